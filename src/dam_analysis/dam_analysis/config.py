@@ -1,0 +1,534 @@
+"""Load and validate the DAM configuration (``config/dam.yaml``).
+
+The YAML file is the single source of truth for the hand geometry, the object, friction, the
+controller gains and the device link. :func:`load_config` reads it, checks every value and
+returns frozen dataclasses in SI units (angles in radians). A bad file raises
+:class:`~dam_analysis.errors.ConfigError` whose message names the key and the value.
+
+This module is pure Python (numpy and PyYAML); it does not import rclpy.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from dam_analysis.errors import ConfigError
+
+#: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).
+JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
+
+#: Environment variable that overrides the default configuration file.
+CONFIG_ENV_VAR = 'DAM_CONFIG'
+
+_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class FingerConfig:
+    """One finger: where its compliant joint sits and how stiff it is relative to finger 1."""
+
+    name: str
+    base_position_m: np.ndarray  # (3,) world position of the compliant joint axis [m]
+    base_yaw_rad: float  # rotation of the finger frame about world z [rad]
+    stiffness_ratio: float  # k_theta_i / k_theta [-]
+
+    @property
+    def joint_names(self) -> tuple[str, str, str]:
+        """Joint names ``<finger>_<role>_joint`` in base-to-tip order."""
+        return tuple(f'{self.name}_{role}_joint' for role in JOINT_ROLES)  # type: ignore[return-value]
+
+    @property
+    def inward_direction(self) -> np.ndarray:
+        """Unit vector (3,) of the finger frame's x axis in the world: towards the object."""
+        return np.array([math.cos(self.base_yaw_rad), math.sin(self.base_yaw_rad), 0.0])
+
+    @property
+    def joint_axis(self) -> np.ndarray:
+        """Unit vector (3,) of every joint axis of this finger in the world.
+
+        A positive joint angle is a right-handed rotation about this axis and flexes the finger
+        inward: it turns the downward link direction -z towards :attr:`inward_direction`. The
+        axis is therefore minus the finger frame's y axis: ``(sin yaw, -cos yaw, 0)``.
+        """
+        return np.array([math.sin(self.base_yaw_rad), -math.cos(self.base_yaw_rad), 0.0])
+
+
+@dataclass(frozen=True)
+class HandConfig:
+    """Hand geometry: three identical planar fingers of capsule links."""
+
+    link_lengths_m: np.ndarray  # (3,) base to tip [m]
+    link_radius_m: float  # capsule radius of every link, the fingertip radius [m]
+    joint_limits_rad: Mapping[str, tuple[float, float]]  # role -> (min, max) [rad]
+    fingers: tuple[FingerConfig, ...]
+    initial_locked_angle_rad: float
+    initial_position_angle_rad: float
+    joint_roles: tuple[str, str, str] = JOINT_ROLES
+
+    @property
+    def n_fingers(self) -> int:
+        return len(self.fingers)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """All joint names, finger by finger, base to tip."""
+        return tuple(name for finger in self.fingers for name in finger.joint_names)
+
+    @property
+    def stiffness_ratios(self) -> np.ndarray:
+        """(n_fingers,) k_theta_i / k_theta."""
+        return np.array([f.stiffness_ratio for f in self.fingers])
+
+
+@dataclass(frozen=True)
+class ObjectConfig:
+    """The cylinder lying on the table."""
+
+    shape: str
+    radius_m: float
+    length_m: float
+    mass_kg: float
+    position_m: np.ndarray  # (3,) centre of gravity [m]
+    axis: np.ndarray  # (3,) unit axis, horizontal
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Friction and contact stiffness between the object and the finger links."""
+
+    friction_angle_rad: float  # alpha; mu = tan(alpha)
+    cone_faces: int  # L of eq. (7)
+    contact_stiffness_n_per_m: np.ndarray  # (3,) diagonal of K_pi
+    table_friction_coefficient: float
+
+    @property
+    def friction_coefficient(self) -> float:
+        """mu = tan(alpha)."""
+        return math.tan(self.friction_angle_rad)
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    gravity_m_per_s2: float
+    k_theta_nm_per_rad: float
+    delta_theta_p_rad: float
+    delta_theta_p_max_rad: float
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    damping_nms_per_rad: float
+    torque_limit_nm: float
+    trajectory_duration_s: float
+    envelope_torque_nm: float
+    contact_torque_threshold_nm: float
+    approach_speed_rad_per_s: float
+    phase_timeout_s: float
+    state_timeout_s: float
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Raw device units to SI: ``si = (raw - offset) * scale``."""
+
+    position_scale_rad_per_count: float
+    position_offset_counts: float
+    torque_scale_nm_per_raw: float
+    torque_offset_raw: float
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    host: str
+    state_port: int
+    command_port: int
+    rate_hz: float
+    watchdog_s: float
+    probe_timeout_s: float
+    state_timeout_s: float
+    torque_rate_limit_nm_per_s: float
+    calibration: Mapping[str, Calibration]  # joint role -> calibration
+
+
+@dataclass(frozen=True)
+class DamConfig:
+    """The whole validated configuration."""
+
+    hand: HandConfig
+    object: ObjectConfig
+    contact: ContactConfig
+    task: TaskConfig
+    controller: ControllerConfig
+    device: DeviceConfig
+    source: str = field(default='<dict>')
+
+    @property
+    def object_weight_n(self) -> float:
+        """m_B g [N]."""
+        return self.object.mass_kg * self.task.gravity_m_per_s2
+
+
+# --------------------------------------------------------------------------------------------
+# Locating the file
+
+
+def default_config_path() -> Path:
+    """Return the configuration file used when none is given.
+
+    Order: the ``DAM_CONFIG`` environment variable; the copy installed in the ``dam_analysis``
+    share directory (``share/dam_analysis/config/dam.yaml``); ``config/dam.yaml`` of the source
+    tree this module lives in.
+    """
+    env = os.environ.get(CONFIG_ENV_VAR)
+    if env:
+        return Path(env)
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        installed = Path(get_package_share_directory('dam_analysis')) / 'config' / 'dam.yaml'
+        if installed.is_file():
+            return installed
+    except Exception:  # noqa: BLE001 - ament index absent or package not installed
+        pass
+    for parent in Path(__file__).resolve().parents:
+        candidate = parent / 'config' / 'dam.yaml'
+        if candidate.is_file():
+            return candidate
+    raise ConfigError(
+        f'no configuration file found: set {CONFIG_ENV_VAR} or install dam_analysis'
+    )
+
+
+def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
+    """Read and validate a configuration file.
+
+    Parameters
+    ----------
+    path
+        YAML file; ``None`` uses :func:`default_config_path`.
+
+    Raises
+    ------
+    ConfigError
+        The file is missing, is not YAML, or any key is missing, unknown or has a bad value.
+    """
+    cfg_path = Path(path) if path is not None else default_config_path()
+    try:
+        text = cfg_path.read_text(encoding='utf-8')
+    except OSError as exc:
+        raise ConfigError(f'cannot read configuration file {str(cfg_path)!r}: {exc}') from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f'{str(cfg_path)!r} is not valid YAML: {exc}') from exc
+    return config_from_dict(data, source=str(cfg_path))
+
+
+def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
+    """Validate an already parsed configuration mapping (same rules as :func:`load_config`)."""
+    root = _Node(data, '', source)
+    root.require_mapping()
+    version = root.child('format_version').integer(minimum=1)
+    if version != _FORMAT_VERSION:
+        raise root.child('format_version').error(
+            f'unsupported format version {version} (this code reads {_FORMAT_VERSION})'
+        )
+    root.only_keys({'format_version', 'hand', 'object', 'contact', 'task', 'controller',
+                    'device'})
+    hand = _hand(root.child('hand'))
+    obj = _object(root.child('object'))
+    contact = _contact(root.child('contact'))
+    task = _task(root.child('task'), hand)
+    controller = _controller(root.child('controller'))
+    device = _device(root.child('device'))
+    return DamConfig(hand=hand, object=obj, contact=contact, task=task, controller=controller,
+                     device=device, source=source)
+
+
+# --------------------------------------------------------------------------------------------
+# Sections
+
+
+def _hand(node: _Node) -> HandConfig:
+    node.only_keys({'joint_roles', 'link_lengths_m', 'link_radius_m', 'joint_limits_deg',
+                    'fingers', 'initial_locked_angle_deg', 'initial_position_angle_deg'})
+    roles = node.child('joint_roles')
+    role_list = roles.sequence(length=3)
+    if tuple(role_list) != JOINT_ROLES:
+        raise roles.error(f'must be {list(JOINT_ROLES)} (base to tip), got {role_list!r}')
+    lengths = node.child('link_lengths_m').vector(3, positive=True)
+    radius = node.child('link_radius_m').number(positive=True)
+    if radius >= float(lengths.min()) / 2.0:
+        raise node.child('link_radius_m').error(
+            f'{radius!r} is too large for the shortest link ({lengths.min()!r} m)'
+        )
+    limits_node = node.child('joint_limits_deg')
+    limits_node.only_keys(set(JOINT_ROLES))
+    limits: dict[str, tuple[float, float]] = {}
+    for role in JOINT_ROLES:
+        lim = limits_node.child(role).vector(2)
+        if not lim[0] < lim[1]:
+            raise limits_node.child(role).error(f'min must be below max, got {lim.tolist()!r}')
+        if np.any(np.abs(lim) > 180.0):
+            raise limits_node.child(role).error(f'limits beyond +-180 deg: {lim.tolist()!r}')
+        limits[role] = (math.radians(lim[0]), math.radians(lim[1]))
+    fingers_node = node.child('fingers')
+    finger_items = fingers_node.sequence()
+    if len(finger_items) < 2:
+        raise fingers_node.error(f'at least two fingers are needed, got {len(finger_items)}')
+    fingers = []
+    names: set[str] = set()
+    for i in range(len(finger_items)):
+        fnode = fingers_node.item(i)
+        fnode.only_keys({'name', 'base_position_m', 'base_yaw_deg', 'stiffness_ratio'})
+        name = fnode.child('name').identifier()
+        if name in names:
+            raise fnode.child('name').error(f'duplicate finger name {name!r}')
+        names.add(name)
+        fingers.append(FingerConfig(
+            name=name,
+            base_position_m=fnode.child('base_position_m').vector(3),
+            base_yaw_rad=math.radians(fnode.child('base_yaw_deg').number()),
+            stiffness_ratio=fnode.child('stiffness_ratio').number(positive=True),
+        ))
+    locked = node.child('initial_locked_angle_deg')
+    locked_rad = math.radians(locked.number())
+    _check_within(locked, locked_rad, limits['locked'])
+    pos = node.child('initial_position_angle_deg')
+    pos_rad = math.radians(pos.number())
+    _check_within(pos, pos_rad, limits['position'])
+    return HandConfig(link_lengths_m=lengths, link_radius_m=radius, joint_limits_rad=limits,
+                      fingers=tuple(fingers), initial_locked_angle_rad=locked_rad,
+                      initial_position_angle_rad=pos_rad)
+
+
+def _object(node: _Node) -> ObjectConfig:
+    node.only_keys({'shape', 'radius_m', 'length_m', 'mass_kg', 'position_m', 'axis'})
+    shape = node.child('shape').string()
+    if shape != 'cylinder':
+        raise node.child('shape').error(f'only "cylinder" is supported, got {shape!r}')
+    radius = node.child('radius_m').number(positive=True)
+    axis_node = node.child('axis')
+    axis = axis_node.vector(3)
+    norm = float(np.linalg.norm(axis))
+    if norm == 0.0:
+        raise axis_node.error('axis must not be the zero vector')
+    axis = axis / norm
+    if abs(axis[2]) > 1e-9:
+        raise axis_node.error(f'the cylinder must lie on the table (horizontal axis), got '
+                              f'{axis_node.raw!r}')
+    position_node = node.child('position_m')
+    position = position_node.vector(3)
+    if position[2] < radius - 1e-12:
+        raise position_node.error(f'z = {position[2]!r} puts the cylinder into the table '
+                                  f'(radius {radius!r} m)')
+    return ObjectConfig(shape=shape, radius_m=radius,
+                        length_m=node.child('length_m').number(positive=True),
+                        mass_kg=node.child('mass_kg').number(positive=True),
+                        position_m=position, axis=axis)
+
+
+def _contact(node: _Node) -> ContactConfig:
+    node.only_keys({'friction_angle_deg', 'cone_faces', 'contact_stiffness_n_per_m',
+                    'table_friction_coefficient'})
+    alpha = node.child('friction_angle_deg')
+    alpha_deg = alpha.number()
+    if not 0.0 <= alpha_deg < 90.0:
+        raise alpha.error(f'friction angle must be in [0, 90) deg, got {alpha_deg!r}')
+    return ContactConfig(
+        friction_angle_rad=math.radians(alpha_deg),
+        cone_faces=node.child('cone_faces').integer(minimum=3, maximum=64),
+        contact_stiffness_n_per_m=node.child('contact_stiffness_n_per_m').vector(
+            3, positive=True),
+        table_friction_coefficient=node.child('table_friction_coefficient').number(
+            nonnegative=True),
+    )
+
+
+def _task(node: _Node, hand: HandConfig) -> TaskConfig:
+    node.only_keys({'gravity_m_per_s2', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
+                    'delta_theta_p_max_deg'})
+    max_node = node.child('delta_theta_p_max_deg')
+    max_rad = math.radians(max_node.number(positive=True))
+    reachable = hand.joint_limits_rad['position'][1] - hand.initial_position_angle_rad
+    if max_rad > reachable + 1e-12:
+        raise max_node.error(f'{max_node.raw!r} deg exceeds the position joint range from the '
+                             f'initial angle ({math.degrees(reachable):.6g} deg)')
+    dp_node = node.child('delta_theta_p_deg')
+    dp_rad = math.radians(dp_node.number(nonnegative=True))
+    if dp_rad > max_rad + 1e-12:
+        raise dp_node.error(f'{dp_node.raw!r} deg exceeds delta_theta_p_max_deg')
+    return TaskConfig(
+        gravity_m_per_s2=node.child('gravity_m_per_s2').number(positive=True),
+        k_theta_nm_per_rad=node.child('k_theta_nm_per_rad').number(positive=True),
+        delta_theta_p_rad=dp_rad,
+        delta_theta_p_max_rad=max_rad,
+    )
+
+
+def _controller(node: _Node) -> ControllerConfig:
+    node.only_keys({'damping_nms_per_rad', 'torque_limit_nm', 'trajectory_duration_s',
+                    'envelope_torque_nm', 'contact_torque_threshold_nm',
+                    'approach_speed_deg_per_s', 'phase_timeout_s', 'state_timeout_s'})
+    limit = node.child('torque_limit_nm').number(positive=True)
+    envelope = node.child('envelope_torque_nm')
+    envelope_nm = envelope.number(positive=True)
+    if envelope_nm > limit:
+        raise envelope.error(f'{envelope_nm!r} N*m exceeds torque_limit_nm ({limit!r})')
+    return ControllerConfig(
+        damping_nms_per_rad=node.child('damping_nms_per_rad').number(nonnegative=True),
+        torque_limit_nm=limit,
+        trajectory_duration_s=node.child('trajectory_duration_s').number(positive=True),
+        envelope_torque_nm=envelope_nm,
+        contact_torque_threshold_nm=node.child('contact_torque_threshold_nm').number(
+            positive=True),
+        approach_speed_rad_per_s=math.radians(
+            node.child('approach_speed_deg_per_s').number(positive=True)),
+        phase_timeout_s=node.child('phase_timeout_s').number(positive=True),
+        state_timeout_s=node.child('state_timeout_s').number(positive=True),
+    )
+
+
+def _device(node: _Node) -> DeviceConfig:
+    node.only_keys({'host', 'state_port', 'command_port', 'rate_hz', 'watchdog_s',
+                    'probe_timeout_s', 'state_timeout_s', 'torque_rate_limit_nm_per_s',
+                    'calibration'})
+    watchdog = node.child('watchdog_s')
+    watchdog_s = watchdog.number(positive=True)
+    if watchdog_s > 0.2:
+        raise watchdog.error(f'{watchdog_s!r} s: the watchdog may be at most 0.2 s')
+    state_port = node.child('state_port').integer(minimum=1, maximum=65535)
+    command = node.child('command_port')
+    command_port = command.integer(minimum=1, maximum=65535)
+    if command_port == state_port:
+        raise command.error(f'{command_port} is also the state_port')
+    cal_node = node.child('calibration')
+    cal_node.only_keys(set(JOINT_ROLES))
+    calibration: dict[str, Calibration] = {}
+    for role in JOINT_ROLES:
+        rnode = cal_node.child(role)
+        rnode.only_keys({'position_scale_rad_per_count', 'position_offset_counts',
+                         'torque_scale_nm_per_raw', 'torque_offset_raw'})
+        calibration[role] = Calibration(
+            position_scale_rad_per_count=_nonzero(rnode.child('position_scale_rad_per_count')),
+            position_offset_counts=rnode.child('position_offset_counts').number(),
+            torque_scale_nm_per_raw=_nonzero(rnode.child('torque_scale_nm_per_raw')),
+            torque_offset_raw=rnode.child('torque_offset_raw').number(),
+        )
+    return DeviceConfig(
+        host=node.child('host').string(),
+        state_port=state_port,
+        command_port=command_port,
+        rate_hz=node.child('rate_hz').number(positive=True),
+        watchdog_s=watchdog_s,
+        probe_timeout_s=node.child('probe_timeout_s').number(positive=True),
+        state_timeout_s=node.child('state_timeout_s').number(positive=True),
+        torque_rate_limit_nm_per_s=node.child('torque_rate_limit_nm_per_s').number(
+            positive=True),
+        calibration=calibration,
+    )
+
+
+def _nonzero(node: _Node) -> float:
+    value = node.number()
+    if value == 0.0:
+        raise node.error('scale must not be zero')
+    return value
+
+
+def _check_within(node: _Node, value_rad: float, limits: tuple[float, float]) -> None:
+    if not limits[0] <= value_rad <= limits[1]:
+        raise node.error(
+            f'{node.raw!r} deg is outside the joint limits '
+            f'[{math.degrees(limits[0]):.6g}, {math.degrees(limits[1]):.6g}] deg'
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# A cursor into the parsed YAML that knows its key path, for error messages.
+
+
+class _Node:
+    def __init__(self, raw: Any, path: str, source: str) -> None:
+        self.raw = raw
+        self.path = path
+        self.source = source
+
+    def error(self, message: str) -> ConfigError:
+        where = self.path or '<root>'
+        return ConfigError(f'{where}: {message} (in {self.source})')
+
+    def require_mapping(self) -> Mapping[str, Any]:
+        if not isinstance(self.raw, Mapping):
+            raise self.error(f'expected a mapping, got {self.raw!r}')
+        return self.raw
+
+    def only_keys(self, allowed: set[str]) -> None:
+        mapping = self.require_mapping()
+        unknown = sorted(str(k) for k in mapping if k not in allowed)
+        if unknown:
+            raise self.error(f'unknown key(s) {unknown} (allowed: {sorted(allowed)})')
+
+    def child(self, key: str) -> _Node:
+        mapping = self.require_mapping()
+        path = f'{self.path}.{key}' if self.path else key
+        if key not in mapping:
+            raise _Node(None, path, self.source).error('missing key')
+        return _Node(mapping[key], path, self.source)
+
+    def sequence(self, length: int | None = None) -> list[Any]:
+        if isinstance(self.raw, (str, bytes)) or not isinstance(self.raw, Sequence):
+            raise self.error(f'expected a list, got {self.raw!r}')
+        if length is not None and len(self.raw) != length:
+            raise self.error(f'expected {length} values, got {len(self.raw)}: {self.raw!r}')
+        return list(self.raw)
+
+    def item(self, index: int) -> _Node:
+        return _Node(self.raw[index], f'{self.path}[{index}]', self.source)
+
+    def number(self, positive: bool = False, nonnegative: bool = False) -> float:
+        value = self.raw
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(f'expected a number, got {value!r}')
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.error(f'expected a finite number, got {value!r}')
+        if positive and value <= 0.0:
+            raise self.error(f'expected a positive number, got {value!r}')
+        if nonnegative and value < 0.0:
+            raise self.error(f'expected a non-negative number, got {value!r}')
+        return value
+
+    def integer(self, minimum: int | None = None, maximum: int | None = None) -> int:
+        value = self.raw
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(f'expected an integer, got {value!r}')
+        if minimum is not None and value < minimum:
+            raise self.error(f'expected an integer >= {minimum}, got {value!r}')
+        if maximum is not None and value > maximum:
+            raise self.error(f'expected an integer <= {maximum}, got {value!r}')
+        return value
+
+    def vector(self, length: int, positive: bool = False) -> np.ndarray:
+        items = self.sequence(length)
+        return np.array([self.item(i).number(positive=positive) for i in range(len(items))],
+                        dtype=np.float64)
+
+    def string(self) -> str:
+        if not isinstance(self.raw, str) or not self.raw:
+            raise self.error(f'expected a non-empty string, got {self.raw!r}')
+        return self.raw
+
+    def identifier(self) -> str:
+        value = self.string()
+        if not value.isidentifier() or not value.isascii():
+            raise self.error(f'expected a name of letters, digits and underscores, got {value!r}')
+        return value

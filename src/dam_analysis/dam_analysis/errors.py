@@ -1,0 +1,26 @@
+"""Errors raised by dam_analysis.
+
+Every error names the offending key or value in its message, so that a user can fix the input
+without reading the code.
+"""
+
+from __future__ import annotations
+
+
+class DamAnalysisError(Exception):
+    """Base class of every error raised by this package."""
+
+
+class ConfigError(DamAnalysisError, ValueError):
+    """The configuration file is missing, unreadable or holds a bad value.
+
+    The message starts with the dotted key path (``hand.link_lengths_m[1]``) and names the value.
+    """
+
+
+class InputError(DamAnalysisError, ValueError):
+    """An argument to an analysis function is malformed (NaN, wrong shape, out of range)."""
+
+
+class NoSolutionError(DamAnalysisError):
+    """A kinematic problem has no solution (contact lost, table penetrated, joint limit)."""

@@ -1,0 +1,1 @@
+"""PyBullet stand-in for the three-fingered DAM hand, speaking the device link; simulated experiments."""

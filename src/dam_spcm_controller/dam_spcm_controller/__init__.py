@@ -1,0 +1,1 @@
+"""SPCM controller: compliant-joint impedance, position-joint trajectories and the DAM grasp sequence."""
