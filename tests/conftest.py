@@ -12,6 +12,10 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CONFIG_FILE = REPO_ROOT / 'config' / 'dam.yaml'
 
+TESTS_DIR = Path(__file__).resolve().parent
+if str(TESTS_DIR) not in sys.path:
+    sys.path.insert(0, str(TESTS_DIR))  # shared helpers such as ros_testing
+
 for _pkg in sorted((REPO_ROOT / 'src').iterdir()):
     if (_pkg / 'setup.py').is_file() and str(_pkg) not in sys.path:
         sys.path.insert(0, str(_pkg))

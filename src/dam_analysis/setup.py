@@ -14,7 +14,10 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
         # The single source of truth config/ at the repository root, installed for `ros2 run`.
-        ('share/' + PACKAGE_NAME + '/config', sorted(glob(os.path.join(HERE, '..', '..', 'config', '*.yaml')))),
+        # Paths relative to this file, as colcon requires.
+        ('share/' + PACKAGE_NAME + '/config',
+         sorted(os.path.relpath(p, HERE)
+                for p in glob(os.path.join(HERE, '..', '..', 'config', '*.yaml')))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

@@ -1,0 +1,196 @@
+#!/usr/bin/env bash
+# Set up everything the DAM suite needs and build the colcon workspace. Idempotent: a second
+# run with nothing changed only checks and returns.
+#
+#   bash scripts/setup.sh            # use /opt/ros/jazzy if present, else ROS 2 wheels from PyPI
+#   DAM_ROS=wheels bash scripts/setup.sh   # force the PyPI wheels even where /opt/ros/jazzy exists
+#   DAM_FORCE_BUILD=1 bash scripts/setup.sh  # rebuild even if no source changed
+#
+# Every other script calls this first. It installs what is missing (apt as root, pip into a
+# virtual environment inside the repository), then runs `colcon build` into ros2_ws/install.
+set -euo pipefail
+
+REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+VENV="$REPO_ROOT/.venv"
+WS="$REPO_ROOT/ros2_ws"
+REQ_DIR="$REPO_ROOT/scripts/requirements"
+SYSTEM_ROS_SETUP=/opt/ros/jazzy/setup.bash
+
+step() { printf '==> %s\n' "$*"; }
+info() { printf '    %s\n' "$*"; }
+die() {
+  printf 'setup.sh: FAILED: %s\n' "$1" >&2
+  if [ $# -gt 1 ]; then printf 'setup.sh: what to do: %s\n' "$2" >&2; fi
+  exit 1
+}
+
+# ------------------------------------------------------------------------------------------
+step "Checking Python"
+PYTHON=${DAM_PYTHON:-python3}
+command -v "$PYTHON" >/dev/null 2>&1 ||
+  die "no '$PYTHON' on PATH" "install Python 3.11 or newer (apt-get install python3)"
+if ! "$PYTHON" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)'; then
+  die "$("$PYTHON" --version 2>&1) is too old: ROS 2 Jazzy here needs Python 3.11 or newer" \
+    "install Python 3.11+ and run again with DAM_PYTHON=/path/to/python3.11"
+fi
+PY_VERSION=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+info "$("$PYTHON" --version 2>&1)"
+
+if [ -f "$SYSTEM_ROS_SETUP" ] && [ "${DAM_ROS:-auto}" != wheels ]; then
+  MODE=system
+  info "ROS 2: system install at /opt/ros/jazzy"
+else
+  MODE=wheels
+  info "ROS 2: Jazzy wheels from PyPI into $VENV"
+fi
+
+# ------------------------------------------------------------------------------------------
+step "Checking system tools"
+missing_apt=()
+command -v cc >/dev/null 2>&1 || missing_apt+=(gcc)
+command -v c++ >/dev/null 2>&1 || missing_apt+=(g++)
+command -v make >/dev/null 2>&1 || missing_apt+=(make)
+command -v cmake >/dev/null 2>&1 || missing_apt+=(cmake)
+if [ ! -x "$VENV/bin/python" ] && ! "$PYTHON" -c 'import ensurepip, venv' >/dev/null 2>&1; then
+  missing_apt+=("python${PY_VERSION}-venv")
+fi
+if [ "$MODE" = system ]; then
+  # The system message packages are built against the distribution's numpy: use its packages.
+  for mod_pkg in numpy:python3-numpy scipy:python3-scipy yaml:python3-yaml \
+    matplotlib:python3-matplotlib colcon_core:python3-colcon-common-extensions; do
+    "$PYTHON" -c "import ${mod_pkg%%:*}" >/dev/null 2>&1 || missing_apt+=("${mod_pkg#*:}")
+  done
+fi
+if [ ${#missing_apt[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    info "installing with apt-get: ${missing_apt[*]}"
+    apt-get update -qq >/dev/null ||
+      die "apt-get update failed" "check that a Debian/Ubuntu package mirror is reachable"
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing_apt[@]}" >/dev/null ||
+      die "apt-get install ${missing_apt[*]} failed" "run it by hand to see why"
+  else
+    die "missing system packages: ${missing_apt[*]}" \
+      "sudo apt-get install ${missing_apt[*]}   (then run this script again)"
+  fi
+else
+  info "compiler, cmake and venv are present"
+fi
+
+# ------------------------------------------------------------------------------------------
+step "Python virtual environment ($VENV)"
+if [ ! -x "$VENV/bin/python" ]; then
+  if [ "$MODE" = system ]; then
+    "$PYTHON" -m venv --system-site-packages "$VENV" || die "could not create $VENV"
+  else
+    "$PYTHON" -m venv "$VENV" || die "could not create $VENV"
+  fi
+  info "created"
+else
+  info "present"
+fi
+VPY="$VENV/bin/python"
+
+req_files=("$REQ_DIR/python.txt")
+[ "$MODE" = wheels ] && req_files=("$REQ_DIR/ros-jazzy-wheels.txt" "${req_files[@]}")
+req_hash=$(cat "${req_files[@]}" | sha1sum | cut -d' ' -f1)-$MODE
+req_stamp="$VENV/.dam-requirements"
+if [ "$(cat "$req_stamp" 2>/dev/null)" != "$req_hash" ]; then
+  pip_args=(-m pip install --disable-pip-version-check -q)
+  constraints=()
+  if [ "$MODE" = system ]; then
+    # Never replace the distribution's numpy inside the venv (ABI of the message packages).
+    sys_numpy=$("$PYTHON" -c 'import numpy; print(numpy.__version__)')
+    printf 'numpy==%s\n' "$sys_numpy" >"$VENV/.dam-constraints.txt"
+    constraints=(-c "$VENV/.dam-constraints.txt")
+  fi
+  for req in "${req_files[@]}"; do
+    info "pip install -r ${req#"$REPO_ROOT"/}"
+    if ! "$VPY" "${pip_args[@]}" -r "$req" "${constraints[@]}"; then
+      die "pip could not install ${req#"$REPO_ROOT"/}" \
+        "check that the Python package index is reachable (pip config list; proxy settings)"
+    fi
+  done
+  echo "$req_hash" >"$req_stamp"
+  rm -f "$VENV/.dam-cmake-repaired"
+else
+  info "pinned requirements already installed"
+fi
+
+# ------------------------------------------------------------------------------------------
+if [ "$MODE" = wheels ]; then
+  step "Repairing the wheels' CMake exports"
+  if [ ! -f "$VENV/.dam-cmake-repaired" ]; then
+    # The wheels' exported CMake files name the wheel build machine's Python and numpy
+    # include directories; point them at this venv's.
+    "$VPY" - "$VENV" <<'PYEOF' || die "could not repair the CMake files under $VENV/share"
+import pathlib
+import re
+import sys
+import sysconfig
+
+import numpy
+
+venv = pathlib.Path(sys.argv[1])
+py_include = sysconfig.get_paths()['include']
+np_include = numpy.get_include()
+numpy_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/_core/include')
+include_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/include/python3\.\d+')
+changed = 0
+for path in (venv / 'share').glob('*/cmake/*.cmake'):
+    text = path.read_text(encoding='utf-8', errors='surrogateescape')
+    if '/opt/python/' not in text:
+        continue
+    new = include_re.sub(py_include, numpy_re.sub(np_include, text))
+    if new != text:
+        path.write_text(new, encoding='utf-8', errors='surrogateescape')
+        changed += 1
+print(f'    rewrote {changed} CMake file(s) to {py_include} and {np_include}')
+PYEOF
+    touch "$VENV/.dam-cmake-repaired"
+  else
+    info "already repaired"
+  fi
+fi
+
+# ------------------------------------------------------------------------------------------
+step "Building the workspace ($WS)"
+# Rebuild only when a source, the config or the environment changed.
+src_hash=$(
+  cd "$REPO_ROOT" &&
+    { find src config -type f ! -name '*.pyc' ! -path '*/__pycache__/*' -printf '%p %s %T@\n' |
+      sort; echo "$MODE $req_hash"; } | sha1sum | cut -d' ' -f1
+)
+build_stamp="$WS/install/.dam-source-hash"
+if [ "${DAM_FORCE_BUILD:-0}" != 1 ] && [ "$(cat "$build_stamp" 2>/dev/null)" = "$src_hash" ]; then
+  info "up to date (no change in src/ or config/)"
+else
+  set +u
+  if [ "$MODE" = system ]; then
+    # shellcheck disable=SC1090
+    source "$SYSTEM_ROS_SETUP"
+  fi
+  # shellcheck disable=SC1091
+  source "$VENV/bin/activate"
+  set -u
+  if [ "$MODE" = wheels ]; then
+    export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+  fi
+  command -v colcon >/dev/null 2>&1 ||
+    die "colcon is not installed" "apt-get install python3-colcon-common-extensions"
+  mkdir -p "$WS/log"
+  cd "$WS"
+  info "colcon build (log: $WS/log/latest_build)"
+  if ! colcon --log-base "$WS/log" build --base-paths "$REPO_ROOT/src" \
+    --build-base "$WS/build" --install-base "$WS/install" \
+    --event-handlers console_cohesion- summary+ status- \
+    --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF >"$WS/log/colcon-output.txt" 2>&1
+  then
+    tail -n 30 "$WS/log/colcon-output.txt" >&2 || true
+    die "colcon build failed" \
+      "read $WS/log/colcon-output.txt and $WS/log/latest_build/<package>/stdout_stderr.log"
+  fi
+  grep -E '^Summary' "$WS/log/colcon-output.txt" | sed 's/^/    /' || true
+  echo "$src_hash" >"$build_stamp"
+fi
+
+step "Ready. Use it with:  source scripts/env.sh"

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Run the whole test suite: set up and build (scripts/setup.sh), then pytest over tests/.
+#
+#   bash scripts/test.sh                 # everything
+#   bash scripts/test.sh -k config -x    # extra arguments go to pytest
+#
+# Each run reserves its own ROS_DOMAIN_ID (a lock file per id), so parallel runs on one
+# machine never see each other's nodes; discovery stays on this machine (LOCALHOST).
+set -euo pipefail
+REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+
+bash "$REPO_ROOT/scripts/setup.sh"
+
+set +u
+# shellcheck disable=SC1091
+source "$REPO_ROOT/scripts/env.sh"
+set -u
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
+
+# Reserve a domain id nobody else on this machine is using for the length of this run.
+lock_dir="${TMPDIR:-/tmp}/dam-ros-domains"
+mkdir -p "$lock_dir"
+domain=""
+for offset in $(seq 0 100); do
+  candidate=$(( (offset + $$) % 101 + 1 ))  # 1..101, start at a PID-dependent id
+  exec {lock_fd}>"$lock_dir/$candidate.lock"
+  if flock -n "$lock_fd"; then
+    domain=$candidate
+    break
+  fi
+  exec {lock_fd}>&-
+done
+[ -n "$domain" ] || { echo "test.sh: every ROS_DOMAIN_ID 1..101 is in use" >&2; exit 1; }
+export ROS_DOMAIN_ID="$domain"
+echo "==> Running tests (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, discovery $ROS_AUTOMATIC_DISCOVERY_RANGE)"
+
+cd "$REPO_ROOT"
+test_dirs=(tests)
+for pkg_tests in src/*/test; do
+  [ -d "$pkg_tests" ] && test_dirs+=("$pkg_tests")
+done
+set +e
+python -m pytest -p no:cacheprovider -ra "${test_dirs[@]}" "$@"
+status=$?
+set -e
+if [ "$status" = 5 ]; then
+  echo "test.sh: pytest collected no tests" >&2
+  exit 1
+fi
+exit "$status"

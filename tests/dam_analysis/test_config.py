@@ -1,0 +1,170 @@
+"""The configuration loader: the shipped file, and each kind of bad file."""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from dam_analysis.config import (
+    JOINT_ROLES,
+    config_from_dict,
+    default_config_path,
+    load_config,
+)
+from dam_analysis.errors import ConfigError
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CONFIG_FILE = REPO_ROOT / 'config' / 'dam.yaml'
+
+
+@pytest.fixture(scope='module')
+def raw() -> dict[str, Any]:
+    return yaml.safe_load(CONFIG_FILE.read_text())
+
+
+def _with(raw: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
+    """A deep copy of ``raw`` with the dotted/indexed ``path`` set to ``value``."""
+    data = copy.deepcopy(raw)
+    node: Any = data
+    keys = path.replace('[', '.').replace(']', '').split('.')
+    for key in keys[:-1]:
+        node = node[int(key)] if key.isdigit() else node[key]
+    last = keys[-1]
+    if value is _DELETE:
+        del node[last]
+    elif last.isdigit():
+        node[int(last)] = value
+    else:
+        node[last] = value
+    return data
+
+
+_DELETE = object()
+
+
+def test_shipped_file_has_the_papers_values() -> None:
+    cfg = load_config(CONFIG_FILE)
+    hand = cfg.hand
+    assert hand.n_fingers == 3
+    assert hand.joint_roles == JOINT_ROLES == ('compliant', 'locked', 'position')
+    np.testing.assert_allclose(hand.link_lengths_m, [0.040, 0.025, 0.025])
+    assert hand.link_radius_m == pytest.approx(0.005)
+    assert cfg.object.radius_m == pytest.approx(0.010)
+    assert cfg.object.mass_kg == pytest.approx(0.04)
+    assert cfg.object_weight_n == pytest.approx(0.04 * 9.81)
+    # k_theta2 = k_theta3 = k_theta1 / 2 (paper section 3.3)
+    np.testing.assert_allclose(hand.stiffness_ratios, [1.0, 0.5, 0.5])
+    assert hand.initial_position_angle_rad == pytest.approx(math.radians(15.0))
+    assert cfg.contact.cone_faces == 8
+    np.testing.assert_allclose(cfg.contact.contact_stiffness_n_per_m, [1e5, 1e5, 1e5])
+    alpha = cfg.contact.friction_angle_rad
+    assert cfg.contact.friction_coefficient == pytest.approx(math.tan(alpha))
+    assert len(hand.joint_names) == 9
+    assert hand.joint_names[:3] == (
+        'finger1_compliant_joint', 'finger1_locked_joint', 'finger1_position_joint')
+
+
+def test_finger_geometry_matches_the_paper_layout() -> None:
+    cfg = load_config(CONFIG_FILE)
+    f1, f2, f3 = cfg.hand.fingers
+    obj_x = cfg.object.position_m[0]
+    # Finger 1 opposes fingers 2 and 3: on the other side of the object, facing it.
+    assert np.sign(f1.base_position_m[0] - obj_x) == -np.sign(f2.base_position_m[0] - obj_x)
+    for finger in (f1, f2, f3):
+        towards_object = np.sign(obj_x - finger.base_position_m[0])
+        assert np.sign(finger.inward_direction[0]) == towards_object
+        # Joint axes are parallel to the cylinder axis.
+        assert abs(abs(float(finger.joint_axis @ cfg.object.axis)) - 1.0) < 1e-12
+        # A positive rotation about the joint axis turns "down" towards "inward".
+        down = np.array([0.0, 0.0, -1.0])
+        assert np.cross(finger.joint_axis, down) @ finger.inward_direction == pytest.approx(1.0)
+    # Fingers 2 and 3 stand side by side along the cylinder axis (y).
+    assert f2.base_position_m[0] == pytest.approx(f3.base_position_m[0])
+    assert f2.base_position_m[1] != pytest.approx(f3.base_position_m[1])
+
+
+def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
+                                          tmp_path: Path) -> None:
+    target = tmp_path / 'other.yaml'
+    target.write_text(CONFIG_FILE.read_text())
+    monkeypatch.setenv('DAM_CONFIG', str(target))
+    assert default_config_path() == target
+    assert load_config().source == str(target)
+
+
+@pytest.mark.parametrize(
+    ('path', 'value', 'expected'),
+    [
+        ('hand.link_lengths_m[1]', -0.025, r'hand\.link_lengths_m\[1\].*-0\.025'),
+        ('hand.link_lengths_m', [0.04, 0.025], r'hand\.link_lengths_m.*expected 3 values'),
+        ('hand.link_radius_m', float('nan'), r'hand\.link_radius_m.*finite.*nan'),
+        ('hand.link_radius_m', 'five', r"hand\.link_radius_m.*expected a number.*'five'"),
+        ('hand.joint_roles', ['locked', 'compliant', 'position'], r'hand\.joint_roles'),
+        ('hand.joint_limits_deg.position', [90.0, 10.0], r'joint_limits_deg\.position.*below'),
+        ('hand.fingers[1].name', 'finger1', r"hand\.fingers\[1\]\.name.*duplicate.*'finger1'"),
+        ('hand.fingers[0].stiffness_ratio', 0.0, r'fingers\[0\]\.stiffness_ratio.*positive.*0\.0'),
+        ('hand.fingers[2].base_position_m', [0.0, 0.0], r'fingers\[2\]\.base_position_m'),
+        ('hand.initial_position_angle_deg', 120.0, r'initial_position_angle_deg.*120'),
+        ('object.radius_m', 0.0, r'object\.radius_m.*positive.*0\.0'),
+        ('object.mass_kg', float('inf'), r'object\.mass_kg.*finite.*inf'),
+        ('object.axis', [0.0, 0.6, 0.8], r'object\.axis.*horizontal'),
+        ('object.position_m', [0.0, 0.0, 0.001], r'object\.position_m.*into the table'),
+        ('object.shape', 'sphere', r"object\.shape.*'sphere'"),
+        ('contact.friction_angle_deg', 90.0, r'contact\.friction_angle_deg.*90'),
+        ('contact.friction_angle_deg', -1.0, r'contact\.friction_angle_deg.*-1'),
+        ('contact.cone_faces', 2, r'contact\.cone_faces.*>= 3.*2'),
+        ('contact.cone_faces', 8.5, r'contact\.cone_faces.*integer.*8\.5'),
+        ('task.delta_theta_p_max_deg', 90.0, r'task\.delta_theta_p_max_deg.*position joint range'),
+        ('task.k_theta_nm_per_rad', True, r'task\.k_theta_nm_per_rad.*number.*True'),
+        ('controller.envelope_torque_nm', 5.0, r'controller\.envelope_torque_nm.*torque_limit'),
+        ('device.watchdog_s', 0.5, r'device\.watchdog_s.*0\.5.*at most 0\.2'),
+        ('device.watchdog_s', 0.0, r'device\.watchdog_s.*positive'),
+        ('device.state_port', 70000, r'device\.state_port.*65535.*70000'),
+        ('device.command_port', 45110, r'device\.command_port.*45110.*state_port'),
+        ('device.calibration.locked.torque_scale_nm_per_raw', 0.0, r'torque_scale.*zero'),
+        ('object.radius_m', _DELETE, r'object\.radius_m: missing key'),
+        ('hand.fingers[0].colour', 'red', r"hand\.fingers\[0\].*unknown key.*'colour'"),
+        ('format_version', 2, r'format_version.*unsupported.*2'),
+    ],
+)
+def test_bad_values_are_named(raw: dict[str, Any], path: str, value: Any, expected: str) -> None:
+    with pytest.raises(ConfigError, match=expected):
+        config_from_dict(_with(raw, path, value))
+
+
+def test_unknown_top_level_section(raw: dict[str, Any]) -> None:
+    data = copy.deepcopy(raw)
+    data['hands'] = {}
+    with pytest.raises(ConfigError, match=r"unknown key.*'hands'"):
+        config_from_dict(data)
+
+
+def test_file_errors(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r'cannot read configuration file.*nope\.yaml'):
+        load_config(tmp_path / 'nope.yaml')
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('hand: [unclosed\n')
+    with pytest.raises(ConfigError, match=r'broken\.yaml.*not valid YAML'):
+        load_config(broken)
+    scalar = tmp_path / 'scalar.yaml'
+    scalar.write_text('42\n')
+    with pytest.raises(ConfigError, match=r'<root>: expected a mapping, got 42'):
+        load_config(scalar)
+    empty = tmp_path / 'empty.yaml'
+    empty.write_text('')
+    with pytest.raises(ConfigError, match=r'expected a mapping, got None'):
+        load_config(empty)
+
+
+def test_angles_are_converted_to_radians(raw: dict[str, Any]) -> None:
+    cfg = config_from_dict(_with(raw, 'contact.friction_angle_deg', 30.0))
+    assert cfg.contact.friction_angle_rad == pytest.approx(math.pi / 6)
+    assert cfg.contact.friction_coefficient == pytest.approx(1 / math.sqrt(3))
+    lo, hi = cfg.hand.joint_limits_rad['position']
+    assert (lo, hi) == pytest.approx((0.0, math.radians(95.0)))

@@ -1,0 +1,87 @@
+"""Each installed package has the layout `ros2 run` and the ament index rely on."""
+
+from __future__ import annotations
+
+import ast
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+SRC = REPO_ROOT / 'src'
+INSTALL = REPO_ROOT / 'ros2_ws' / 'install'
+PYTHON_PACKAGES = ['dam_analysis', 'dam_sim_bridge', 'dam_hand_driver', 'dam_spcm_controller']
+
+
+def declared_executables(setup_py: Path) -> list[str]:
+    """Console scripts declared in setup.py, read from its source (not from the install)."""
+    tree = ast.parse(setup_py.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == 'entry_points':
+            entry_points = ast.literal_eval(node.value)
+            return [spec.split('=')[0].strip() for spec in entry_points.get('console_scripts', [])]
+    return []
+
+
+def test_all_packages_are_in_src_and_installed() -> None:
+    found = sorted(p.name for p in SRC.iterdir() if (p / 'package.xml').is_file())
+    assert found == sorted(PYTHON_PACKAGES + ['dam_interfaces'])
+    for name in found:
+        marker = INSTALL / name / 'share' / 'ament_index' / 'resource_index' / 'packages' / name
+        assert marker.is_file(), f'{name} is not registered in the ament index'
+
+
+@pytest.mark.parametrize('package', PYTHON_PACKAGES + ['dam_interfaces'])
+def test_package_xml_is_format_3_with_real_dependencies(package: str) -> None:
+    root = ET.parse(SRC / package / 'package.xml').getroot()
+    assert root.tag == 'package' and root.get('format') == '3'
+    assert root.findtext('name') == package
+    build_type = root.find('export/build_type')
+    assert build_type is not None
+    expected_type = 'ament_cmake' if package == 'dam_interfaces' else 'ament_python'
+    assert build_type.text == expected_type
+    depends = {e.text for e in root if e.tag.endswith('depend')}
+    if package == 'dam_interfaces':
+        assert {'rosidl_default_generators', 'rosidl_default_runtime'} <= depends
+    else:
+        assert 'rclpy' in depends and 'dam_interfaces' in depends
+        # Every package.xml dependency that names one of ours must exist.
+        for dep in depends:
+            if dep.startswith('dam_'):
+                assert (SRC / dep / 'package.xml').is_file(), f'{package} depends on {dep}'
+
+
+@pytest.mark.parametrize('package', PYTHON_PACKAGES)
+def test_executables_are_installed_where_ros2_run_looks(package: str) -> None:
+    pkg_dir = SRC / package
+    assert (pkg_dir / 'resource' / package).is_file()
+    assert f'install_scripts=$base/lib/{package}' in (pkg_dir / 'setup.cfg').read_text()
+    declared = declared_executables(pkg_dir / 'setup.py')
+    lib_dir = INSTALL / package / 'lib' / package
+    installed = sorted(p.name for p in lib_dir.iterdir()) if lib_dir.is_dir() else []
+    assert sorted(declared) == installed
+    for exe in declared:
+        path = lib_dir / exe
+        assert os.access(path, os.X_OK), f'{path} is not executable'
+        assert path.read_text().startswith('#!'), f'{path} has no interpreter line'
+
+
+def test_interfaces_are_generated_for_python() -> None:
+    from dam_interfaces.srv import CheckLift
+
+    request_fields = CheckLift.Request.get_fields_and_field_types()
+    assert request_fields == {
+        'k_theta': 'sequence<double>', 'delta_theta_p': 'sequence<double>',
+        'friction_angle': 'double'}
+    response_fields = CheckLift.Response.get_fields_and_field_types()
+    assert response_fields == {
+        'ok': 'boolean', 'message': 'string', 'lift_guaranteed': 'boolean',
+        'worst_case_margin': 'double', 'csm_lift': 'boolean', 'csm_margin': 'double',
+        'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>'}
+
+
+def test_config_is_installed_with_dam_analysis() -> None:
+    installed = INSTALL / 'dam_analysis' / 'share' / 'dam_analysis' / 'config' / 'dam.yaml'
+    assert installed.read_text() == (REPO_ROOT / 'config' / 'dam.yaml').read_text()

@@ -1,0 +1,141 @@
+"""Helpers for integration tests that run real ROS 2 processes over DDS.
+
+Processes are started from the installed workspace (``ros2_ws/install/<pkg>/lib/<pkg>/<exe>``,
+what ``ros2 run`` runs) or from a test fixture script, inherit the test's environment (and so its
+``ROS_DOMAIN_ID``), and are stopped by their own PID: SIGINT first, SIGKILL if they hang.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+INSTALL_DIR = REPO_ROOT / 'ros2_ws' / 'install'
+FIXTURES_DIR = Path(__file__).resolve().parent / 'fixtures'
+
+
+def installed_executable(package: str, executable: str) -> Path:
+    """Path of an executable as ``ros2 run <package> <executable>`` would find it."""
+    return INSTALL_DIR / package / 'lib' / package / executable
+
+
+class NodeProcess:
+    """A ROS 2 process under test: started with a command, its output captured to a file."""
+
+    def __init__(self, command: Sequence[str | os.PathLike[str]],
+                 env: dict[str, str] | None = None) -> None:
+        self.command = [str(c) for c in command]
+        self._log = tempfile.NamedTemporaryFile(prefix='dam-node-', suffix='.log', delete=False)
+        full_env = dict(os.environ)
+        full_env.setdefault('PYTHONUNBUFFERED', '1')
+        if env:
+            full_env.update(env)
+        self.process = subprocess.Popen(
+            self.command, stdout=self._log, stderr=subprocess.STDOUT, env=full_env,
+            stdin=subprocess.DEVNULL)
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def output(self) -> str:
+        """Everything the process printed so far."""
+        self._log.flush()
+        return Path(self._log.name).read_text(encoding='utf-8', errors='replace')
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """Stop the process by its PID (SIGINT, then SIGKILL after ``timeout``); return code."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=timeout)
+        self._log.close()
+        return self.process.returncode
+
+    def cleanup(self) -> None:
+        self.stop()
+        try:
+            os.unlink(self._log.name)
+        except OSError:
+            pass
+
+
+@contextmanager
+def node_process(command: Sequence[str | os.PathLike[str]],
+                 env: dict[str, str] | None = None) -> Iterator[NodeProcess]:
+    """Run a process for the duration of a ``with`` block; on failure its output is shown."""
+    proc = NodeProcess(command, env)
+    try:
+        yield proc
+    except BaseException:
+        proc.stop()
+        sys.stderr.write(f'--- output of {proc.command} ---\n{proc.output()}\n')
+        raise
+    finally:
+        proc.cleanup()
+
+
+def fixture_command(script: str, *args: str) -> list[str]:
+    """Command that runs a test fixture script from tests/fixtures with this interpreter."""
+    return [sys.executable, str(FIXTURES_DIR / script), *args]
+
+
+class RosClient:
+    """A client node in its own rclpy context with a single-threaded executor."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(f'dam_test_{uuid.uuid4().hex[:8]}', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def call(self, srv_type: Any, name: str, request: Any, timeout: float = 10.0,
+             wait: float = 30.0) -> Any:
+        """Call a service and return its response; raise AssertionError on time-out."""
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=wait):
+                raise AssertionError(f'service {name} did not appear within {wait} s')
+            future = client.call_async(request)
+            self.executor.spin_until_future_complete(future, timeout_sec=timeout)
+            if not future.done():
+                raise AssertionError(f'service {name} did not answer within {timeout} s')
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """Spin until ``predicate()`` is true or ``timeout`` seconds pass; return the predicate."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
