@@ -1,0 +1,360 @@
+"""Tests of the device link codec, decoder, calibration and watchdog (no ROS, no sockets)."""
+
+from __future__ import annotations
+
+import math
+import struct
+import time
+import zlib
+
+import numpy as np
+import pytest
+
+from dam_analysis.config import load_config
+from dam_hand_driver.errors import EncodeError, ParameterError
+from dam_hand_driver.protocol import (
+    MAGIC,
+    PROTOCOL_VERSION,
+    Calibration,
+    CommandFrame,
+    DeviceWatchdog,
+    FrameDecoder,
+    FrameKind,
+    JointMode,
+    StateFrame,
+    check_watchdog_timeout,
+    command_frame_size,
+    crc32,
+    encode_command,
+    encode_state,
+    seq_newer,
+    seq_next,
+    state_frame_size,
+)
+
+N = 9
+T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+
+
+def _state(seq: int, n: int = N, rng: np.random.Generator | None = None) -> bytes:
+    rng = rng or np.random.default_rng(seq)
+    big = 2**31
+    return encode_state(
+        seq, int(rng.integers(0, 2**63)),
+        rng.integers(-big, big, n), rng.integers(-big, big, n), rng.integers(-big, big, n),
+        rng.integers(1, 4, n), rng.integers(0, 2**16, n), status=int(rng.integers(0, 2**16)))
+
+
+def _command(seq: int, ref: int = 0, n: int = N) -> bytes:
+    return encode_command(seq, ref, [T, T, H, P, P, P, T, H, P][:n], list(range(-4, n - 4)))
+
+
+def _with_crc(body: bytes) -> bytes:
+    """Re-seal a modified frame (without its old CRC) with a correct checksum."""
+    return body + struct.pack('<I', zlib.crc32(body) & 0xFFFFFFFF)
+
+
+# --------------------------------------------------------------------------------------------
+# Codec
+
+
+def test_crc_is_the_standard_crc32_check_value() -> None:
+    # The published check value of CRC-32/ISO-HDLC.
+    assert crc32(b'123456789') == 0xCBF43926
+
+
+def test_frame_sizes_match_the_documented_layout() -> None:
+    assert state_frame_size(N) == 12 + 12 + 16 * N + 4 == len(_state(1))
+    assert command_frame_size(N) == 12 + 6 + 6 * N + 4 == len(_command(1))
+
+
+def test_state_round_trip_with_extreme_values() -> None:
+    lo, hi = -(2**31), 2**31 - 1
+    pos = [lo, hi, 0, 1, -1, 12345, -54321, 7, 8]
+    vel = [hi, lo, 3, 4, 5, 6, 7, 8, 9]
+    tor = [0, -1, 1, lo, hi, 100, -100, 2, 3]
+    modes = [T, P, H] * 3
+    faults = [0, 1, 2, 4, 8, 15, 0xFFFF, 0, 3]
+    data = encode_state(2**32 - 1, 2**64 - 1, pos, vel, tor, modes, faults, status=3)
+    frame = FrameDecoder(FrameKind.STATE, N).decode(data)
+    assert isinstance(frame, StateFrame)
+    assert frame.seq == 2**32 - 1 and frame.timestamp_ns == 2**64 - 1 and frame.status == 3
+    assert frame.position_counts.tolist() == pos
+    assert frame.velocity_counts_per_s.tolist() == vel
+    assert frame.torque_raw.tolist() == tor
+    assert frame.modes.tolist() == modes and frame.faults.tolist() == faults
+
+
+def test_state_header_bytes_follow_the_layout() -> None:
+    data = _state(0x01020304)
+    assert data[:4] == MAGIC
+    assert data[4] == PROTOCOL_VERSION and data[5] == FrameKind.STATE
+    assert struct.unpack_from('<H', data, 6)[0] == len(data)
+    assert struct.unpack_from('<I', data, 8)[0] == 0x01020304
+    assert struct.unpack_from('<I', data, len(data) - 4)[0] == zlib.crc32(data[:-4])
+
+
+def test_command_round_trip() -> None:
+    modes = [T, P, H, T, P, H, T, P, H]
+    setpoints = [-(2**31), 2**31 - 1, 0, 5, -5, 0, 123, 456, 0]
+    data = encode_command(77, 76, modes, setpoints)
+    assert data[5] == FrameKind.COMMAND
+    frame = FrameDecoder(FrameKind.COMMAND, N).decode(data)
+    assert isinstance(frame, CommandFrame)
+    assert (frame.seq, frame.ref_state_seq) == (77, 76)
+    assert frame.modes.tolist() == modes and frame.setpoints.tolist() == setpoints
+
+
+@pytest.mark.parametrize('kwargs, word', [
+    ({'seq': -1}, 'sequence'),
+    ({'seq': 2**32}, 'sequence'),
+    ({'setpoints': [2**31] + [0] * 8}, 'setpoints[0]'),
+    ({'setpoints': [0.5] + [0] * 8}, 'integers'),
+    ({'setpoints': [float('nan')] + [0] * 8}, 'non-finite'),
+    ({'modes': [0] + [T] * 8}, 'modes[0] = 0'),
+    ({'modes': [T] * 8}, 'shape'),
+])
+def test_encode_rejects_bad_values_and_names_them(kwargs: dict, word: str) -> None:
+    args = {'seq': 1, 'ref_state_seq': 0, 'modes': [T] * N, 'setpoints': [0] * N}
+    args.update(kwargs)
+    with pytest.raises(EncodeError, match=word.replace('[', r'\[').replace(']', r'\]')):
+        encode_command(**args)
+
+
+# --------------------------------------------------------------------------------------------
+# Decoder: each rejection counted under its own reason
+
+
+def test_each_rejection_reason_is_counted() -> None:
+    dec = FrameDecoder(FrameKind.STATE, N)
+    good = _state(10)
+    body = good[:-4]
+    cases = {
+        'short': good[:15],
+        'bad_magic': b'XAMH' + good[4:],
+        'bad_version': _with_crc(body[:4] + bytes([PROTOCOL_VERSION + 1]) + body[5:]),
+        'bad_kind': _command(10),
+        'bad_length': good + b'\x00',
+        'bad_crc': body + bytes([good[-4] ^ 0x01]) + good[-3:],
+        'bad_joint_count': _state(10, n=N - 1),
+        'bad_value': _with_crc(body[:24 + 12] + struct.pack('<H', 9) + body[24 + 14:]),
+    }
+    for reason, data in cases.items():
+        assert dec.decode(data) is None, reason
+        assert getattr(dec.counters, reason) == 1, (reason, dec.counters)
+        assert dec.last_reject == reason
+    assert dec.counters.rejected == len(cases)
+    assert dec.counters.accepted == 0
+    assert dec.decode(good) is not None
+    assert dec.counters.accepted == 1
+    assert dec.counters.internal_error == 0
+
+
+def test_joint_count_in_body_must_match() -> None:
+    good = _state(3)
+    # Same length, but the body claims 8 joints.
+    forged = _with_crc(good[:20] + struct.pack('<H', N - 1) + good[22:-4])
+    dec = FrameDecoder(FrameKind.STATE, N)
+    assert dec.decode(forged) is None
+    assert dec.counters.bad_joint_count == 1
+
+
+def test_stale_and_replayed_frames_are_dropped() -> None:
+    dec = FrameDecoder(FrameKind.COMMAND, N)
+    assert dec.decode(_command(100)) is not None
+    assert dec.decode(_command(100)) is None  # replay of the newest
+    assert dec.decode(_command(99)) is None  # reordered / old
+    assert dec.decode(_command(50)) is None
+    assert (dec.counters.replayed, dec.counters.stale) == (1, 2)
+    assert dec.decode(_command(103)) is not None  # gaps (lost datagrams) are fine
+    assert dec.decode(_command(101)) is None
+    assert dec.newest_seq == 103
+    dec.reset()  # peer restarted
+    assert dec.decode(_command(1)) is not None
+    assert dec.counters.accepted == 3
+
+
+def test_sequence_numbers_wrap_around() -> None:
+    assert seq_next(2**32 - 1) == 0
+    assert seq_newer(0, 2**32 - 1) and not seq_newer(2**32 - 1, 0)
+    assert seq_newer(5, 3) and not seq_newer(3, 5) and not seq_newer(7, 7)
+    assert not seq_newer(2**31 + 10, 10)  # half the circle ahead counts as old
+    dec = FrameDecoder(FrameKind.STATE, N)
+    assert dec.decode(_state(2**32 - 2)) is not None
+    assert dec.decode(_state(2**32 - 1)) is not None
+    assert dec.decode(_state(0)) is not None
+    assert dec.decode(_state(2**32 - 1)) is None
+    assert dec.counters.stale == 1
+
+
+def test_decoder_accepts_memoryview_and_bytearray() -> None:
+    dec = FrameDecoder(FrameKind.STATE, N)
+    assert dec.decode(bytearray(_state(1))) is not None
+    assert dec.decode(memoryview(_state(2))) is not None
+
+
+def test_decoder_never_raises_on_non_bytes() -> None:
+    dec = FrameDecoder(FrameKind.STATE, N)
+    assert dec.decode(None) is None  # type: ignore[arg-type]
+    assert dec.counters.internal_error == 1
+
+
+# --------------------------------------------------------------------------------------------
+# Fuzz
+
+
+def _flip_bits(data: bytes, rng: np.random.Generator) -> bytes:
+    buf = bytearray(data)
+    n_bits = int(rng.integers(1, 9))
+    for bit in rng.choice(len(buf) * 8, size=n_bits, replace=False):
+        buf[bit // 8] ^= 1 << (bit % 8)
+    return bytes(buf)
+
+
+@pytest.mark.parametrize('kind', [FrameKind.STATE, FrameKind.COMMAND])
+def test_fuzz_no_corrupt_frame_accepted_and_next_valid_frame_is(kind: FrameKind) -> None:
+    """10**5 corrupt datagrams per decoder kind; after each, a fresh valid frame must pass."""
+    rng = np.random.default_rng(20261123 + int(kind))
+    dec = FrameDecoder(kind, N)
+    make = _state if kind is FrameKind.STATE else _command
+    size = state_frame_size(N) if kind is FrameKind.STATE else command_frame_size(N)
+    header_prefix = MAGIC + bytes([PROTOCOL_VERSION, int(kind)]) + struct.pack('<H', size)
+    n_corrupt = 100_000
+    seq = 1
+    valid = make(seq)
+    assert dec.decode(valid) is not None
+    started = time.perf_counter()
+    for i in range(n_corrupt):
+        choice = i % 5
+        if choice == 0:  # random bytes of random length
+            bad = rng.bytes(int(rng.integers(0, 2 * size)))
+        elif choice == 1:  # random body behind a plausible header
+            bad = header_prefix + rng.bytes(size - len(header_prefix))
+        elif choice == 2:  # a few flipped bits of a fresh valid frame
+            bad = _flip_bits(make(seq + 1), rng)
+        elif choice == 3:  # truncated or extended
+            fresh = make(seq + 1)
+            cut = int(rng.integers(0, len(fresh)))
+            bad = fresh[:cut] if rng.random() < 0.5 else fresh + rng.bytes(int(rng.integers(1, 9)))
+        else:  # a valid frame replayed
+            bad = valid
+        assert dec.decode(bad) is None, (i, choice, bad.hex())
+        seq += 1
+        valid = make(seq)
+        assert dec.decode(valid) is not None, (i, dec.last_reject)
+    elapsed = time.perf_counter() - started
+    c = dec.counters
+    assert c.internal_error == 0
+    assert c.accepted == n_corrupt + 1
+    assert c.rejected == n_corrupt
+    assert c.replayed == n_corrupt // 5
+    assert c.bad_crc > 0 and c.short > 0 and c.bad_magic > 0 and c.bad_length > 0
+    print(f'fuzz {kind.name}: {2 * n_corrupt} decodes in {elapsed:.2f} s; {c.as_dict()}')
+
+
+# --------------------------------------------------------------------------------------------
+# Calibration
+
+
+def test_calibration_from_config_follows_the_formula() -> None:
+    cfg = load_config()
+    cal = Calibration.from_config(cfg)
+    assert cal.n_joints == len(cfg.hand.joint_names)
+    role = cfg.hand.joint_roles[0]
+    c = cfg.device.calibration[role]
+    raw = np.arange(N) * 1000 - 3000
+    expected = (raw[0] - c.position_offset_counts) * c.position_scale_rad_per_count
+    assert cal.position_si(raw)[0] == pytest.approx(expected)
+
+
+def test_calibration_round_trips_and_offsets() -> None:
+    cal = Calibration([1e-4, 2e-4, 1e-3], [100, -50, 0], [1e-5, 2e-5, 1e-3], [10, 0, -7])
+    counts = np.array([100, 0, 2000])
+    # (raw - offset) * scale computed by hand.
+    np.testing.assert_allclose(cal.position_si(counts), [0.0, 50 * 2e-4, 2.0])
+    np.testing.assert_allclose(cal.torque_si([10, 100, 3]), [0.0, 2e-3, 10e-3])
+    np.testing.assert_allclose(cal.velocity_si([10, 10, 10]), [1e-3, 2e-3, 1e-2])
+    angles = np.array([0.3, -1.2, 2.5])
+    np.testing.assert_allclose(cal.position_si(cal.position_raw(angles)), angles, atol=1e-3)
+    torques = np.array([0.12, -0.3, 0.0])
+    np.testing.assert_allclose(cal.torque_si(cal.torque_raw(torques)), torques, atol=1e-3)
+    assert cal.position_raw(angles).dtype == np.int64
+
+
+def test_setpoints_per_mode() -> None:
+    cal = Calibration([1e-4] * 3, [0] * 3, [1e-5] * 3, [0] * 3)
+    raw = cal.setpoints_raw([T, P, H], [0.1, math.radians(15.0), float('nan')])
+    assert raw.tolist() == [10000, round(math.radians(15.0) / 1e-4), 0]
+    si = cal.setpoints_si([T, P, H], raw)
+    assert si[0] == pytest.approx(0.1) and math.isnan(si[2])
+
+
+def test_calibration_rejects_bad_values() -> None:
+    with pytest.raises(ParameterError, match='zero scale'):
+        Calibration([0.0], [0], [1e-5], [0])
+    cal = Calibration([1e-4], [0], [1e-5], [0])
+    with pytest.raises(ParameterError, match='non-finite'):
+        cal.torque_raw([float('inf')])
+    with pytest.raises(ParameterError, match='int32'):
+        cal.position_raw([1e6])
+    with pytest.raises(ParameterError, match='JointMode'):
+        cal.setpoints_raw([7], [0.0])
+
+
+# --------------------------------------------------------------------------------------------
+# Watchdog
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_watchdog_starts_tripped_and_holds() -> None:
+    wd = DeviceWatchdog(3, 0.04, clock=FakeClock())
+    modes, setpoints, tripped = wd.output()
+    assert tripped and modes.tolist() == [H, H, H] and setpoints.tolist() == [0, 0, 0]
+
+
+def test_watchdog_zeroes_torque_holds_positions_until_fresh_command() -> None:
+    clock = FakeClock()
+    wd = DeviceWatchdog(3, 0.04, clock=clock)
+    wd.feed([T, P, H], [500, 1234, 0])
+    clock.now += 0.039
+    modes, setpoints, tripped = wd.output()
+    assert not tripped and modes.tolist() == [T, P, H] and setpoints.tolist() == [500, 1234, 0]
+    clock.now += 0.002  # 41 ms without a command
+    modes, setpoints, tripped = wd.output()
+    assert tripped
+    assert modes.tolist() == [T, H, H]  # torque joint stays in torque mode, at zero torque
+    assert setpoints.tolist() == [0, 0, 0]
+    assert wd.trips == 1
+    clock.now += 10.0  # stays tripped however long
+    assert wd.output()[2] and wd.trips == 1
+    wd.feed_frame(CommandFrame(seq=2, ref_state_seq=1, modes=np.array([T, T, P]),
+                               setpoints=np.array([-7, 8, 9])))
+    modes, setpoints, tripped = wd.output()
+    assert not tripped and modes.tolist() == [T, T, P] and setpoints.tolist() == [-7, 8, 9]
+    clock.now += 0.05
+    assert wd.output()[2] and wd.trips == 2
+
+
+def test_watchdog_timeout_is_bounded_and_never_off() -> None:
+    for bad in (0.0, -0.01, 0.2001, 1.0, float('inf'), float('nan')):
+        with pytest.raises(ParameterError, match='never be switched off'):
+            DeviceWatchdog(3, bad)
+    assert check_watchdog_timeout(0.2) == 0.2
+    cfg = load_config()
+    assert check_watchdog_timeout(cfg.device.watchdog_s) == cfg.device.watchdog_s
+
+
+def test_watchdog_rejects_bad_feed() -> None:
+    wd = DeviceWatchdog(3, clock=FakeClock())
+    with pytest.raises(ParameterError, match='JointMode'):
+        wd.feed([T, 0, P], [0, 0, 0])
+    with pytest.raises(ParameterError, match='shape'):
+        wd.feed([T, P], [0, 0])
+    assert wd.output()[2]  # a rejected feed does not disarm the watchdog
