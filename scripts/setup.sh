@@ -105,7 +105,9 @@ if [ "$(cat "$req_stamp" 2>/dev/null)" != "$req_hash" ]; then
   fi
   for req in "${req_files[@]}"; do
     info "pip install -r ${req#"$REPO_ROOT"/}"
-    if ! "$VPY" "${pip_args[@]}" -r "$req" "${constraints[@]}"; then
+    # (Some pip configurations warn about every absent local index; keep the log readable.)
+    if ! "$VPY" "${pip_args[@]}" -r "$req" "${constraints[@]}" \
+      2> >(grep -v "^WARNING: Location '.*' is ignored" >&2); then
       die "pip could not install ${req#"$REPO_ROOT"/}" \
         "check that the Python package index is reachable (pip config list; proxy settings)"
     fi
