@@ -1,1 +1,1 @@
-"""SPCM controller: compliant-joint impedance, position-joint trajectories and the DAM grasp sequence."""
+"""SPCM controller: compliant-joint impedance, position-joint trajectories, DAM sequence."""

@@ -1,0 +1,57 @@
+"""Boundary checks shared by the modules of this package (internal)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dam_spcm_controller.errors import InputError
+
+
+def finite_scalar(name: str, value: float, *, positive: bool = False,
+                  nonnegative: bool = False) -> float:
+    """Return ``value`` as a float; raise :class:`InputError` naming it when it is bad."""
+    if isinstance(value, bool):
+        raise InputError(f'{name} must be a number, got {value!r}')
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f'{name} must be a number, got {value!r}') from None
+    if not math.isfinite(out):
+        raise InputError(f'{name} must be finite, got {value!r}')
+    if positive and out <= 0.0:
+        raise InputError(f'{name} must be positive, got {value!r}')
+    if nonnegative and out < 0.0:
+        raise InputError(f'{name} must be non-negative, got {value!r}')
+    return out
+
+
+def finite_vector(name: str, value: object, length: int | None = None, *,
+                  positive: bool = False, nonnegative: bool = False) -> np.ndarray:
+    """Return ``value`` as a 1-D float64 array; raise :class:`InputError` naming it when bad.
+
+    A scalar is accepted and broadcast when ``length`` is given.
+    """
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f'{name} must be numeric, got {value!r}') from None
+    if arr.ndim == 0 and length is not None:
+        arr = np.full(length, float(arr))
+    if arr.ndim != 1:
+        raise InputError(f'{name} must be one-dimensional, got shape {arr.shape}')
+    if length is not None and arr.shape[0] != length:
+        raise InputError(f'{name} must have {length} values, got {arr.shape[0]}: '
+                         f'{arr.tolist()!r}')
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f'{name}[{i}] must be finite, got {arr[i]!r}')
+    if positive and (arr <= 0.0).any():
+        i = int(np.flatnonzero(arr <= 0.0)[0])
+        raise InputError(f'{name}[{i}] must be positive, got {arr[i]!r}')
+    if nonnegative and (arr < 0.0).any():
+        i = int(np.flatnonzero(arr < 0.0)[0])
+        raise InputError(f'{name}[{i}] must be non-negative, got {arr[i]!r}')
+    return arr
