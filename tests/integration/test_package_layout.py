@@ -85,3 +85,22 @@ def test_interfaces_are_generated_for_python() -> None:
 def test_config_is_installed_with_dam_analysis() -> None:
     installed = INSTALL / 'dam_analysis' / 'share' / 'dam_analysis' / 'config' / 'dam.yaml'
     assert installed.read_text() == (REPO_ROOT / 'config' / 'dam.yaml').read_text()
+
+
+def test_hand_command_and_grasp_action_are_generated() -> None:
+    from dam_interfaces.action import DamGrasp
+    from dam_interfaces.msg import DamStatus, HandCommand
+
+    assert HandCommand.get_fields_and_field_types() == {
+        'header': 'std_msgs/Header', 'name': 'sequence<string>', 'mode': 'sequence<uint8>',
+        'setpoint': 'sequence<double>'}
+    modes = {HandCommand.MODE_TORQUE, HandCommand.MODE_POSITION, HandCommand.MODE_HOLD}
+    assert len(modes) == 3
+    assert DamGrasp.Goal.get_fields_and_field_types() == {
+        'k_theta': 'sequence<double>', 'delta_theta_p': 'sequence<double>'}
+    outcomes = {DamGrasp.Result.OUTCOME_UNKNOWN, DamGrasp.Result.OUTCOME_SUCCESS,
+                DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED, DamGrasp.Result.OUTCOME_FAILURE,
+                DamGrasp.Result.OUTCOME_ABORTED}
+    assert len(outcomes) == 5
+    assert 'phase' in DamGrasp.Feedback.get_fields_and_field_types()
+    assert DamStatus.get_fields_and_field_types()['compliant_torque'] == 'sequence<double>'
