@@ -1,0 +1,668 @@
+"""The DAM grasp sequence as an explicit, deterministic state machine (paper sections 3.1, 4).
+
+Phases::
+
+    IDLE --start()--> APPROACH --all fingers in contact--> ROLLING_UP --trajectory done-->
+    ENVELOPE --fingers settled--> DONE
+
+    APPROACH / ROLLING_UP / ENVELOPE --cancel()--> ABORTED
+    APPROACH / ROLLING_UP / ENVELOPE --timeout, lost contact, joint limit, fail()--> FAILED
+
+IDLE
+    Every joint holds the angle measured at the first step in IDLE (clean start).
+APPROACH
+    Pre-shape: locked joints go to ``initial_locked_angle``, position joints to
+    ``initial_position_angle`` (15 deg), both at ``approach_speed``; compliant joints stay
+    under impedance around their measured angle. Closing: the equilibrium of each compliant
+    joint moves inward at ``approach_speed`` until the compliant-joint torque sensor of that
+    finger reads at least ``contact_torque_threshold``; then ``theta_0`` of that finger is
+    latched at its measured angle, so that ``tau_s = 0`` in the initial state (section 3.2).
+ROLLING_UP
+    SPCM{K_theta, delta_theta_p}: position joints follow a minimum-jerk trajectory from the
+    pre-shape angle by ``delta_theta_p`` over ``trajectory_duration``; compliant joints run the
+    impedance law ``tau_s = k_theta_i (theta_0 - theta) - d theta_dot``.
+ENVELOPE
+    Constant torque ``envelope_torque`` on the compliant and the position joints closes the
+    enveloping grasp (paper Fig. 6(d)); it is ramped in from the torque at phase entry.
+DONE
+    The envelope torque is kept (the object stays grasped).
+ABORTED, FAILED
+    The fingers relax: every torque command ramps linearly to zero over ``torque_ramp_time``;
+    moving position setpoints become HOLD at their last value.
+
+All timing comes from the ``t`` argument of :meth:`DamSequence.step`; nothing reads a clock.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dam_spcm_controller._validate import finite_scalar, finite_vector
+from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
+from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.impedance import _impedance_unchecked, finger_stiffness
+from dam_spcm_controller.trajectory import MinimumJerkTrajectory
+
+if TYPE_CHECKING:  # pragma: no cover
+    from dam_analysis.config import DamConfig
+
+
+class Phase(enum.Enum):
+    """Phase of the DAM sequence."""
+
+    IDLE = 'idle'
+    APPROACH = 'approach'
+    ROLLING_UP = 'rolling_up'
+    ENVELOPE = 'envelope'
+    DONE = 'done'
+    ABORTED = 'aborted'
+    FAILED = 'failed'
+
+    @property
+    def active(self) -> bool:
+        """True for the phases in which the grasp is in progress."""
+        return self in (Phase.APPROACH, Phase.ROLLING_UP, Phase.ENVELOPE)
+
+    @property
+    def terminal(self) -> bool:
+        """True for DONE, ABORTED and FAILED."""
+        return self in (Phase.DONE, Phase.ABORTED, Phase.FAILED)
+
+
+# Share of the overall progress reached at the end of each phase.
+_PROGRESS_APPROACH = 0.2
+_PROGRESS_ROLLING = 0.9
+# Times closer than this count as equal (float rounding of sums of time steps) [s].
+_TIME_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class SequenceParams:
+    """Everything the sequence needs besides ``k_theta`` and ``delta_theta_p``.
+
+    Attributes
+    ----------
+    layout
+        Joint order, stiffness ratios, joint limits and pre-shape angles.
+    damping
+        Compliant-joint damping ``d`` [N*m*s/rad].
+    torque_limit
+        ``|tau|`` limit of every torque command [N*m].
+    trajectory_duration
+        Time of the position-joint motion by ``delta_theta_p`` [s].
+    envelope_torque
+        Constant torque of the enveloping grasp [N*m].
+    contact_torque_threshold
+        Compliant-joint torque that signals contact during APPROACH [N*m]; also the load
+        level above which a finger counts as loaded in ROLLING_UP.
+    approach_speed
+        Speed of the pre-shape and of the closing equilibrium [rad/s].
+    phase_timeout
+        Longest time any active phase may last [s].
+    delta_theta_p_max
+        Largest ``delta_theta_p`` accepted by :meth:`DamSequence.start` [rad].
+    torque_ramp_time
+        Torque ramp-in at APPROACH and ENVELOPE entry, ramp-out on abort/failure [s].
+    lost_contact_time
+        During ROLLING_UP a finger counts as loaded once its static compliant torque
+        ``tau_s = -k_theta_i delta_theta_s`` reaches ``contact_torque_threshold``; a loaded
+        finger whose ``tau_s`` then stays below ``lost_contact_ratio *
+        contact_torque_threshold`` this long has lost contact [s].
+    lost_contact_ratio
+        Release level of the lost-contact hysteresis, in (0, 1] [-].
+    settle_speed
+        ENVELOPE ends when every compliant and position joint turns slower than this [rad/s]
+    settle_time
+        ... for this long [s].
+    limit_margin
+        A torque-controlled joint fails this close to a joint limit; a position-controlled
+        joint fails this far beyond one [rad].
+    """
+
+    layout: HandLayout
+    damping: float
+    torque_limit: float
+    trajectory_duration: float
+    envelope_torque: float
+    contact_torque_threshold: float
+    approach_speed: float
+    phase_timeout: float
+    delta_theta_p_max: float
+    torque_ramp_time: float = 0.2
+    lost_contact_time: float = 0.1
+    lost_contact_ratio: float = 0.5
+    settle_speed: float = 0.05
+    settle_time: float = 0.3
+    limit_margin: float = math.radians(0.5)
+
+    def __post_init__(self) -> None:
+        for name in ('damping', 'torque_ramp_time'):
+            object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
+                                                         nonnegative=True))
+        for name in ('torque_limit', 'trajectory_duration', 'envelope_torque',
+                     'contact_torque_threshold', 'approach_speed', 'phase_timeout',
+                     'delta_theta_p_max', 'lost_contact_time', 'lost_contact_ratio',
+                     'settle_speed', 'settle_time', 'limit_margin'):
+            object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
+                                                         positive=True))
+        if self.envelope_torque > self.torque_limit:
+            raise InputError(f'envelope_torque {self.envelope_torque!r} N*m exceeds '
+                             f'torque_limit {self.torque_limit!r} N*m')
+        if self.contact_torque_threshold >= self.torque_limit:
+            raise InputError(f'contact_torque_threshold {self.contact_torque_threshold!r} N*m '
+                             f'must be below torque_limit {self.torque_limit!r} N*m')
+        if self.lost_contact_ratio > 1.0:
+            raise InputError(f'lost_contact_ratio must be in (0, 1], got '
+                             f'{self.lost_contact_ratio!r}')
+        if self.phase_timeout <= self.trajectory_duration:
+            raise InputError(f'phase_timeout {self.phase_timeout!r} s must exceed '
+                             f'trajectory_duration {self.trajectory_duration!r} s')
+
+    @classmethod
+    def from_config(cls, config: DamConfig, **overrides: float) -> SequenceParams:
+        """Parameters from a validated ``dam_analysis.config.DamConfig``.
+
+        ``overrides`` replace individual attributes (e.g. ``settle_time=0.5``).
+        """
+        c = config.controller
+        params = cls(layout=HandLayout.from_hand_config(config.hand),
+                     damping=c.damping_nms_per_rad, torque_limit=c.torque_limit_nm,
+                     trajectory_duration=c.trajectory_duration_s,
+                     envelope_torque=c.envelope_torque_nm,
+                     contact_torque_threshold=c.contact_torque_threshold_nm,
+                     approach_speed=c.approach_speed_rad_per_s,
+                     phase_timeout=c.phase_timeout_s,
+                     delta_theta_p_max=config.task.delta_theta_p_max_rad)
+        return replace(params, **overrides) if overrides else params
+
+
+class DamSequence:
+    """The SPCM controller core: one call of :meth:`step` per control cycle.
+
+    Parameters
+    ----------
+    params
+        Gains, limits and timing (see :class:`SequenceParams`).
+
+    Notes
+    -----
+    Arrays passed to and returned by :meth:`step` have one entry per joint, ordered as
+    ``params.layout.joint_names`` (finger by finger, base to tip). Angles are in rad, positive
+    flexes the finger inward; torques in N*m; times in s.
+    """
+
+    def __init__(self, params: SequenceParams) -> None:
+        self._p = params
+        lay = params.layout
+        self._n = lay.n_fingers
+        self._nj = lay.n_joints
+        self._c = lay.compliant
+        self._l = lay.locked
+        self._q = lay.position
+        # Torque-mode joints fail inside these bounds, position-mode joints outside the outer.
+        self._inner_lo = lay.lower + params.limit_margin
+        self._inner_hi = lay.upper - params.limit_margin
+        self._outer_lo = lay.lower - params.limit_margin
+        self._outer_hi = lay.upper + params.limit_margin
+        self._modes = np.full(self._nj, JointMode.HOLD, dtype=np.int8)
+        self._set = np.zeros(self._nj)
+        self._phase = Phase.IDLE
+        self._t_last: float | None = None
+        self._reset_run()
+
+    def _reset_run(self) -> None:
+        n = self._n
+        self._hold: np.ndarray | None = None  # IDLE hold posture, latched at the first step
+        self._pending_start = False
+        self._relax_latch_measured = False
+        self._t_phase = 0.0
+        self._t_envelope = 0.0
+        self._progress = 0.0
+        self._failure_reason: str | None = None
+        self._k_theta: float | None = None
+        self._k_theta_i = np.zeros(n)
+        self._delta_theta_p: float | None = None
+        self._theta_0 = np.full(n, np.nan)
+        self._contact = np.zeros(n, dtype=bool)
+        self._loaded = np.zeros(n, dtype=bool)
+        self._below_since = np.full(n, np.nan)
+        self._eq_start = np.zeros(n)
+        self._preshape_from = np.zeros(self._nj)
+        self._preshape_to = np.zeros(self._nj)
+        self._preshape_time = 0.0
+        self._trajectory: MinimumJerkTrajectory | None = None
+        self._tau_from = np.zeros(self._nj)
+        self._settled_since: float | None = None
+        self._relax_from_modes = np.zeros(self._nj, dtype=np.int8)
+        self._relax_from = np.zeros(self._nj)
+        self._relax_scale = 1.0
+        self._last_theta_c = np.zeros(n)
+
+    # ------------------------------------------------------------------------------------
+    # Public state
+
+    @property
+    def params(self) -> SequenceParams:
+        return self._p
+
+    @property
+    def phase(self) -> Phase:
+        """Current phase. After :meth:`start`, IDLE until the next :meth:`step`."""
+        return self._phase
+
+    @property
+    def progress(self) -> float:
+        """Overall progress in [0, 1]: 0.2 at the end of APPROACH, 0.9 at the end of
+        ROLLING_UP, 1 at DONE; frozen on abort or failure. Never decreases within a run."""
+        return self._progress
+
+    @property
+    def failure_reason(self) -> str | None:
+        """Why the sequence FAILED (names the finger/joint and the values), else ``None``."""
+        return self._failure_reason
+
+    @property
+    def k_theta(self) -> float | None:
+        """``k_theta`` of the current run [N*m/rad] (finger 1), ``None`` before start."""
+        return self._k_theta
+
+    @property
+    def k_theta_i(self) -> np.ndarray:
+        """(n,) per-finger stiffness of the current run [N*m/rad] (zeros before start)."""
+        return self._k_theta_i.copy()
+
+    @property
+    def delta_theta_p(self) -> float | None:
+        """Position-joint displacement of the current run [rad], ``None`` before start."""
+        return self._delta_theta_p
+
+    @property
+    def contact(self) -> np.ndarray:
+        """(n,) True for fingers whose contact posture has been latched."""
+        return self._contact.copy()
+
+    @property
+    def theta_0(self) -> np.ndarray:
+        """(n,) latched contact posture of the compliant joints [rad]; NaN before contact."""
+        return self._theta_0.copy()
+
+    @property
+    def delta_theta_s(self) -> np.ndarray:
+        """(n,) ``theta - theta_0`` of the compliant joints at the last step [rad] (NaN
+        before contact)."""
+        return self._last_theta_c - self._theta_0
+
+    @property
+    def tau_s(self) -> np.ndarray:
+        """(n,) static compliant torque ``-K_theta delta_theta_s`` at the last step [N*m]."""
+        return -self._k_theta_i * self.delta_theta_s
+
+    # ------------------------------------------------------------------------------------
+    # Commands from the user
+
+    def start(self, k_theta: float, delta_theta_p: float) -> None:
+        """Begin a grasp ``SPCM{k_theta, delta_theta_p}``; APPROACH begins at the next step.
+
+        Parameters
+        ----------
+        k_theta
+            Compliant-joint stiffness of finger 1 [N*m/rad], positive; finger ``i`` gets
+            ``stiffness_ratio_i * k_theta``.
+        delta_theta_p
+            Position-joint displacement [rad], in (0, ``delta_theta_p_max``].
+
+        Raises
+        ------
+        InputError
+            A value is NaN/inf, not positive, or ``delta_theta_p`` is too large.
+        StateError
+            A grasp is already in progress.
+        """
+        if self._phase.active or self._pending_start:
+            raise StateError(f'cannot start: a grasp is in progress (phase '
+                             f'{self._phase.value})')
+        k = finite_scalar('k_theta', k_theta, positive=True)
+        dp = finite_scalar('delta_theta_p', delta_theta_p, positive=True)
+        if dp > self._p.delta_theta_p_max + 1e-12:
+            raise InputError(f'delta_theta_p {dp!r} rad ({math.degrees(dp):.6g} deg) exceeds '
+                             f'delta_theta_p_max {self._p.delta_theta_p_max!r} rad')
+        goal = self._p.layout.initial_position_angle + dp
+        upper = float(self._p.layout.upper[2])
+        if goal > upper + 1e-12:
+            raise InputError(f'delta_theta_p {dp!r} rad takes the position joints to '
+                             f'{math.degrees(goal):.6g} deg, beyond their limit '
+                             f'{math.degrees(upper):.6g} deg')
+        t_last = self._t_last
+        phase_before = self._phase
+        self._reset_run()
+        self._t_last = t_last
+        if phase_before.terminal:
+            self._phase = Phase.IDLE
+        self._k_theta = k
+        self._k_theta_i = finger_stiffness(k, self._p.layout.stiffness_ratios)
+        self._delta_theta_p = dp
+        self._pending_start = True
+
+    def cancel(self) -> bool:
+        """Abort an active grasp: the phase becomes ABORTED and the torques ramp to zero.
+
+        Returns
+        -------
+        bool
+            True if a grasp was cancelled (pending or active), False if there was none.
+        """
+        if self._pending_start:
+            self._pending_start = False
+            self._phase = Phase.ABORTED
+            self._relax_from_modes[:] = JointMode.HOLD
+            self._relax_latch_measured = True  # hold whatever is measured at the next step
+            self._t_phase = self._t_last if self._t_last is not None else 0.0
+            return True
+        if not self._phase.active:
+            return False
+        self._enter_relax(Phase.ABORTED, self._t_last if self._t_last is not None else 0.0)
+        return True
+
+    def fail(self, reason: str) -> bool:
+        """Fail an active grasp from outside (e.g. joint states went silent, driver error).
+
+        Returns
+        -------
+        bool
+            True if a grasp was active and is now FAILED with ``reason``.
+        """
+        if not (self._phase.active or self._pending_start):
+            return False
+        self._pending_start = False
+        self._failure_reason = str(reason)
+        self._enter_relax(Phase.FAILED, self._t_last if self._t_last is not None else 0.0)
+        return True
+
+    def reset(self) -> None:
+        """Return from DONE, ABORTED or FAILED to IDLE (hold the measured posture).
+
+        Raises
+        ------
+        StateError
+            A grasp is in progress.
+        """
+        if self._phase.active:
+            raise StateError(f'cannot reset during phase {self._phase.value}; cancel first')
+        t_last = self._t_last
+        self._reset_run()
+        self._t_last = t_last
+        self._phase = Phase.IDLE
+
+    # ------------------------------------------------------------------------------------
+    # The control cycle
+
+    def step(self, t: float, positions: np.ndarray, velocities: np.ndarray,
+             efforts: np.ndarray) -> JointCommand:
+        """Advance the sequence to time ``t`` and return the command for every joint.
+
+        Parameters
+        ----------
+        t
+            Time [s], any origin, never decreasing between calls.
+        positions
+            (3n,) measured joint angles [rad].
+        velocities
+            (3n,) measured joint velocities [rad/s].
+        efforts
+            (3n,) measured joint torques [N*m] (positive = flexion).
+
+        Returns
+        -------
+        JointCommand
+            Fresh arrays of modes and setpoints (angles [rad] or torques [N*m]).
+
+        Raises
+        ------
+        InputError
+            ``t`` is NaN/inf or earlier than the previous step, or an array has the wrong
+            length or holds NaN/inf. The sequence state is unchanged.
+        """
+        t = finite_scalar('t', t)
+        if self._t_last is not None and t < self._t_last:
+            raise InputError(f't must not decrease: got {t!r} s after {self._t_last!r} s')
+        pos = finite_vector('positions', positions, self._nj)
+        vel = finite_vector('velocities', velocities, self._nj)
+        eff = finite_vector('efforts', efforts, self._nj)
+        self._t_last = t
+        self._last_theta_c = pos[self._c].copy()
+
+        if self._pending_start:
+            self._pending_start = False
+            self._enter_approach(t, pos)
+        if self._relax_latch_measured:
+            self._relax_latch_measured = False
+            self._relax_from[:] = pos
+            self._modes[:] = JointMode.HOLD
+        phase = self._phase
+        if phase.active:
+            if t - self._t_phase > self._p.phase_timeout:
+                self._fail(t, f'phase {phase.value} exceeded phase_timeout '
+                              f'{self._p.phase_timeout:g} s (at t = {t:.6g} s)')
+            else:
+                self._check_limits(t, pos)
+        phase = self._phase
+        if phase is Phase.IDLE:
+            self._step_idle(pos)
+        elif phase is Phase.APPROACH:
+            self._step_approach(t, pos, vel, eff)
+        elif phase is Phase.ROLLING_UP:
+            self._step_rolling(t, pos, vel, eff)
+        if self._phase is Phase.ENVELOPE or self._phase is Phase.DONE:
+            self._step_envelope(t, vel)
+        if self._phase is Phase.ABORTED or self._phase is Phase.FAILED:
+            self._step_relax(t)
+        return JointCommand(modes=self._modes.copy(), setpoints=self._set.copy())
+
+    # ------------------------------------------------------------------------------------
+    # Phases
+
+    def _step_idle(self, pos: np.ndarray) -> None:
+        if self._hold is None:
+            self._hold = pos.copy()
+        self._modes[:] = JointMode.HOLD
+        self._set[:] = self._hold
+
+    def _enter_approach(self, t: float, pos: np.ndarray) -> None:
+        lay = self._p.layout
+        self._phase = Phase.APPROACH
+        self._t_phase = t
+        self._preshape_from[:] = pos
+        self._preshape_to[:] = pos
+        self._preshape_to[self._l] = lay.initial_locked_angle
+        self._preshape_to[self._q] = lay.initial_position_angle
+        dist = np.abs(self._preshape_to - self._preshape_from)
+        self._preshape_time = float(dist.max()) / self._p.approach_speed
+        self._eq_start[:] = pos[self._c]
+        self._modes[:] = JointMode.POSITION
+        self._modes[self._c] = JointMode.TORQUE
+        self._progress = 0.0
+
+    def _compliant_torque(self, theta_eq: np.ndarray, pos: np.ndarray,
+                          vel: np.ndarray) -> np.ndarray:
+        p = self._p
+        return _impedance_unchecked(self._k_theta_i, p.damping, p.torque_limit, theta_eq,
+                                    pos[self._c], vel[self._c])
+
+    def _step_approach(self, t: float, pos: np.ndarray, vel: np.ndarray,
+                       eff: np.ndarray) -> None:
+        p = self._p
+        elapsed = t - self._t_phase
+        # Pre-shape of locked and position joints, rate-limited towards the targets.
+        step = p.approach_speed * elapsed
+        delta = self._preshape_to - self._preshape_from
+        moved = self._preshape_from + np.clip(delta, -step, step)
+        self._set[self._l] = moved[self._l]
+        self._set[self._q] = moved[self._q]
+        preshaped = elapsed >= self._preshape_time
+        # Closing: the equilibrium of fingers without contact moves inward.
+        closing_time = max(elapsed - self._preshape_time, 0.0)
+        theta_eq = self._eq_start + p.approach_speed * closing_time
+        if preshaped:
+            new = (~self._contact) & (eff[self._c] >= p.contact_torque_threshold)
+            if new.any():
+                self._theta_0[new] = pos[self._c][new]
+                self._contact |= new
+        theta_eq = np.where(self._contact, self._theta_0, theta_eq)
+        tau = self._compliant_torque(theta_eq, pos, vel)
+        if p.torque_ramp_time > 0.0 and elapsed < p.torque_ramp_time:
+            tau = tau * (elapsed / p.torque_ramp_time)
+        self._set[self._c] = tau
+        frac_pre = 1.0 if self._preshape_time <= 0.0 else min(elapsed / self._preshape_time,
+                                                               1.0)
+        frac = 0.5 * frac_pre + 0.5 * float(self._contact.mean())
+        self._progress = max(self._progress, _PROGRESS_APPROACH * frac)
+        if self._contact.all():
+            self._enter_rolling(t, pos, vel)
+            return
+        # A finger whose equilibrium has passed its joint limit will never find the object.
+        upper_c = self._inner_hi[self._c]
+        open_limit = (~self._contact) & (theta_eq >= upper_c)
+        if open_limit.any():
+            i = int(np.flatnonzero(open_limit)[0])
+            self._fail(t, f'{p.layout.finger_name(i)} closed to its compliant joint limit '
+                          f'({math.degrees(upper_c[i]):.6g} deg) without contact: compliant '
+                          f'torque {eff[self._c][i]:.4g} N*m stayed below '
+                          f'contact_torque_threshold {p.contact_torque_threshold:g} N*m')
+
+    def _enter_rolling(self, t: float, pos: np.ndarray, vel: np.ndarray) -> None:
+        p = self._p
+        self._phase = Phase.ROLLING_UP
+        self._t_phase = t
+        self._progress = _PROGRESS_APPROACH
+        start = self._set[self._q].copy()
+        self._trajectory = MinimumJerkTrajectory(
+            start, np.full(self._n, self._delta_theta_p), p.trajectory_duration)
+        self._loaded[:] = False
+        self._below_since[:] = np.nan
+        self._modes[self._q] = JointMode.POSITION
+        self._modes[self._c] = JointMode.TORQUE
+        self._modes[self._l] = JointMode.HOLD
+        self._set[self._l] = self._p.layout.initial_locked_angle
+        self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
+
+    def _step_rolling(self, t: float, pos: np.ndarray, vel: np.ndarray,
+                      eff: np.ndarray) -> None:
+        p = self._p
+        traj = self._trajectory
+        assert traj is not None
+        elapsed = t - self._t_phase
+        self._set[self._q] = traj.position(elapsed)
+        self._set[self._l] = p.layout.initial_locked_angle
+        self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
+        self._progress = max(self._progress, _PROGRESS_APPROACH + (
+            _PROGRESS_ROLLING - _PROGRESS_APPROACH) * traj.phase(elapsed))
+        # Lost contact: a finger that carried load drops below the release level. The load is
+        # the paper's tau_s = -K_theta delta_theta_s from the encoders (the torque sensor would
+        # still show the approach torque for a cycle after the contact posture is latched).
+        tau_c = self._k_theta_i * (self._theta_0 - pos[self._c])
+        self._loaded |= tau_c >= p.contact_torque_threshold
+        release = p.lost_contact_ratio * p.contact_torque_threshold
+        below = self._loaded & (tau_c < release)
+        self._below_since = np.where(below, np.where(np.isnan(self._below_since), t,
+                                                     self._below_since), np.nan)
+        lost = below & (t - self._below_since >= p.lost_contact_time)
+        if lost.any():
+            i = int(np.flatnonzero(lost)[0])
+            self._fail(t, f'lost contact on {p.layout.finger_name(i)}: compliant torque '
+                          f'{tau_c[i]:.4g} N*m below {release:.4g} N*m for '
+                          f'{t - self._below_since[i]:.4g} s during rolling_up')
+            return
+        if elapsed >= traj.duration:
+            self._enter_envelope(t, eff)
+
+    def _enter_envelope(self, t: float, eff: np.ndarray) -> None:
+        self._phase = Phase.ENVELOPE
+        self._t_phase = t
+        self._t_envelope = t
+        self._progress = _PROGRESS_ROLLING
+        self._tau_from[:] = 0.0
+        self._tau_from[self._c] = self._set[self._c]  # last compliant torque command
+        self._tau_from[self._q] = np.clip(eff[self._q], -self._p.torque_limit,
+                                          self._p.torque_limit)  # position servo torque
+        self._modes[self._c] = JointMode.TORQUE
+        self._modes[self._q] = JointMode.TORQUE
+        self._modes[self._l] = JointMode.HOLD
+        self._set[self._l] = self._p.layout.initial_locked_angle
+        self._settled_since = None
+
+    def _step_envelope(self, t: float, vel: np.ndarray) -> None:
+        p = self._p
+        elapsed = t - self._t_envelope
+        frac = 1.0 if p.torque_ramp_time <= 0.0 else min(elapsed / p.torque_ramp_time, 1.0)
+        for sl in (self._c, self._q):
+            self._set[sl] = self._tau_from[sl] + (p.envelope_torque - self._tau_from[sl]) * frac
+        if self._phase is Phase.DONE:
+            return
+        settled_frac = 0.0
+        if frac >= 1.0:
+            moving = max(float(np.abs(vel[self._c]).max()), float(np.abs(vel[self._q]).max()))
+            if moving < p.settle_speed:
+                if self._settled_since is None:
+                    self._settled_since = t
+                settled_frac = min((t - self._settled_since) / p.settle_time, 1.0)
+            else:
+                self._settled_since = None
+        self._progress = max(self._progress, _PROGRESS_ROLLING + (1.0 - _PROGRESS_ROLLING) * (
+            0.5 * frac + 0.5 * settled_frac))
+        if settled_frac >= 1.0:
+            self._phase = Phase.DONE
+            self._t_phase = t
+            self._progress = 1.0
+
+    # ------------------------------------------------------------------------------------
+    # Failure, abort, relaxation
+
+    def _check_limits(self, t: float, pos: np.ndarray) -> None:
+        torque = self._modes == JointMode.TORQUE
+        lo = np.where(torque, self._inner_lo, self._outer_lo)
+        hi = np.where(torque, self._inner_hi, self._outer_hi)
+        bad = (pos < lo) | (pos > hi)
+        if bad.any():
+            j = int(np.flatnonzero(bad)[0])
+            lay = self._p.layout
+            self._fail(t, f'{lay.joint_names[j]} at {math.degrees(pos[j]):.6g} deg reached its '
+                          f'joint limit [{math.degrees(lay.lower[j]):.6g}, '
+                          f'{math.degrees(lay.upper[j]):.6g}] deg during phase '
+                          f'{self._phase.value}')
+
+    def _fail(self, t: float, reason: str) -> None:
+        self._failure_reason = reason
+        self._enter_relax(Phase.FAILED, t)
+
+    def _enter_relax(self, phase: Phase, t: float) -> None:
+        self._phase = phase
+        self._t_phase = t
+        self._relax_from_modes[:] = self._modes
+        self._relax_from[:] = self._set
+        self._relax_scale = 1.0
+        moving = self._modes == JointMode.POSITION
+        self._modes[moving] = JointMode.HOLD
+
+    def _step_relax(self, t: float) -> None:
+        p = self._p
+        elapsed = t - self._t_phase
+        if elapsed >= p.torque_ramp_time - _TIME_EPS:
+            scale = 0.0
+        else:
+            scale = 1.0 - elapsed / p.torque_ramp_time
+        self._relax_scale = scale
+        torque = self._relax_from_modes == JointMode.TORQUE
+        self._set[:] = np.where(torque, self._relax_from * scale, self._relax_from)
+
+    @property
+    def relaxed(self) -> bool:
+        """True in ABORTED/FAILED once every torque command has reached zero."""
+        if not (self._phase is Phase.ABORTED or self._phase is Phase.FAILED):
+            return False
+        torque = self._relax_from_modes == JointMode.TORQUE
+        return bool(not torque.any() or self._relax_scale == 0.0)
