@@ -1,0 +1,45 @@
+"""Joint layout from the configuration and the command container."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dam_analysis.config import load_config
+from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
+from dam_spcm_controller.errors import InputError
+
+
+def test_layout_from_config_matches_joint_names_and_limits():
+    cfg = load_config()
+    lay = HandLayout.from_hand_config(cfg.hand)
+    assert lay.joint_names == cfg.hand.joint_names
+    assert lay.n_fingers == 3 and lay.n_joints == 9
+    names = np.array(lay.joint_names)
+    assert all(n.endswith('_compliant_joint') for n in names[lay.compliant])
+    assert all(n.endswith('_locked_joint') for n in names[lay.locked])
+    assert all(n.endswith('_position_joint') for n in names[lay.position])
+    assert np.allclose(np.degrees(lay.upper[lay.position]), 95.0)
+    assert np.allclose(np.degrees(lay.lower[lay.compliant]), -45.0)
+    assert lay.initial_position_angle == pytest.approx(math.radians(15.0))
+    assert np.allclose(lay.stiffness_ratios, [1.0, 0.5, 0.5])
+    assert lay.finger_name(2) == 'finger3'
+
+
+def test_layout_rejects_bad_input():
+    names = tuple(f'f_{r}_joint' for r in ('compliant', 'locked', 'position'))
+    with pytest.raises(InputError, match='three joints per finger'):
+        HandLayout(names[:2], np.ones(1), np.zeros(2), np.ones(2), 0.0, 0.0)
+    with pytest.raises(InputError, match='f_locked_joint are empty'):
+        HandLayout(names, np.ones(1), np.zeros(3), np.array([1.0, 0.0, 1.0]), 0.0, 0.0)
+    with pytest.raises(InputError, match=r'stiffness_ratios\[0\] must be positive'):
+        HandLayout(names, np.zeros(1), np.zeros(3), np.ones(3), 0.0, 0.0)
+
+
+def test_joint_command_mode_lookup():
+    cmd = JointCommand(np.array([0, 1, 2], dtype=np.int8), np.zeros(3))
+    assert cmd.mode(0) is JointMode.HOLD
+    assert cmd.mode(1) is JointMode.POSITION
+    assert cmd.mode(2) is JointMode.TORQUE
