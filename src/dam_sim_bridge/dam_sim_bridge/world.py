@@ -1,0 +1,647 @@
+"""The PyBullet world of the DAM hand: three capsule fingers, a table and the cylinder.
+
+:class:`HandWorld` is a plain Python class: no rclpy, no sockets. It is built from the same
+``config/dam.yaml`` as the analysis and is stepped in lockstep (:meth:`HandWorld.step` runs as
+fast as the CPU allows); the ROS node that serves it over the device link paces it in real time.
+
+Model
+-----
+* The palm is fixed in the world (fixed base, no collision shape). Each finger is a chain of
+  three revolute joints (compliant, locked, position) about the finger's
+  :attr:`~dam_analysis.config.FingerConfig.joint_axis`; a positive angle flexes the finger
+  inward, all angles zero hang it straight down from its base.
+* Link ``i`` is a capsule of radius ``hand.link_radius_m`` whose segment runs from joint ``i``
+  to joint ``i + 1`` (``hand.link_lengths_m``); the last segment ends at the fingertip centre.
+  Its mass is :attr:`WorldOptions.link_masses_kg`, its centre of mass the segment midpoint and
+  its inertia that of a solid cylinder of the segment's length and the link radius.
+* The table is a static box whose top is the plane ``z = 0``; the cylinder (``object``) lies on
+  it with its axis along ``object.axis``. Its collision shape is a regular prism of
+  :attr:`WorldOptions.object_faces` faces tangent to the cylinder (zero collision margin), with
+  the solid cylinder's mass and inertia: Bullet's primitive cylinder creeps and rolls away on a
+  flat table by itself (about 0.17 m in 5 s), the prism rests.
+* Friction. Bullet combines the lateral friction of two bodies by multiplying them. The finger
+  links get ``tan(alpha)``, the object ``1.0`` and the table ``contact.table_friction_
+  coefficient``, so finger-object = ``tan(alpha)`` and table-object = the table coefficient,
+  exactly, also for ``alpha = 0``. (Finger-table is their product; fingers do not touch the
+  table in the task.) Rolling and spinning friction are zero, restitution is zero.
+
+Joint control
+-------------
+Each joint is in one :class:`~dam_hand_driver.protocol.JointMode`:
+
+* ``TORQUE``: the default velocity motor is disabled (``VELOCITY_CONTROL`` with force 0) and the
+  torque, clipped to :attr:`WorldOptions.torque_limit_nm`, is applied with ``TORQUE_CONTROL``
+  before every physics step.
+* ``POSITION``: Bullet's position servo (``POSITION_CONTROL``) tracks the setpoint (clipped to
+  the joint limits) with at most :attr:`WorldOptions.servo_force_limit_nm`.
+* ``HOLD``: the same servo holds the angle the joint had when it entered ``HOLD``.
+
+Torque sensor
+-------------
+:meth:`HandWorld.joint_states` reports, like a joint torque sensor between the actuator and the
+link of a frictionless joint, the actuator torque transmitted to the link [N*m] (positive in
+the positive joint direction): for servoed joints (POSITION, HOLD) Bullet's
+``appliedJointMotorTorque`` of the last step (the servo's constraint torque, which carries the
+load); for TORQUE joints the torque Bullet applied during the last step after clipping. Bullet
+does not report the latter itself: ``appliedJointMotorTorque`` keeps the last servo value, and
+the joint reaction excludes generalised forces. Before the first step every reading is zero.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+import pybullet
+from pybullet_utils import bullet_client
+
+from dam_hand_driver.protocol import JointMode
+from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
+
+_TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
+
+
+@dataclass(frozen=True)
+class WorldOptions:
+    """Simulation settings that are not part of the task configuration.
+
+    Attributes
+    ----------
+    time_step_s
+        Physics step [s] (1 kHz by default).
+    gui
+        Open the PyBullet GUI instead of the headless DIRECT server.
+    link_masses_kg
+        Mass of each link, base to tip [kg].
+    initial_compliant_angle_rad
+        Compliant joints after :meth:`HandWorld.reset` [rad]: slightly open (negative), so that
+        no finger touches the object; the controller's APPROACH phase closes them.
+    servo_force_limit_nm
+        Largest torque of the position servo (POSITION and HOLD joints) [N*m].
+    torque_limit_nm
+        TORQUE commands are clipped to +-this [N*m] (the device's actuator limit).
+    position_gain, velocity_gain
+        Gains of Bullet's position servo (dimensionless, see ``setJointMotorControlArray``).
+    solver_iterations
+        Constraint solver iterations per step.
+    object_faces
+        Faces of the prism that stands in for the cylinder's collision shape.
+    """
+
+    time_step_s: float = 1.0e-3
+    gui: bool = False
+    link_masses_kg: tuple[float, float, float] = (0.020, 0.012, 0.012)
+    initial_compliant_angle_rad: float = math.radians(-10.0)
+    servo_force_limit_nm: float = 2.0
+    torque_limit_nm: float = 1.0
+    position_gain: float = 0.3
+    velocity_gain: float = 1.0
+    solver_iterations: int = 50
+    object_faces: int = 64
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.time_step_s) and 1e-5 <= self.time_step_s <= 0.01):
+            raise WorldConfigError(f'time_step_s {self.time_step_s!r} is outside [1e-5, 0.01] s')
+        masses = tuple(self.link_masses_kg)
+        if len(masses) != 3 or not all(math.isfinite(m) and m > 0.0 for m in masses):
+            raise WorldConfigError(f'link_masses_kg {self.link_masses_kg!r} must be three '
+                                   f'positive masses')
+        for name in ('servo_force_limit_nm', 'torque_limit_nm', 'position_gain',
+                     'velocity_gain'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise WorldConfigError(f'{name} {value!r} must be a positive number')
+        if not math.isfinite(self.initial_compliant_angle_rad):
+            raise WorldConfigError(f'initial_compliant_angle_rad '
+                                   f'{self.initial_compliant_angle_rad!r} is not finite')
+        if not 16 <= int(self.object_faces) <= 256:
+            raise WorldConfigError(f'object_faces {self.object_faces!r} is outside [16, 256]')
+        if int(self.solver_iterations) < 1:
+            raise WorldConfigError(f'solver_iterations {self.solver_iterations!r} must be >= 1')
+
+
+class JointStates(NamedTuple):
+    """Joint state in ``HandConfig.joint_names`` order (SI)."""
+
+    positions: np.ndarray  #: [rad]
+    velocities: np.ndarray  #: [rad/s]
+    torques: np.ndarray  #: torque-sensor readings [N*m], see the module docstring
+
+
+class ObjectPose(NamedTuple):
+    """Pose of the cylinder's centre of mass in the world."""
+
+    position: np.ndarray  #: (3,) [m]
+    quaternion: np.ndarray  #: (4,) x, y, z, w
+    sim_time: float  #: simulated time since the last reset [s]
+
+
+@dataclass
+class _JointTable:
+    indices: list[int] = field(default_factory=list)  # Bullet joint indices, joint_names order
+    roles: list[str] = field(default_factory=list)
+    lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
+    """Quaternion (x, y, z, w) that turns the local z axis onto the horizontal unit ``axis``."""
+    a = np.asarray(axis, dtype=float) / float(np.linalg.norm(axis))
+    rot = np.cross([0.0, 0.0, 1.0], a)  # (-a_y, a_x, 0), unit length for a horizontal axis
+    s = math.sin(math.pi / 4.0)
+    return (float(rot[0] * s), float(rot[1] * s), float(rot[2] * s), math.cos(math.pi / 4.0))
+
+
+def prism_vertices(radius_m: float, length_m: float, faces: int,
+                   face_angle_rad: float = 0.0) -> list[list[float]]:
+    """Vertices of a regular prism along z whose flat faces are tangent to the cylinder.
+
+    The inradius is ``radius_m``; one face's outward normal points at ``face_angle_rad`` in the
+    local xy plane (the face the prism rests on). The corners stick out by
+    ``radius_m * (1 / cos(pi / faces) - 1)``.
+    """
+    corner = radius_m / math.cos(math.pi / faces)
+    half = length_m / 2.0
+    angles = [face_angle_rad + math.pi * (2 * k + 1) / faces for k in range(faces)]
+    return [[corner * math.cos(a), corner * math.sin(a), z] for a in angles
+            for z in (-half, half)]
+
+
+def _down_angle(quaternion: Sequence[float]) -> float:
+    """Angle in the body's xy plane of the world's -z direction, for a body at ``quaternion``."""
+    rot = np.array(pybullet.getMatrixFromQuaternion(list(quaternion))).reshape(3, 3)
+    down = rot.T @ np.array([0.0, 0.0, -1.0])
+    return math.atan2(float(down[1]), float(down[0]))
+
+
+def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
+                           ) -> tuple[float, float, float]:
+    """Principal inertia (ixx, iyy, izz) [kg*m^2] of a solid cylinder along z about its centre."""
+    transverse = mass_kg * (3.0 * radius_m**2 + length_m**2) / 12.0
+    return transverse, transverse, 0.5 * mass_kg * radius_m**2
+
+
+def hand_urdf(config: Any, link_masses_kg: Sequence[float]) -> str:
+    """URDF text of the hand (fixed palm, three joints per finger) built from ``config``.
+
+    Parameters
+    ----------
+    config
+        A ``DamConfig``.
+    link_masses_kg
+        Mass of each link, base to tip [kg].
+    """
+    hand = config.hand
+    r = hand.link_radius_m
+    parts = ['<?xml version="1.0"?>', '<robot name="dam_hand">',
+             '<link name="palm"><inertial><mass value="0.1"/>'
+             '<inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/>'
+             '</inertial></link>']
+    for finger in hand.fingers:
+        parent = 'palm'
+        for i, role in enumerate(hand.joint_roles):
+            length = float(hand.link_lengths_m[i])
+            mass = float(link_masses_kg[i])
+            ixx, iyy, izz = solid_cylinder_inertia(mass, length, r)
+            lo, hi = hand.joint_limits_rad[role]
+            link = f'{finger.name}_{role}_link'
+            if i == 0:
+                x, y, z = (float(v) for v in finger.base_position_m)
+                origin = f'<origin xyz="{x!r} {y!r} {z!r}" rpy="0 0 {finger.base_yaw_rad!r}"/>'
+            else:
+                prev = float(hand.link_lengths_m[i - 1])
+                origin = f'<origin xyz="0 0 {-prev!r}" rpy="0 0 0"/>'
+            parts.append(
+                f'<joint name="{finger.name}_{role}_joint" type="revolute">'
+                f'<parent link="{parent}"/><child link="{link}"/>{origin}'
+                f'<axis xyz="0 -1 0"/>'
+                f'<limit lower="{lo!r}" upper="{hi!r}" effort="100" velocity="100"/>'
+                f'<dynamics damping="0" friction="0"/></joint>')
+            parts.append(
+                f'<link name="{link}">'
+                f'<inertial><origin xyz="0 0 {-length / 2.0!r}"/><mass value="{mass!r}"/>'
+                f'<inertia ixx="{ixx!r}" iyy="{iyy!r}" izz="{izz!r}" ixy="0" ixz="0" iyz="0"/>'
+                f'</inertial>'
+                f'<collision><origin xyz="0 0 {-length / 2.0!r}"/>'
+                f'<geometry><capsule radius="{r!r}" length="{length!r}"/></geometry></collision>'
+                f'<visual><origin xyz="0 0 {-length / 2.0!r}"/>'
+                f'<geometry><capsule radius="{r!r}" length="{length!r}"/></geometry></visual>'
+                f'</link>')
+            parent = link
+    parts.append('</robot>')
+    return '\n'.join(parts)
+
+
+class HandWorld:
+    """The simulated hand, table and cylinder, steppable in lockstep.
+
+    Parameters
+    ----------
+    config
+        A ``DamConfig`` (``dam_analysis.config.load_config()``).
+    options
+        Simulation settings; defaults to :class:`WorldOptions`.
+
+    Raises
+    ------
+    WorldConfigError
+        The initial compliant angle is outside the compliant joint limits.
+    SimulationError
+        The physics server could not be started or the model not loaded.
+    """
+
+    def __init__(self, config: Any, options: WorldOptions | None = None) -> None:
+        self.config = config
+        self.options = options or WorldOptions()
+        hand = config.hand
+        lo, hi = hand.joint_limits_rad['compliant']
+        if not lo <= self.options.initial_compliant_angle_rad <= hi:
+            raise WorldConfigError(
+                f'initial_compliant_angle_rad {self.options.initial_compliant_angle_rad!r} is '
+                f'outside the compliant joint limits [{lo!r}, {hi!r}] rad')
+        self.joint_names: tuple[str, ...] = tuple(hand.joint_names)
+        self.n_joints = len(self.joint_names)
+        self.link_masses_kg = np.asarray(self.options.link_masses_kg, dtype=float)
+        mode = pybullet.GUI if self.options.gui else pybullet.DIRECT
+        try:
+            self._pb = bullet_client.BulletClient(connection_mode=mode)
+        except Exception as exc:  # noqa: BLE001 - pybullet raises plain errors
+            raise SimulationError(f'cannot start the PyBullet server (mode {mode}): {exc}') from exc
+        self._closed = False
+        self._pb.setTimeStep(self.options.time_step_s)
+        self._pb.setPhysicsEngineParameter(numSolverIterations=int(self.options.solver_iterations))
+        self.set_gravity((0.0, 0.0, -config.task.gravity_m_per_s2))
+        self._build()
+        self._friction_angle_rad = float(config.contact.friction_angle_rad)
+        self._table_mu = float(config.contact.table_friction_coefficient)
+        self.reset()
+
+    # ---------------------------------------------------------------------------------------
+    # Construction
+
+    def _build(self) -> None:
+        pb = self._pb
+        urdf = hand_urdf(self.config, self.link_masses_kg)
+        fd, path = tempfile.mkstemp(suffix='.urdf', prefix='dam_hand_')
+        try:
+            with os.fdopen(fd, 'w', encoding='utf-8') as handle:
+                handle.write(urdf)
+            self.hand_id = pb.loadURDF(path, useFixedBase=True,
+                                       flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+        except Exception as exc:  # noqa: BLE001
+            raise SimulationError(f'cannot load the hand model: {exc}') from exc
+        finally:
+            os.unlink(path)
+        by_name = {pb.getJointInfo(self.hand_id, j)[1].decode(): j
+                   for j in range(pb.getNumJoints(self.hand_id))}
+        table = _JointTable()
+        for name in self.joint_names:
+            if name not in by_name:
+                raise SimulationError(f'joint {name!r} missing from the loaded model')
+            table.indices.append(by_name[name])
+            table.roles.append(name.rsplit('_', 2)[-2])
+        limits = [self.config.hand.joint_limits_rad[r] for r in table.roles]
+        table.lower = np.array([lim[0] for lim in limits])
+        table.upper = np.array([lim[1] for lim in limits])
+        self._joints = table
+        for j in table.indices:
+            pb.changeDynamics(self.hand_id, j, linearDamping=0.0, angularDamping=0.0,
+                              jointDamping=0.0, restitution=0.0, rollingFriction=0.0,
+                              spinningFriction=0.0)
+        # Table: static box, top face at z = 0.
+        hx, hy, hz = _TABLE_HALF_EXTENTS_M
+        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[hx, hy, hz])
+        box_vis = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=[hx, hy, hz],
+                                       rgbaColor=[0.6, 0.5, 0.4, 1.0])
+        self.table_id = pb.createMultiBody(0.0, box, box_vis, basePosition=[0.0, 0.0, -hz])
+        # Object: the cylinder, local z along object.axis.
+        obj = self.config.object
+        cyl = pb.createCollisionShape(
+            pybullet.GEOM_MESH,
+            vertices=prism_vertices(obj.radius_m, obj.length_m, self.options.object_faces,
+                                    _down_angle(_axis_quaternion(obj.axis))))
+        cyl_vis = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=obj.radius_m,
+                                       length=obj.length_m, rgbaColor=[0.2, 0.4, 0.8, 1.0])
+        self.object_id = pb.createMultiBody(obj.mass_kg, cyl, cyl_vis,
+                                            basePosition=obj.position_m.tolist(),
+                                            baseOrientation=_axis_quaternion(obj.axis))
+        for body in (self.table_id, self.object_id):
+            pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
+                              rollingFriction=0.0, spinningFriction=0.0)
+        # Zero margin: the hull is the cylinder's true surface; exact solid-cylinder inertia
+        # (Bullet would use the hull's bounding box).
+        pb.changeDynamics(self.object_id, -1, collisionMargin=0.0,
+                          localInertiaDiagonal=list(solid_cylinder_inertia(
+                              obj.mass_kg, obj.length_m, obj.radius_m)))
+        self._pb.setJointMotorControlArray(
+            self.hand_id, self._joints.indices, pybullet.VELOCITY_CONTROL,
+            forces=[0.0] * self.n_joints)
+
+    # ---------------------------------------------------------------------------------------
+    # Settings
+
+    @property
+    def client(self) -> bullet_client.BulletClient:
+        """The PyBullet client of this world (for inspection and tests)."""
+        return self._pb
+
+    @property
+    def joint_indices(self) -> tuple[int, ...]:
+        """Bullet joint (= link) indices in ``joint_names`` order."""
+        return tuple(self._joints.indices)
+
+    @property
+    def joint_lower_limits(self) -> np.ndarray:
+        """(n,) lower joint limits [rad]."""
+        return self._joints.lower.copy()
+
+    @property
+    def joint_upper_limits(self) -> np.ndarray:
+        """(n,) upper joint limits [rad]."""
+        return self._joints.upper.copy()
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated time since the last :meth:`reset` [s]."""
+        return self._steps * self.options.time_step_s
+
+    @property
+    def time_step_s(self) -> float:
+        return self.options.time_step_s
+
+    def set_gravity(self, gravity_m_per_s2: Sequence[float]) -> None:
+        """Set the gravity vector [m/s^2] (world frame; default ``(0, 0, -g)`` of the config)."""
+        g = np.asarray(gravity_m_per_s2, dtype=float)
+        if g.shape != (3,) or not np.all(np.isfinite(g)):
+            raise WorldConfigError(f'gravity {gravity_m_per_s2!r} must be three finite numbers')
+        self._pb.setGravity(*g.tolist())
+
+    def set_friction_angle(self, alpha_rad: float) -> None:
+        """Set the finger-object friction angle: the pair coefficient becomes ``tan(alpha)``.
+
+        Parameters
+        ----------
+        alpha_rad
+            Friction angle [rad], ``0 <= alpha < pi/2``.
+        """
+        a = float(alpha_rad)
+        if not (math.isfinite(a) and 0.0 <= a < math.pi / 2.0):
+            raise WorldConfigError(f'friction angle {alpha_rad!r} rad is outside [0, pi/2)')
+        self._friction_angle_rad = a
+        mu = math.tan(a)
+        for j in self._joints.indices:
+            self._pb.changeDynamics(self.hand_id, j, lateralFriction=mu)
+        self._pb.changeDynamics(self.object_id, -1, lateralFriction=1.0)
+
+    def set_table_friction(self, coefficient: float) -> None:
+        """Set the table-object friction coefficient (>= 0)."""
+        mu = float(coefficient)
+        if not (math.isfinite(mu) and mu >= 0.0):
+            raise WorldConfigError(f'table friction coefficient {coefficient!r} must be >= 0')
+        self._table_mu = mu
+        self._pb.changeDynamics(self.table_id, -1, lateralFriction=mu)
+
+    def pair_friction(self) -> dict[str, float]:
+        """Effective Coulomb coefficients of the body pairs, as Bullet combines them (product).
+
+        Returns
+        -------
+        dict
+            ``finger_object``, ``table_object``, ``finger_table`` (each link of every finger has
+            the same value; the first is read).
+        """
+        def mu(body: int, link: int) -> float:
+            return float(self._pb.getDynamicsInfo(body, link)[1])
+
+        finger = mu(self.hand_id, self._joints.indices[0])
+        obj = mu(self.object_id, -1)
+        table = mu(self.table_id, -1)
+        return {'finger_object': finger * obj, 'table_object': table * obj,
+                'finger_table': finger * table}
+
+    # ---------------------------------------------------------------------------------------
+    # Reset and commands
+
+    def initial_positions(self) -> np.ndarray:
+        """(n,) joint angles after :meth:`reset` [rad]."""
+        hand = self.config.hand
+        per_role = {'compliant': self.options.initial_compliant_angle_rad,
+                    'locked': hand.initial_locked_angle_rad,
+                    'position': hand.initial_position_angle_rad}
+        return np.array([per_role[r] for r in self._joints.roles])
+
+    def reset(self, object_position: Sequence[float] | None = None,
+              object_quaternion: Sequence[float] | None = None,
+              friction_angle_rad: float | None = None,
+              table_friction_coefficient: float | None = None) -> None:
+        """Put the hand in its initial posture (all joints HOLD) and the object at rest.
+
+        Parameters
+        ----------
+        object_position
+            (3,) centre of gravity [m]; default ``object.position_m``.
+        object_quaternion
+            (4,) x, y, z, w; default: axis along ``object.axis``.
+        friction_angle_rad
+            New finger-object friction angle [rad]; default: keep the current one.
+        table_friction_coefficient
+            New table-object coefficient; default: keep the current one.
+        """
+        obj = self.config.object
+        pos = obj.position_m if object_position is None else np.asarray(object_position, float)
+        quat = (_axis_quaternion(obj.axis) if object_quaternion is None
+                else np.asarray(object_quaternion, float))
+        if np.shape(pos) != (3,) or not np.all(np.isfinite(pos)):
+            raise WorldConfigError(f'object_position {object_position!r} must be 3 finite numbers')
+        qn = float(np.linalg.norm(quat))
+        if np.shape(quat) != (4,) or not math.isfinite(qn) or qn < 1e-9:
+            raise WorldConfigError(f'object_quaternion {object_quaternion!r} must be a nonzero '
+                                   f'quaternion (x, y, z, w)')
+        self.set_friction_angle(self._friction_angle_rad if friction_angle_rad is None
+                                else friction_angle_rad)
+        self.set_table_friction(self._table_mu if table_friction_coefficient is None
+                                else table_friction_coefficient)
+        pb = self._pb
+        pb.resetBasePositionAndOrientation(self.object_id, list(map(float, pos)),
+                                           [float(q) / qn for q in quat])
+        pb.resetBaseVelocity(self.object_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+        q0 = self.initial_positions()
+        for j, q in zip(self._joints.indices, q0, strict=True):
+            pb.resetJointState(self.hand_id, j, float(q), 0.0)
+        self._modes = np.full(self.n_joints, int(JointMode.HOLD), dtype=np.int64)
+        self._targets = q0.copy()
+        self._torque_cmd = np.zeros(self.n_joints)
+        self._applied_torque = np.zeros(self.n_joints)
+        self._steps = 0
+        self._stepped = False
+        self._send_servo_targets()
+
+    def joint_modes(self) -> np.ndarray:
+        """(n,) current :class:`JointMode` of every joint."""
+        return self._modes.copy()
+
+    def set_joint_commands(self, modes: Sequence[int] | np.ndarray,
+                           setpoints: Sequence[float] | np.ndarray) -> None:
+        """Set the mode and setpoint of every joint (held until the next call).
+
+        Parameters
+        ----------
+        modes
+            (n,) :class:`JointMode` per joint, ``joint_names`` order.
+        setpoints
+            (n,) torque [N*m] (TORQUE, clipped to ``torque_limit_nm``), angle [rad] (POSITION,
+            clipped to the joint limits), ignored (HOLD: the angle at the switch to HOLD is
+            held; NaN allowed).
+
+        Raises
+        ------
+        CommandError
+            Wrong length, an unknown mode, or a non-finite TORQUE/POSITION setpoint.
+        """
+        m = np.asarray(modes)
+        sp = np.asarray(setpoints, dtype=float)
+        if m.shape != (self.n_joints,) or sp.shape != (self.n_joints,):
+            raise CommandError(f'modes {m.shape} and setpoints {sp.shape} must both have shape '
+                               f'({self.n_joints},)')
+        try:
+            m = np.array([int(JointMode(int(v))) for v in m], dtype=np.int64)
+        except (ValueError, TypeError) as exc:
+            raise CommandError(f'modes {np.asarray(modes).tolist()!r}: {exc}') from exc
+        active = m != JointMode.HOLD
+        if not np.all(np.isfinite(sp[active])):
+            bad = [self.joint_names[i] for i in np.flatnonzero(active & ~np.isfinite(sp))]
+            raise CommandError(f'non-finite setpoint for {bad}: {sp.tolist()!r}')
+        positions = None
+        entering_hold = (m == JointMode.HOLD) & (self._modes != JointMode.HOLD)
+        if np.any(entering_hold):
+            positions = self._read_positions()
+        for i in range(self.n_joints):
+            if m[i] == JointMode.TORQUE:
+                self._torque_cmd[i] = float(np.clip(sp[i], -self.options.torque_limit_nm,
+                                                    self.options.torque_limit_nm))
+            elif m[i] == JointMode.POSITION:
+                self._targets[i] = float(np.clip(sp[i], self._joints.lower[i],
+                                                 self._joints.upper[i]))
+            elif entering_hold[i] and positions is not None:
+                self._targets[i] = float(positions[i])
+        torque_now = m == JointMode.TORQUE
+        newly_torque = torque_now & (self._modes != JointMode.TORQUE)
+        self._modes = m
+        if np.any(newly_torque):
+            idx = [self._joints.indices[i] for i in np.flatnonzero(newly_torque)]
+            self._pb.setJointMotorControlArray(self.hand_id, idx, pybullet.VELOCITY_CONTROL,
+                                               forces=[0.0] * len(idx))
+        self._torque_cmd[~torque_now] = 0.0
+        self._send_servo_targets()
+
+    def _send_servo_targets(self) -> None:
+        servo = np.flatnonzero(self._modes != JointMode.TORQUE)
+        if servo.size == 0:
+            return
+        n = int(servo.size)
+        self._pb.setJointMotorControlArray(
+            self.hand_id, [self._joints.indices[i] for i in servo], pybullet.POSITION_CONTROL,
+            targetPositions=self._targets[servo].tolist(), targetVelocities=[0.0] * n,
+            forces=[self.options.servo_force_limit_nm] * n,
+            positionGains=[self.options.position_gain] * n,
+            velocityGains=[self.options.velocity_gain] * n)
+
+    # ---------------------------------------------------------------------------------------
+    # Stepping and reading
+
+    def step(self, n: int = 1) -> None:
+        """Advance the physics by ``n`` steps of ``time_step_s`` (lockstep, no pacing).
+
+        Torque-mode joints receive their torque before every step.
+        """
+        steps = int(n)
+        if steps < 0:
+            raise CommandError(f'step count {n!r} must be >= 0')
+        if self._closed:
+            raise SimulationError('the world is closed')
+        pb = self._pb
+        torque_idx = np.flatnonzero(self._modes == JointMode.TORQUE)
+        joints = [self._joints.indices[i] for i in torque_idx]
+        forces = self._torque_cmd[torque_idx].tolist()
+        for _ in range(steps):
+            if joints:
+                pb.setJointMotorControlArray(self.hand_id, joints, pybullet.TORQUE_CONTROL,
+                                             forces=forces)
+            pb.stepSimulation()
+        if steps:
+            self._steps += steps
+            self._stepped = True
+            self._applied_torque = np.where(self._modes == JointMode.TORQUE,
+                                            self._torque_cmd, 0.0)
+
+    def _read_positions(self) -> np.ndarray:
+        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+        return np.array([s[0] for s in states])
+
+    def joint_states(self) -> JointStates:
+        """Positions [rad], velocities [rad/s] and torque-sensor readings [N*m].
+
+        Arrays in ``joint_names`` order; see the module docstring for the torque reading.
+        """
+        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+        positions = np.array([s[0] for s in states])
+        velocities = np.array([s[1] for s in states])
+        if not self._stepped:
+            torques = np.zeros(self.n_joints)
+        else:
+            motor = np.array([s[3] for s in states])
+            torques = np.where(self._modes == JointMode.TORQUE, self._applied_torque, motor)
+        return JointStates(positions, velocities, torques)
+
+    def object_pose(self) -> ObjectPose:
+        """Position [m] and orientation (x, y, z, w) of the cylinder, and the sim time [s]."""
+        pos, quat = self._pb.getBasePositionAndOrientation(self.object_id)
+        return ObjectPose(np.array(pos), np.array(quat), self.sim_time)
+
+    def object_velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Linear [m/s] and angular [rad/s] velocity of the cylinder (world frame)."""
+        lin, ang = self._pb.getBaseVelocity(self.object_id)
+        return np.array(lin), np.array(ang)
+
+    def fingertip_positions(self) -> np.ndarray:
+        """(n_fingers, 3) world positions of the fingertip centres (end of the last segment)."""
+        hand = self.config.hand
+        tips = []
+        last = float(hand.link_lengths_m[-1])
+        for f in range(hand.n_fingers):
+            link = self._joints.indices[3 * f + 2]
+            state = self._pb.getLinkState(self.hand_id, link, computeForwardKinematics=True)
+            frame_pos, frame_quat = state[4], state[5]
+            rot = np.array(self._pb.getMatrixFromQuaternion(frame_quat)).reshape(3, 3)
+            tips.append(np.array(frame_pos) + rot @ np.array([0.0, 0.0, -last]))
+        return np.array(tips)
+
+    def hand_object_contacts(self) -> list[tuple[str, float]]:
+        """Current finger-object contacts: (joint name of the touching link, normal force [N])."""
+        names = dict(zip(self._joints.indices, self.joint_names, strict=True))
+        return [(names.get(c[3], str(c[3])), float(c[9]))
+                for c in self._pb.getContactPoints(self.hand_id, self.object_id)]
+
+    def object_table_contacts(self) -> int:
+        """Number of contact points between the object and the table."""
+        return len(self._pb.getContactPoints(self.object_id, self.table_id))
+
+    def close(self) -> None:
+        """Disconnect from the physics server (idempotent)."""
+        if not self._closed:
+            self._closed = True
+            try:
+                self._pb.disconnect()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+
+    def __enter__(self) -> HandWorld:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
