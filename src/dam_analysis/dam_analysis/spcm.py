@@ -1,0 +1,285 @@
+"""Self-Posture Changing Motion kinematics (Kaneko et al., section 3.1, eqs. 1-4).
+
+With the object held fixed, a displacement ``delta_theta_p`` of the position joint is imparted
+and the compliant joint turns by ``delta_theta_s`` so that the distal link keeps touching the
+object: the contact point lies on both surfaces (eq. 2), is the same point seen from the object
+and from the finger (eq. 3) and the surface normals are opposite (eq. 4). For a capsule link
+and a cylinder with parallel axes these three conditions reduce to one scalar equation,
+``gap(theta_s, theta_p) = 0`` (:func:`dam_analysis.model.distal_gap`), solved by Newton's method.
+
+The physical solution branch is followed by continuation from the first contact
+(``delta_theta_p = 0``, ``delta_theta_s = 0``) on a fine grid (:class:`SpcmPath`, built once);
+a request at an arbitrary ``delta_theta_p`` starts Newton from the interpolated grid value.
+
+Failure policy: the solver never returns a posture that is not a valid SPCM state. It raises
+:class:`~dam_analysis.errors.NoSolutionError` naming the finger, ``delta_theta_p`` and the
+reason: contact lost (the compliant joint would have to open past its rest angle, i.e. the
+finger would have to pull on the object), a proximal link or the table penetrated, a joint
+limit exceeded, or Newton failed (no contact solution on the branch).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dam_analysis.errors import NoSolutionError
+from dam_analysis.model import FingerGeometry, HandModel, distal_gap, joint_positions
+
+#: Grid step of the cached continuation path [rad].
+PATH_STEP_RAD = math.radians(0.05)
+_NEWTON_TOL_M = 1e-13
+_NEWTON_MAX_ITER = 30
+
+
+@dataclass(frozen=True)
+class FingerContact:
+    """SPCM state of one finger.
+
+    Attributes
+    ----------
+    delta_theta_s : compliant-joint displacement from first contact [rad] (eq. 2-4 solution).
+    theta_s, theta_p : absolute compliant and position joint angles [rad].
+    contact_point : (3,) world p_Ci [m].
+    normal_object : (3,) n_CBi, unit outward normal of the object at p_Ci.
+    normal_finger : (3,) n_CFi = -n_CBi (eq. 4).
+    on_fingertip : True when the contact is on the hemispherical tip, False on the inner side.
+    dtheta_s_dtheta_p : d(theta_s)/d(theta_p) along the SPCM [-] (implicit differentiation).
+    joints : (4, 2) plane positions of the compliant, locked, position joints and tip [m].
+    """
+
+    delta_theta_s: float
+    theta_s: float
+    theta_p: float
+    contact_point: np.ndarray
+    normal_object: np.ndarray
+    normal_finger: np.ndarray
+    on_fingertip: bool
+    dtheta_s_dtheta_p: float
+    joints: np.ndarray
+
+
+def newton_theta_s(geometry: FingerGeometry, theta_l: float, theta_p: float,
+                   theta_start: float) -> float | None:
+    """Solve ``gap(theta_s, theta_p) = 0`` by damped Newton from ``theta_start`` (None: failed)."""
+    theta = theta_start
+    for _ in range(_NEWTON_MAX_ITER):
+        gap, deriv = distal_gap(geometry, theta, theta_l, theta_p)
+        if abs(gap) < _NEWTON_TOL_M:
+            return theta
+        if abs(deriv) < 1e-9:
+            return None
+        step = gap / deriv
+        if abs(step) > 0.2:
+            step = math.copysign(0.2, step)
+        theta -= step
+    gap, _ = distal_gap(geometry, theta, theta_l, theta_p)
+    return theta if abs(gap) < 1e-11 else None
+
+
+def contact_state(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p: float,
+                  theta_s0: float) -> FingerContact:
+    """Contact point, normals and SPCM rate for a posture that satisfies eqs. 2-4."""
+    joints = joint_positions(geometry, theta_s, theta_l, theta_p)
+    q, tip = joints[2], joints[3]
+    c = geometry.object_center
+    ab = tip - q
+    t = min(1.0, max(0.0, float((c - q) @ ab) / float(ab @ ab)))
+    closest = q + t * ab
+    n_uz = (closest - c) / float(np.linalg.norm(closest - c))
+    p_uz = c + geometry.object_radius * n_uz
+    # implicit differentiation of gap(theta_s, theta_p) = 0 (envelope theorem, both derivatives
+    # are the normal component of the rigid-rotation velocity of the closest segment point)
+    g_s = float(n_uz @ np.array([-closest[1], closest[0]]))
+    rel = closest - q
+    g_p = float(n_uz @ np.array([-rel[1], rel[0]]))
+    return FingerContact(
+        delta_theta_s=theta_s - theta_s0, theta_s=theta_s, theta_p=theta_p,
+        contact_point=geometry.to_world(p_uz), normal_object=geometry.direction_to_world(n_uz),
+        normal_finger=-geometry.direction_to_world(n_uz), on_fingertip=t >= 1.0 - 1e-12,
+        dtheta_s_dtheta_p=-g_p / g_s if g_s != 0.0 else math.nan, joints=joints)
+
+
+def _segment_distance(au: float, az: float, bu: float, bz: float, cu: float, cz: float
+                      ) -> tuple[float, float, float]:
+    """Distance from (cu, cz) to segment [a, b] and the closest point (pure float math)."""
+    abu, abz = bu - au, bz - az
+    denom = abu * abu + abz * abz
+    t = 0.0 if denom == 0.0 else min(1.0, max(0.0, ((cu - au) * abu + (cz - az) * abz) / denom))
+    pu, pz = au + t * abu, az + t * abz
+    return math.hypot(pu - cu, pz - cz), pu, pz
+
+
+def plane_joints(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p: float
+                 ) -> tuple[float, ...]:
+    """Scalar forward kinematics: (u1, z1, u2, z2, u3, z3) of locked joint, position joint, tip."""
+    l1, l2, l3 = (float(v) for v in geometry.link_lengths)
+    phi2 = theta_s + theta_l
+    phi3 = phi2 + theta_p
+    u1, z1 = l1 * math.sin(theta_s), -l1 * math.cos(theta_s)
+    u2, z2 = u1 + l2 * math.sin(phi2), z1 - l2 * math.cos(phi2)
+    return u1, z1, u2, z2, u2 + l3 * math.sin(phi3), z2 - l3 * math.cos(phi3)
+
+
+def posture_problem(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p: float,
+                    theta_s0: float, limits_s: tuple[float, float],
+                    limits_p: tuple[float, float]) -> str | None:
+    """Reason why an SPCM posture is not valid, or None when it is."""
+    if theta_s > theta_s0 + 1e-12:
+        return (f'contact lost: the compliant joint would open past its rest angle by '
+                f'{math.degrees(theta_s - theta_s0):.4f} deg (the finger would have to pull)')
+    if not limits_s[0] <= theta_s <= limits_s[1]:
+        return (f'compliant joint limit: theta_s = {math.degrees(theta_s):.3f} deg outside '
+                f'[{math.degrees(limits_s[0]):.3g}, {math.degrees(limits_s[1]):.3g}] deg')
+    if not limits_p[0] <= theta_p <= limits_p[1] + 1e-12:
+        return (f'position joint limit: theta_p = {math.degrees(theta_p):.3f} deg outside '
+                f'[{math.degrees(limits_p[0]):.3g}, {math.degrees(limits_p[1]):.3g}] deg')
+    u1, z1, u2, z2, u3, z3 = plane_joints(geometry, theta_s, theta_l, theta_p)
+    clearance = geometry.base_height + min(0.0, z1, z2, z3) - geometry.link_radius
+    if clearance < 0.0:
+        return f'the finger passes {-clearance * 1e3:.3f} mm through the table'
+    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+    reach = geometry.object_radius + geometry.link_radius
+    d1 = _segment_distance(0.0, 0.0, u1, z1, cu, cz)[0]
+    d2 = _segment_distance(u1, z1, u2, z2, cu, cz)[0]
+    if min(d1, d2) - reach < -1e-9:
+        return (f'a proximal link penetrates the object by {(reach - min(d1, d2)) * 1e3:.3f} '
+                'mm (contact would move off the distal link)')
+    return None
+
+
+def plane_contact(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p: float
+                  ) -> tuple[float, float, float, float, bool]:
+    """Contact in plane coordinates (pure float math, for the fast path).
+
+    Returns
+    -------
+    (p_u, p_z, n_u, n_z, on_fingertip): contact point relative to the base [m] and the
+    object's outward unit normal n_CB.
+    """
+    _, _, u2, z2, u3, z3 = plane_joints(geometry, theta_s, theta_l, theta_p)
+    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+    abu, abz = u3 - u2, z3 - z2
+    t = min(1.0, max(0.0, ((cu - u2) * abu + (cz - z2) * abz) / (abu * abu + abz * abz)))
+    qu, qz = u2 + t * abu, z2 + t * abz
+    dist = math.hypot(qu - cu, qz - cz)
+    n_u, n_z = (qu - cu) / dist, (qz - cz) / dist
+    r_obj = geometry.object_radius
+    return cu + r_obj * n_u, cz + r_obj * n_z, n_u, n_z, t >= 1.0 - 1e-12
+
+
+class SpcmPath:
+    """Cached SPCM continuation of one finger on a fine ``delta_theta_p`` grid.
+
+    Attributes
+    ----------
+    delta_theta_p : (m,) grid [rad], from 0 to ``delta_theta_p_max``.
+    theta_s : (m,) compliant angle on the branch [rad]; NaN from the first invalid node on.
+    valid_until : largest valid ``delta_theta_p`` on the grid [rad].
+    failure : reason of the first invalid node, or None if the whole grid is valid.
+    """
+
+    def __init__(self, model: HandModel, index: int, step: float = PATH_STEP_RAD) -> None:
+        self.model = model
+        self.index = index
+        self.geometry = model.fingers[index]
+        self.theta_s0 = float(model.theta_s0[index])
+        n_steps = max(1, int(math.ceil(model.delta_theta_p_max / step)))
+        self.delta_theta_p = np.linspace(0.0, model.delta_theta_p_max, n_steps + 1)
+        self.theta_s = np.full(n_steps + 1, np.nan)
+        self.theta_s[0] = self.theta_s0
+        self.failure: str | None = None
+        self.valid_until = 0.0
+        theta = self.theta_s0
+        for j in range(1, n_steps + 1):
+            theta_p = model.theta_p0 + float(self.delta_theta_p[j])
+            rate = contact_state(self.geometry, theta, model.theta_l0, theta_p,
+                                 self.theta_s0).dtheta_s_dtheta_p
+            guess = theta + (rate * (self.delta_theta_p[j] - self.delta_theta_p[j - 1])
+                             if math.isfinite(rate) else 0.0)
+            sol = newton_theta_s(self.geometry, model.theta_l0, theta_p, guess)
+            if sol is None or abs(sol - theta) > 0.2:
+                _, g_s = distal_gap(self.geometry, theta, model.theta_l0, theta_p)
+                self.failure = ('the SPCM branch ends (fold: turning the compliant joint no '
+                                'longer moves the distal link towards the object, '
+                                f'd gap/d theta_s = {g_s * 1e3:.3f} mm/rad); beyond it the '
+                                'distal link loses contact')
+                break
+            problem = posture_problem(self.geometry, sol, model.theta_l0, theta_p,
+                                      self.theta_s0, model.limits_s, model.limits_p)
+            if problem is not None:
+                self.failure = problem
+                break
+            theta = sol
+            self.theta_s[j] = sol
+            self.valid_until = float(self.delta_theta_p[j])
+        self.step = float(self.delta_theta_p[1] - self.delta_theta_p[0])
+
+    def solve(self, delta_theta_p: float) -> FingerContact:
+        """SPCM state at one ``delta_theta_p`` [rad] (see :meth:`solve_theta_s`)."""
+        theta_s = self.solve_theta_s(delta_theta_p)
+        return contact_state(self.geometry, theta_s, self.model.theta_l0,
+                             self.model.theta_p0 + delta_theta_p, self.theta_s0)
+
+    def solve_theta_s(self, delta_theta_p: float) -> float:
+        """Compliant angle theta_s [rad] at one ``delta_theta_p`` [rad] (Newton from the branch).
+
+        Raises
+        ------
+        NoSolutionError
+            Beyond the valid part of the branch or at an invalid posture.
+        """
+        name = f'finger {self.index + 1}'
+        if delta_theta_p > self.valid_until + 1e-12:
+            raise NoSolutionError(
+                f'{name}: no SPCM solution at delta_theta_p = {math.degrees(delta_theta_p):.4f} '
+                f'deg: {self.failure} (valid up to {math.degrees(self.valid_until):.4f} deg)')
+        j = min(int(delta_theta_p / self.step), len(self.delta_theta_p) - 2)
+        frac = (delta_theta_p - self.delta_theta_p[j]) / self.step
+        guess = float(self.theta_s[j] + frac * (self.theta_s[j + 1] - self.theta_s[j])) \
+            if frac > 0.0 else float(self.theta_s[j])
+        if not math.isfinite(guess):
+            guess = float(self.theta_s[j])
+        theta_p = self.model.theta_p0 + delta_theta_p
+        sol = newton_theta_s(self.geometry, self.model.theta_l0, theta_p, guess)
+        if sol is None or abs(sol - guess) > 10.0 * self.step:
+            raise NoSolutionError(f'{name}: Newton failed at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.4f} deg')
+        if delta_theta_p == 0.0:
+            sol = self.theta_s0
+        else:
+            sol = min(sol, self.theta_s0)  # round-off near the rest angle
+        problem = posture_problem(self.geometry, sol, self.model.theta_l0, theta_p,
+                                  self.theta_s0, self.model.limits_s, self.model.limits_p)
+        if problem is not None:
+            raise NoSolutionError(f'{name} at delta_theta_p = {math.degrees(delta_theta_p):.4f} '
+                                  f'deg: {problem}')
+        return sol
+
+
+def build_paths(model: HandModel, step: float = PATH_STEP_RAD) -> tuple[SpcmPath, ...]:
+    """One cached :class:`SpcmPath` per finger."""
+    return tuple(SpcmPath(model, i, step) for i in range(model.n_fingers))
+
+
+def solve_spcm(paths: tuple[SpcmPath, ...], delta_theta_p: np.ndarray
+               ) -> tuple[FingerContact, ...]:
+    """SPCM{K_theta, delta_theta_p} kinematics of all fingers (eqs. 1-4).
+
+    Parameters
+    ----------
+    paths : cached continuation paths, one per finger (:func:`build_paths`).
+    delta_theta_p : (n,) position-joint displacement per finger [rad].
+
+    Returns
+    -------
+    One :class:`FingerContact` per finger.
+
+    Raises
+    ------
+    NoSolutionError
+        Any finger has no valid SPCM state (see the module docstring).
+    """
+    return tuple(p.solve(float(d)) for p, d in zip(paths, delta_theta_p, strict=True))
