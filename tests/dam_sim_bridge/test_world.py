@@ -1,0 +1,382 @@
+"""Tests of the PyBullet world against closed-form mechanics (no ROS, no network)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from dam_analysis.config import DamConfig, load_config
+from dam_hand_driver.protocol import JointMode
+from dam_sim_bridge.errors import CommandError, WorldConfigError
+from dam_sim_bridge.world import HandWorld, WorldOptions
+
+T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+
+
+@pytest.fixture(scope='module')
+def cfg() -> DamConfig:
+    return load_config()
+
+
+@pytest.fixture
+def world(cfg: DamConfig) -> Iterator[HandWorld]:
+    w = HandWorld(cfg)
+    yield w
+    w.close()
+
+
+def _finger_plane_points(cfg: DamConfig, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joint positions and link centres of one finger in its plane: (inward, up) per point.
+
+    A link at cumulative angle phi points along (sin phi, -cos phi): straight down at 0,
+    inward for positive phi.
+    """
+    lengths = cfg.hand.link_lengths_m
+    joints = [np.zeros(2)]
+    centres = []
+    phi = 0.0
+    for i in range(3):
+        phi += angles[i]
+        d = np.array([math.sin(phi), -math.cos(phi)])
+        centres.append(joints[-1] + 0.5 * lengths[i] * d)
+        joints.append(joints[-1] + lengths[i] * d)
+    return np.array(joints), np.array(centres)
+
+
+def _to_world(cfg: DamConfig, finger: int, planar: np.ndarray) -> np.ndarray:
+    f = cfg.hand.fingers[finger]
+    return f.base_position_m + planar[0] * f.inward_direction + planar[1] * np.array([0, 0, 1.0])
+
+
+def _servo(world: HandWorld, angles: np.ndarray, seconds: float = 0.5) -> None:
+    world.set_joint_commands([P] * world.n_joints, angles)
+    world.step(int(round(seconds / world.time_step_s)))
+
+
+# --------------------------------------------------------------------------------------------
+# Geometry
+
+
+def test_joint_order_and_limits_follow_the_config(world: HandWorld, cfg: DamConfig) -> None:
+    assert world.joint_names == cfg.hand.joint_names
+    for i, name in enumerate(world.joint_names):
+        role = name.split('_')[1]
+        lo, hi = cfg.hand.joint_limits_rad[role]
+        info = world.client.getJointInfo(world.hand_id, world.joint_indices[i])
+        assert info[1].decode() == name
+        assert (info[8], info[9]) == pytest.approx((lo, hi))
+        axis_world = np.array(world.client.getLinkState(
+            world.hand_id, world.joint_indices[i], computeForwardKinematics=True)[5])
+        rot = np.array(world.client.getMatrixFromQuaternion(axis_world)).reshape(3, 3)
+        finger = cfg.hand.fingers[i // 3]
+        np.testing.assert_allclose(rot @ np.array(info[13]), finger.joint_axis, atol=1e-9)
+
+
+def test_fingertips_follow_planar_forward_kinematics(world: HandWorld, cfg: DamConfig) -> None:
+    angles = np.array([0.3, -0.1, 0.8])
+    world.set_gravity((0.0, 0.0, 0.0))
+    _servo(world, np.tile(angles, 3), 1.0)
+    q = world.joint_states().positions
+    tips = world.fingertip_positions()
+    for f in range(cfg.hand.n_fingers):
+        joints, _ = _finger_plane_points(cfg, q[3 * f:3 * f + 3])
+        np.testing.assert_allclose(tips[f], _to_world(cfg, f, joints[-1]), atol=1e-9)
+    np.testing.assert_allclose(q, np.tile(angles, 3), atol=2e-3)
+
+
+def test_capsules_span_joint_to_joint_with_the_link_radius(world: HandWorld,
+                                                           cfg: DamConfig) -> None:
+    """Rays hit a horizontal distal link at its end cap (tip + r) and its top (axis + r)."""
+    world.set_gravity((0.0, 0.0, 0.0))
+    angles = np.array([0.0, 0.0, math.radians(90.0)])
+    _servo(world, np.tile(angles, 3), 1.0)
+    q = world.joint_states().positions
+    np.testing.assert_allclose(q, np.tile(angles, 3), atol=1e-4)
+    lengths, r = cfg.hand.link_lengths_m, cfg.hand.link_radius_m
+    f = cfg.hand.fingers[1]
+    inward = f.inward_direction
+    joint3 = f.base_position_m - np.array([0.0, 0.0, lengths[0] + lengths[1]])
+    tip = joint3 + lengths[2] * inward
+    start = tip + 0.05 * inward
+    hit = world.client.rayTest(start.tolist(), (tip - 0.01 * inward).tolist())[0]
+    assert hit[0] == world.hand_id
+    np.testing.assert_allclose(hit[3], tip + r * inward, atol=1e-4)
+    middle = joint3 + 0.5 * lengths[2] * inward
+    hit = world.client.rayTest((middle + [0, 0, 0.02]).tolist(), middle.tolist())[0]
+    assert hit[0] == world.hand_id
+    np.testing.assert_allclose(hit[3], middle + [0, 0, r], atol=1e-4)
+
+
+def test_initial_posture_does_not_touch_object_or_table(world: HandWorld,
+                                                        cfg: DamConfig) -> None:
+    q = world.joint_states().positions
+    expected = {'compliant': world.options.initial_compliant_angle_rad,
+                'locked': cfg.hand.initial_locked_angle_rad,
+                'position': cfg.hand.initial_position_angle_rad}
+    for name, angle in zip(world.joint_names, q, strict=True):
+        assert angle == pytest.approx(expected[name.split('_')[1]], abs=1e-12)
+    assert world.joint_modes().tolist() == [H] * world.n_joints
+    for other in (world.object_id, world.table_id):
+        closest = world.client.getClosestPoints(world.hand_id, other, 0.002)
+        assert len(closest) == 0 or min(c[8] for c in closest) > 0.0
+    world.step(1000)
+    assert world.hand_object_contacts() == []
+    pose = world.object_pose()
+    np.testing.assert_allclose(pose.position, cfg.object.position_m, atol=1e-4)
+    assert world.object_table_contacts() > 0
+    assert pose.sim_time == pytest.approx(1.0)
+
+
+def test_object_axis_lies_along_the_configured_axis(world: HandWorld, cfg: DamConfig) -> None:
+    quat = world.object_pose().quaternion
+    rot = np.array(world.client.getMatrixFromQuaternion(quat.tolist())).reshape(3, 3)
+    np.testing.assert_allclose(rot[:, 2], cfg.object.axis, atol=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# Torque control and the torque sensor
+
+
+def _finger_inertia(cfg: DamConfig, world: HandWorld, angles: np.ndarray) -> float:
+    """Inertia of a rigid finger about its compliant joint axis [kg m^2] (parallel axes)."""
+    _, centres = _finger_plane_points(cfg, angles)
+    r = cfg.hand.link_radius_m
+    total = 0.0
+    for m, length, c in zip(world.link_masses_kg, cfg.hand.link_lengths_m, centres, strict=True):
+        total += m * (3 * r**2 + length**2) / 12.0 + m * float(c @ c)
+    return total
+
+
+def _displacement(alpha: float, steps: int, dt: float) -> float:
+    """Angle travelled from rest under constant angular acceleration ``alpha`` [rad/s^2].
+
+    Bullet integrates semi-implicitly (velocity first, then position), so after n steps the
+    angle is alpha dt^2 n (n + 1) / 2, not alpha t^2 / 2.
+    """
+    return alpha * dt**2 * steps * (steps + 1) / 2.0
+
+
+def _gravity_torque(cfg: DamConfig, world: HandWorld, angles: np.ndarray) -> float:
+    """Torque the compliant joint must apply to hold the finger against gravity [N m]."""
+    _, centres = _finger_plane_points(cfg, angles)
+    g = cfg.task.gravity_m_per_s2
+    return float(sum(m * g * c[0] for m, c in zip(world.link_masses_kg, centres, strict=True)))
+
+
+@pytest.mark.parametrize('sign', [1.0, -1.0])
+def test_torque_accelerates_compliant_joint_by_tau_over_inertia(
+        world: HandWorld, cfg: DamConfig, sign: float) -> None:
+    world.set_gravity((0.0, 0.0, 0.0))
+    q0 = world.joint_states().positions
+    tips0 = world.fingertip_positions()
+    tau = sign * 0.004
+    modes = [H] * world.n_joints
+    setpoints = [math.nan] * world.n_joints
+    for f in range(3):
+        modes[3 * f] = T
+        setpoints[3 * f] = tau
+    world.set_joint_commands(modes, setpoints)
+    steps = 20
+    world.step(steps)
+    q = world.joint_states().positions
+    for f in range(3):
+        inertia = _finger_inertia(cfg, world, q0[3 * f:3 * f + 3])
+        expected = _displacement(tau / inertia, steps, world.time_step_s)
+        assert q[3 * f] - q0[3 * f] == pytest.approx(expected, rel=0.01)
+        # Positive torque flexes inward: the tip moves towards the object.
+        inward = cfg.hand.fingers[f].inward_direction
+        assert sign * float((world.fingertip_positions()[f] - tips0[f]) @ inward) > 0.0
+    # The other joints were held.
+    held = [i for i in range(world.n_joints) if i % 3]
+    np.testing.assert_allclose(q[held], q0[held], atol=1e-3)
+
+
+def test_servo_torque_reading_equals_gravity_torque_of_a_tilted_finger(
+        world: HandWorld, cfg: DamConfig) -> None:
+    angles = np.array([math.radians(45.0), 0.0, 0.0])
+    _servo(world, np.tile(angles, 3), 1.0)
+    states = world.joint_states()
+    # Closed form: g sin(45 deg) (m1 L1/2 + m2 (L1 + L2/2) + m3 (L1 + L2 + L3/2)).
+    m, (l1, l2, l3) = world.link_masses_kg, cfg.hand.link_lengths_m
+    g = cfg.task.gravity_m_per_s2
+    closed = g * math.sin(math.radians(45.0)) * (
+        m[0] * l1 / 2 + m[1] * (l1 + l2 / 2) + m[2] * (l1 + l2 + l3 / 2))
+    for f in range(3):
+        assert states.torques[3 * f] == pytest.approx(closed, rel=0.01)
+        assert abs(states.velocities[3 * f]) < 1e-3
+
+
+def test_horizontal_distal_link_loads_joints_with_m_g_half_length(
+        world: HandWorld, cfg: DamConfig) -> None:
+    _servo(world, np.tile([0.0, 0.0, math.radians(90.0)], 3), 1.0)
+    states = world.joint_states()
+    closed = world.link_masses_kg[2] * cfg.task.gravity_m_per_s2 * cfg.hand.link_lengths_m[2] / 2
+    for f in range(3):
+        # Links 1 and 2 hang vertically: every joint carries only the distal link's moment.
+        for j in range(3):
+            assert states.torques[3 * f + j] == pytest.approx(closed, rel=0.01)
+
+
+def test_gravity_compensating_torque_holds_finger_still(world: HandWorld,
+                                                        cfg: DamConfig) -> None:
+    angles = np.array([math.radians(30.0), 0.0, math.radians(15.0)])
+    _servo(world, np.tile(angles, 3), 1.0)
+    q0 = world.joint_states().positions
+    tau_g = _gravity_torque(cfg, world, q0[:3])
+    assert tau_g > 0.0
+    inertia = _finger_inertia(cfg, world, q0[:3])
+    modes = [T, H, H] * 3
+    world.set_joint_commands(modes, [tau_g, 0, 0, 0.0, 0, 0, 0.5 * tau_g, 0, 0])
+    steps = 20
+    world.step(steps)
+    q = world.joint_states().positions
+    fall = _displacement(-tau_g / inertia, steps, world.time_step_s)
+    assert abs(q[0] - q0[0]) < 0.01 * abs(fall)  # finger 1: balanced
+    # Finger 2: no torque, falls back with alpha = -tau_g / I; finger 3: half of that.
+    assert q[3] - q0[3] == pytest.approx(fall, rel=0.02)
+    assert q[6] - q0[6] == pytest.approx(0.5 * fall, rel=0.02)
+
+
+def test_torque_mode_reports_applied_clipped_torque(world: HandWorld) -> None:
+    limit = world.options.torque_limit_nm
+    world.set_gravity((0.0, 0.0, 0.0))
+    modes = [T, H, H] * 3
+    world.set_joint_commands(modes, [0.002, 0, 0, 5.0 * limit, 0, 0, -5.0 * limit, 0, 0])
+    assert world.joint_states().torques.tolist() == [0.0] * world.n_joints  # before a step
+    world.step(1)
+    torques = world.joint_states().torques
+    assert torques[0] == pytest.approx(0.002)
+    assert torques[3] == pytest.approx(limit) and torques[6] == pytest.approx(-limit)
+
+
+# --------------------------------------------------------------------------------------------
+# Modes
+
+
+def test_hold_keeps_the_angle_at_the_switch(world: HandWorld) -> None:
+    world.set_gravity((0.0, 0.0, 0.0))
+    world.set_joint_commands([T, H, H] * 3, [0.003, 0, 0] * 3)
+    world.step(30)
+    q_switch = world.joint_states().positions
+    assert q_switch[0] > world.initial_positions()[0] + 0.01
+    world.set_joint_commands([H] * world.n_joints, [math.nan] * world.n_joints)
+    world.step(500)
+    q = world.joint_states().positions
+    # Held within the overshoot of stopping a moving joint.
+    assert q[0] == pytest.approx(q_switch[0], abs=0.01)
+    assert abs(world.joint_states().velocities[0]) < 1e-3
+    # A repeated HOLD does not re-capture.
+    world.set_joint_commands([H] * world.n_joints, [0.0] * world.n_joints)
+    world.step(10)
+    assert world.joint_states().positions[0] == pytest.approx(q[0], abs=1e-4)
+
+
+def test_position_setpoints_are_clipped_to_joint_limits(world: HandWorld) -> None:
+    world.set_gravity((0.0, 0.0, 0.0))
+    upper = world.joint_upper_limits
+    _servo(world, upper + 1.0, 1.0)
+    np.testing.assert_allclose(world.joint_states().positions, upper, atol=5e-3)
+
+
+@pytest.mark.parametrize('modes, setpoints, word', [
+    ([T] * 8, [0.0] * 8, 'shape'),
+    ([7] + [H] * 8, [0.0] * 9, 'modes'),
+    ([T] + [H] * 8, [math.nan] + [0.0] * 8, 'finger1_compliant_joint'),
+    ([H, P] + [H] * 7, [0.0, math.inf] + [0.0] * 7, 'finger1_locked_joint'),
+])
+def test_bad_commands_are_refused_with_the_joint_named(world: HandWorld, modes: list,
+                                                       setpoints: list, word: str) -> None:
+    with pytest.raises(CommandError, match=word):
+        world.set_joint_commands(modes, setpoints)
+
+
+def test_bad_options_are_refused() -> None:
+    with pytest.raises(WorldConfigError, match='time_step_s'):
+        WorldOptions(time_step_s=0.0)
+    with pytest.raises(WorldConfigError, match='link_masses_kg'):
+        WorldOptions(link_masses_kg=(0.01, -0.01, 0.01))
+    with pytest.raises(WorldConfigError, match='initial_compliant_angle_rad'):
+        HandWorld(load_config(), WorldOptions(initial_compliant_angle_rad=-2.0))
+
+
+def test_reset_restores_posture_and_object(world: HandWorld, cfg: DamConfig) -> None:
+    world.set_joint_commands([T] * world.n_joints, [0.01] * world.n_joints)
+    world.step(200)
+    world.reset(object_position=[0.0, 0.005, 0.012])
+    assert world.sim_time == 0.0
+    np.testing.assert_allclose(world.joint_states().positions, world.initial_positions())
+    np.testing.assert_allclose(world.object_pose().position, [0.0, 0.005, 0.012])
+    world.reset()
+    np.testing.assert_allclose(world.object_pose().position, cfg.object.position_m)
+
+
+# --------------------------------------------------------------------------------------------
+# Friction
+
+
+def test_pair_friction_coefficients_are_exact(world: HandWorld, cfg: DamConfig) -> None:
+    mu_table = cfg.contact.table_friction_coefficient
+    alpha = cfg.contact.friction_angle_rad
+    pairs = world.pair_friction()
+    assert pairs['finger_object'] == pytest.approx(math.tan(alpha), rel=1e-6)
+    assert pairs['table_object'] == pytest.approx(mu_table, rel=1e-6)
+    for alpha_deg in (0.0, 1.0, 30.0):
+        world.set_friction_angle(math.radians(alpha_deg))
+        pairs = world.pair_friction()
+        assert pairs['finger_object'] == pytest.approx(math.tan(math.radians(alpha_deg)),
+                                                       abs=1e-7)
+        assert pairs['table_object'] == pytest.approx(mu_table, rel=1e-6)
+    world.reset(table_friction_coefficient=0.3, friction_angle_rad=math.radians(5.0))
+    pairs = world.pair_friction()
+    assert pairs['table_object'] == pytest.approx(0.3, rel=1e-6)
+    assert pairs['finger_object'] == pytest.approx(math.tan(math.radians(5.0)), rel=1e-6)
+    # Every link of every finger carries the same coefficient.
+    for j in world.joint_indices:
+        mu_link = world.client.getDynamicsInfo(world.hand_id, j)[1]
+        assert mu_link == pytest.approx(math.tan(math.radians(5.0)), rel=1e-6)
+    with pytest.raises(WorldConfigError, match='friction angle'):
+        world.set_friction_angle(math.pi / 2)
+
+
+@pytest.mark.parametrize('mu', [0.5, 0.2])
+def test_object_on_tilted_table_sticks_below_and_slides_above_atan_mu(
+        world: HandWorld, cfg: DamConfig, mu: float) -> None:
+    """Gravity tilted by beta along the cylinder's axis is an incline the cylinder cannot roll
+    down: it sticks for tan(beta) < mu and slides with a = g (sin beta - mu cos beta)."""
+    g = cfg.task.gravity_m_per_s2
+    axis = cfg.object.axis
+    world.reset(table_friction_coefficient=mu)
+    for beta_deg, slides in ((math.degrees(math.atan(mu)) - 5.0, False),
+                             (math.degrees(math.atan(mu)) + 10.0, True)):
+        world.reset()
+        beta = math.radians(beta_deg)
+        world.set_gravity(g * math.sin(beta) * axis + np.array([0, 0, -g * math.cos(beta)]))
+        start = world.object_pose().position
+        steps = 200
+        world.step(steps)
+        t = steps * world.time_step_s
+        travelled = float((world.object_pose().position - start) @ axis)
+        if slides:
+            expected = 0.5 * g * (math.sin(beta) - mu * math.cos(beta)) * t**2
+            assert travelled == pytest.approx(expected, rel=0.05)
+        else:
+            assert abs(travelled) < 1e-4
+
+
+# --------------------------------------------------------------------------------------------
+# Lockstep speed (measured and printed; no timing assertion)
+
+
+def test_lockstep_speed_is_measured(world: HandWorld) -> None:
+    world.set_joint_commands([T, H, P] * 3, [0.0, 0.0, 0.3] * 3)
+    steps = 3000
+    started = time.perf_counter()
+    world.step(steps)
+    wall = time.perf_counter() - started
+    assert world.sim_time == pytest.approx(steps * world.time_step_s)
+    print(f'lockstep: {steps} steps, {world.sim_time:.3f} s simulated in {wall:.3f} s wall: '
+          f'{world.sim_time / wall:.1f}x real time')
