@@ -194,7 +194,8 @@ def worst_case_vertical_force(h: np.ndarray, c: np.ndarray, tau_s: np.ndarray) -
     """
     tau = np.asarray(tau_s, dtype=np.float64)
     a_plus, a_minus, unbounded = worst_case_coefficients(h, c)
-    value = np.where(tau > 0.0, a_plus * tau, np.where(tau < 0.0, a_minus * tau, 0.0))
+    with np.errstate(invalid='ignore'):
+        value = np.where(tau > 0.0, a_plus * tau, np.where(tau < 0.0, a_minus * tau, 0.0))
     value = np.where(np.isnan(value), np.inf, value)
     status = np.where(np.isinf(value) & (value > 0), STATUS_INFEASIBLE, STATUS_BOUNDED)
     feasible = status != STATUS_INFEASIBLE
