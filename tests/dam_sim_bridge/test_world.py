@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dam_analysis.config import DamConfig, load_config
-from dam_hand_driver.protocol import JointMode
+from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
@@ -251,6 +251,18 @@ def test_torque_mode_reports_applied_clipped_torque(world: HandWorld) -> None:
     torques = world.joint_states().torques
     assert torques[0] == pytest.approx(0.002)
     assert torques[3] == pytest.approx(limit) and torques[6] == pytest.approx(-limit)
+    faults = world.joint_faults()
+    assert faults[0] & JointFault.SATURATED == 0
+    assert faults[3] & JointFault.SATURATED and faults[6] & JointFault.SATURATED
+
+
+def test_limit_fault_flags_joints_at_their_limits(world: HandWorld) -> None:
+    assert not np.any(world.joint_faults() & JointFault.LIMIT)  # initial posture is inside
+    upper = world.joint_upper_limits
+    world.reset(joint_positions=np.where(np.arange(world.n_joints) % 3 == 2, upper,
+                                         world.initial_positions()))
+    limited = (world.joint_faults() & JointFault.LIMIT) != 0
+    assert limited.tolist() == [False, False, True] * 3
 
 
 # --------------------------------------------------------------------------------------------
@@ -301,6 +313,15 @@ def test_bad_options_are_refused() -> None:
         WorldOptions(link_masses_kg=(0.01, -0.01, 0.01))
     with pytest.raises(WorldConfigError, match='initial_compliant_angle_rad'):
         HandWorld(load_config(), WorldOptions(initial_compliant_angle_rad=-2.0))
+
+
+def test_reset_refuses_postures_outside_the_limits(world: HandWorld) -> None:
+    q = world.initial_positions()
+    q[4] = world.joint_upper_limits[4] + 0.1
+    with pytest.raises(WorldConfigError, match='finger2_locked_joint'):
+        world.reset(joint_positions=q)
+    with pytest.raises(WorldConfigError, match='finite'):
+        world.reset(joint_positions=[math.nan] * world.n_joints)
 
 
 def test_reset_restores_posture_and_object(world: HandWorld, cfg: DamConfig) -> None:
@@ -365,6 +386,38 @@ def test_object_on_tilted_table_sticks_below_and_slides_above_atan_mu(
             assert travelled == pytest.approx(expected, rel=0.05)
         else:
             assert abs(travelled) < 1e-4
+
+
+@pytest.mark.parametrize('alpha_deg, margin_deg', [(5.0, -2.0), (5.0, 10.0), (30.0, -2.0),
+                                                    (30.0, 10.0), (0.0, 5.0)])
+def test_object_on_horizontal_fingers_sticks_below_and_slides_above_alpha(
+        world: HandWorld, cfg: DamConfig, alpha_deg: float, margin_deg: float) -> None:
+    """The cylinder rests across the horizontal distal links of fingers 2 and 3 (off the
+    table); gravity tilted by beta along its axis makes it stick for beta < alpha and slide with
+    a = g (sin beta - tan(alpha) cos beta) above: the finger-object coefficient is tan(alpha)."""
+    g = cfg.task.gravity_m_per_s2
+    lengths, r = cfg.hand.link_lengths_m, cfg.hand.link_radius_m
+    f2 = cfg.hand.fingers[1]
+    distal_z = f2.base_position_m[2] - lengths[0] - lengths[1]
+    centre = (f2.base_position_m[0] + 0.8 * lengths[2], 0.0, distal_z + r + cfg.object.radius_m)
+    world.reset(friction_angle_rad=math.radians(alpha_deg), object_position=centre,
+                joint_positions=[0.0, 0.0, math.radians(90.0)] * 3)
+    beta = math.radians(alpha_deg + margin_deg)
+    axis = cfg.object.axis
+    world.set_gravity(g * math.sin(beta) * axis + np.array([0.0, 0.0, -g * math.cos(beta)]))
+    steps = 100
+    world.step(steps)
+    travelled = float((world.object_pose().position - np.array(centre)) @ axis)
+    assert world.object_table_contacts() == 0
+    touching = {name.split('_')[0] for name, _ in world.hand_object_contacts()}
+    assert touching == {'finger2', 'finger3'}
+    if margin_deg < 0:
+        assert abs(travelled) < 2e-5
+    else:
+        t = steps * world.time_step_s
+        mu = math.tan(math.radians(alpha_deg))
+        expected = 0.5 * g * (math.sin(beta) - mu * math.cos(beta)) * t**2
+        assert travelled == pytest.approx(expected, rel=0.03)
 
 
 # --------------------------------------------------------------------------------------------

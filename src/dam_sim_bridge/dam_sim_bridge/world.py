@@ -60,7 +60,7 @@ import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
 
-from dam_hand_driver.protocol import JointMode
+from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
@@ -438,8 +438,9 @@ class HandWorld:
     def reset(self, object_position: Sequence[float] | None = None,
               object_quaternion: Sequence[float] | None = None,
               friction_angle_rad: float | None = None,
-              table_friction_coefficient: float | None = None) -> None:
-        """Put the hand in its initial posture (all joints HOLD) and the object at rest.
+              table_friction_coefficient: float | None = None,
+              joint_positions: Sequence[float] | None = None) -> None:
+        """Put the hand in a posture (all joints HOLD) and the object at rest; sim time 0.
 
         Parameters
         ----------
@@ -451,6 +452,9 @@ class HandWorld:
             New finger-object friction angle [rad]; default: keep the current one.
         table_friction_coefficient
             New table-object coefficient; default: keep the current one.
+        joint_positions
+            (n,) joint angles [rad] within the joint limits; default
+            :meth:`initial_positions`.
         """
         obj = self.config.object
         pos = obj.position_m if object_position is None else np.asarray(object_position, float)
@@ -471,12 +475,23 @@ class HandWorld:
                                            [float(q) / qn for q in quat])
         pb.resetBaseVelocity(self.object_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
         q0 = self.initial_positions()
+        if joint_positions is not None:
+            q0 = np.asarray(joint_positions, dtype=float)
+            if q0.shape != (self.n_joints,) or not np.all(np.isfinite(q0)):
+                raise WorldConfigError(f'joint_positions {joint_positions!r} must be '
+                                       f'{self.n_joints} finite angles')
+            outside = (q0 < self._joints.lower - 1e-12) | (q0 > self._joints.upper + 1e-12)
+            if np.any(outside):
+                bad = [self.joint_names[i] for i in np.flatnonzero(outside)]
+                raise WorldConfigError(f'joint_positions {q0.tolist()!r} outside the limits '
+                                       f'of {bad}')
         for j, q in zip(self._joints.indices, q0, strict=True):
             pb.resetJointState(self.hand_id, j, float(q), 0.0)
         self._modes = np.full(self.n_joints, int(JointMode.HOLD), dtype=np.int64)
         self._targets = q0.copy()
         self._torque_cmd = np.zeros(self.n_joints)
         self._applied_torque = np.zeros(self.n_joints)
+        self._saturated = np.zeros(self.n_joints, dtype=bool)
         self._steps = 0
         self._stepped = False
         self._send_servo_targets()
@@ -522,8 +537,9 @@ class HandWorld:
             positions = self._read_positions()
         for i in range(self.n_joints):
             if m[i] == JointMode.TORQUE:
-                self._torque_cmd[i] = float(np.clip(sp[i], -self.options.torque_limit_nm,
-                                                    self.options.torque_limit_nm))
+                limit = self.options.torque_limit_nm
+                self._torque_cmd[i] = float(np.clip(sp[i], -limit, limit))
+                self._saturated[i] = abs(float(sp[i])) > limit
             elif m[i] == JointMode.POSITION:
                 self._targets[i] = float(np.clip(sp[i], self._joints.lower[i],
                                                  self._joints.upper[i]))
@@ -537,6 +553,7 @@ class HandWorld:
             self._pb.setJointMotorControlArray(self.hand_id, idx, pybullet.VELOCITY_CONTROL,
                                                forces=[0.0] * len(idx))
         self._torque_cmd[~torque_now] = 0.0
+        self._saturated[~torque_now] = False
         self._send_servo_targets()
 
     def _send_servo_targets(self) -> None:
@@ -597,6 +614,18 @@ class HandWorld:
             motor = np.array([s[3] for s in states])
             torques = np.where(self._modes == JointMode.TORQUE, self._applied_torque, motor)
         return JointStates(positions, velocities, torques)
+
+    def joint_faults(self, limit_tolerance_rad: float = 1e-3) -> np.ndarray:
+        """(n,) :class:`~dam_hand_driver.protocol.JointFault` bits of every joint.
+
+        ``LIMIT`` when the joint is within ``limit_tolerance_rad`` of a joint limit,
+        ``SATURATED`` when its TORQUE setpoint was clipped to ``torque_limit_nm``.
+        """
+        q = self._read_positions()
+        at_limit = ((q <= self._joints.lower + limit_tolerance_rad)
+                    | (q >= self._joints.upper - limit_tolerance_rad))
+        return (np.where(at_limit, int(JointFault.LIMIT), 0)
+                | np.where(self._saturated, int(JointFault.SATURATED), 0)).astype(np.int64)
 
     def object_pose(self) -> ObjectPose:
         """Position [m] and orientation (x, y, z, w) of the cylinder, and the sim time [s]."""
