@@ -1,0 +1,438 @@
+"""Outcome of a DAM grasp from joint signals alone (paper Fig. 7).
+
+The paper marks each trial as one of three outcomes:
+
+* ``SUCCESS``            -- o: the object was lifted and enveloped ("completely success in DAM");
+* ``LIFTED_DAM_FAILED``  -- triangle: lifted, but no enveloping grasp;
+* ``FAILURE``            -- x: failure.
+
+A real hand only measures joint angles (encoders) and joint torques (torque sensors), so
+:func:`classify_from_joints` infers the object from the final, settled posture:
+
+1. **Object estimate.** All fingers turn about axes parallel to the cylinder axis, so the
+   problem is planar in the plane normal to that axis (coordinates ``u`` horizontal, ``z`` up).
+   Every link is a capsule of radius ``r_l``; a cylinder of radius ``r`` touching link ``k`` has
+   its centre at distance ``rho = r + r_l`` from that link's segment. The centre ``c`` is the
+   least-squares fit of ``min_k dist(c, link_ik) = rho`` over all fingers ``i``, restricted to
+   physically admissible centres: no finger penetrates the object, the object is above the
+   table, and every finger touches the object on the *inner* (flexion) side of its nearest
+   link -- under a positive (flexing) torque a finger that is at rest must be pushing against
+   the object, not resting on its outer side.
+2. **In contact** (``contact``): every finger's distance residual ``|d_i - rho|`` is at most
+   ``contact_tolerance``.
+3. **Load held** (``load_held``): every compliant-joint torque is at least
+   ``load_torque_threshold`` (flexion), and no compliant or position joint is within
+   ``limit_margin`` of a joint limit (a finger closing on empty space ends at its limit).
+4. **Lifted** (``lifted``): the estimated centre is at least ``lift_height`` above its
+   initial height (object resting on the table).
+5. **Enveloped** (``enveloped``): the object is caged by the fingers -- every fingertip lies
+   at least ``cage_depth_ratio * r`` below the object's centre, and the free gap between the
+   innermost fingertips of the two opposing sides is smaller than the object's diameter, so
+   it cannot drop out without the fingers opening (paper Fig. 6(d)).
+
+``SUCCESS`` = contact and load held and lifted and enveloped; ``LIFTED_DAM_FAILED`` = contact
+and load held and lifted, not enveloped; ``FAILURE`` otherwise.
+
+:func:`classify_with_object_height` replaces step 4 by a ground-truth object height (e.g. from
+the simulator) to cross-check the joint-only result.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dam_spcm_controller._validate import finite_scalar, finite_vector
+from dam_spcm_controller.errors import InputError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from dam_analysis.config import DamConfig
+
+
+class Outcome(enum.Enum):
+    """Trial outcome in the terms of the paper's Fig. 7."""
+
+    SUCCESS = 'success'
+    LIFTED_DAM_FAILED = 'lifted_dam_failed'
+    FAILURE = 'failure'
+
+
+@dataclass(frozen=True)
+class HandGeometry:
+    """Planar geometry of the fingers and the object in the plane normal to the cylinder axis.
+
+    Attributes
+    ----------
+    link_lengths
+        (3,) link lengths base to tip [m].
+    link_radius
+        Capsule radius of every link [m].
+    base_uz
+        (n, 2) compliant-joint axis of each finger in the plane, ``(u, z)`` [m].
+    inward_sign
+        (n,) +1 if the finger closes towards +u, -1 towards -u.
+    object_radius
+        Cylinder radius [m].
+    object_z0
+        Height of the cylinder's centre resting on the table [m].
+    table_z
+        Height of the table top [m].
+    """
+
+    link_lengths: np.ndarray
+    link_radius: float
+    base_uz: np.ndarray
+    inward_sign: np.ndarray
+    object_radius: float
+    object_z0: float
+    table_z: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'link_lengths',
+                           finite_vector('link_lengths', self.link_lengths, 3, positive=True))
+        object.__setattr__(self, 'link_radius',
+                           finite_scalar('link_radius', self.link_radius, positive=True))
+        base = np.asarray(self.base_uz, dtype=np.float64)
+        if base.ndim != 2 or base.shape[1] != 2 or not np.isfinite(base).all():
+            raise InputError(f'base_uz must be a finite (n, 2) array, got {base!r}')
+        object.__setattr__(self, 'base_uz', base)
+        sign = finite_vector('inward_sign', self.inward_sign, base.shape[0])
+        if not np.all(np.abs(sign) == 1.0):
+            raise InputError(f'inward_sign must hold +1 or -1, got {sign.tolist()!r}')
+        if sign.min() > 0 or sign.max() < 0:
+            raise InputError(f'the fingers must close from both sides, got inward_sign '
+                             f'{sign.tolist()!r}')
+        object.__setattr__(self, 'inward_sign', sign)
+        object.__setattr__(self, 'object_radius',
+                           finite_scalar('object_radius', self.object_radius, positive=True))
+        object.__setattr__(self, 'object_z0', finite_scalar('object_z0', self.object_z0))
+        object.__setattr__(self, 'table_z', finite_scalar('table_z', self.table_z))
+
+    @classmethod
+    def from_config(cls, config: DamConfig) -> HandGeometry:
+        """Geometry of a validated ``dam_analysis.config.DamConfig``.
+
+        Raises
+        ------
+        InputError
+            A finger does not close in the plane normal to the cylinder axis.
+        """
+        axis = np.asarray(config.object.axis, dtype=np.float64)
+        e_u = np.cross(axis, [0.0, 0.0, 1.0])
+        e_u = e_u / np.linalg.norm(e_u)
+        base, sign = [], []
+        for finger in config.hand.fingers:
+            s = float(np.dot(finger.inward_direction, e_u))
+            if abs(abs(s) - 1.0) > 1e-6:
+                raise InputError(f'{finger.name} closes along {finger.inward_direction.tolist()}'
+                                 f', not normal to the cylinder axis {axis.tolist()}')
+            base.append([float(np.dot(finger.base_position_m, e_u)),
+                         float(finger.base_position_m[2])])
+            sign.append(math.copysign(1.0, s))
+        return cls(link_lengths=np.asarray(config.hand.link_lengths_m, dtype=np.float64),
+                   link_radius=config.hand.link_radius_m, base_uz=np.array(base),
+                   inward_sign=np.array(sign), object_radius=config.object.radius_m,
+                   object_z0=float(config.object.position_m[2]))
+
+    @property
+    def n_fingers(self) -> int:
+        return int(self.base_uz.shape[0])
+
+    @property
+    def contact_distance(self) -> float:
+        """``rho = r + r_l``: distance of the object centre from a touching link's axis [m]."""
+        return self.object_radius + self.link_radius
+
+
+def finger_points(geometry: HandGeometry, positions: np.ndarray) -> np.ndarray:
+    """Joint and tip points of every finger in the plane.
+
+    Parameters
+    ----------
+    geometry
+        Hand geometry.
+    positions
+        (3n,) joint angles [rad], finger by finger, base to tip; positive flexes inward.
+
+    Returns
+    -------
+    numpy.ndarray
+        (n, 4, 2): compliant joint, locked joint, position joint, fingertip as ``(u, z)`` [m].
+        A finger with all angles zero hangs straight down.
+    """
+    n = geometry.n_fingers
+    q = finite_vector('positions', positions, 3 * n).reshape(n, 3)
+    phi = np.cumsum(q, axis=1)  # (n, 3) absolute link angles from the downward vertical
+    direction = np.stack([geometry.inward_sign[:, None] * np.sin(phi), -np.cos(phi)], axis=2)
+    steps = direction * geometry.link_lengths[None, :, None]
+    pts = np.empty((n, 4, 2))
+    pts[:, 0] = geometry.base_uz
+    pts[:, 1:] = geometry.base_uz[:, None, :] + np.cumsum(steps, axis=1)
+    return pts
+
+
+def _link_inner_normals(geometry: HandGeometry, positions: np.ndarray) -> np.ndarray:
+    """(n, 3, 2) unit normals of each link pointing to its flexion side."""
+    n = geometry.n_fingers
+    phi = np.cumsum(np.asarray(positions, dtype=np.float64).reshape(n, 3), axis=1)
+    return np.stack([geometry.inward_sign[:, None] * np.cos(phi), np.sin(phi)], axis=2)
+
+
+def _distances(pts: np.ndarray, normals: np.ndarray,
+               centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance of candidate centres to each finger and whether they are on the inner side.
+
+    Returns ``d`` (M, n) -- distance to the nearest link of each finger -- and ``inner``
+    (M, n) -- the centre lies on the flexion side of that nearest link.
+    """
+    a = pts[:, :-1, :]  # (n, 3, 2)
+    ab = pts[:, 1:, :] - a
+    ab2 = np.einsum('nkj,nkj->nk', ab, ab)
+    rel = centres[:, None, None, :] - a[None]  # (M, n, 3, 2)
+    t = np.clip(np.einsum('mnkj,nkj->mnk', rel, ab) / ab2[None], 0.0, 1.0)
+    offset = rel - t[..., None] * ab[None]  # centre minus closest point
+    dist = np.linalg.norm(offset, axis=3)  # (M, n, 3)
+    nearest = np.argmin(dist, axis=2)  # (M, n)
+    d = np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0]
+    off = np.take_along_axis(offset, nearest[..., None, None], axis=2)[:, :, 0, :]
+    nrm = normals[np.arange(pts.shape[0])[None, :], nearest]  # (M, n, 2)
+    inner = np.einsum('mnj,mnj->mn', off, nrm) > 0.0
+    return d, inner
+
+
+@dataclass(frozen=True)
+class ObjectEstimate:
+    """Least-squares object centre from the finger posture.
+
+    Attributes
+    ----------
+    centre
+        (2,) estimated centre ``(u, z)`` [m]; NaN if no admissible centre exists.
+    residuals
+        (n,) ``d_i - rho`` per finger [m] (NaN if no admissible centre).
+    """
+
+    centre: np.ndarray
+    residuals: np.ndarray
+
+    @property
+    def found(self) -> bool:
+        return bool(np.isfinite(self.centre).all())
+
+    @property
+    def max_residual(self) -> float:
+        """Largest ``|d_i - rho|`` [m] (inf if no admissible centre)."""
+        return float(np.max(np.abs(self.residuals))) if self.found else math.inf
+
+
+def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
+                    grid_step: float = 1e-3, tolerance: float = 1e-7) -> ObjectEstimate:
+    """Fit the object centre to the finger posture (step 1 of the module's criteria).
+
+    Parameters
+    ----------
+    geometry
+        Hand and object geometry.
+    positions
+        (3n,) joint angles [rad].
+    grid_step
+        Spacing of the initial grid search [m].
+    tolerance
+        Final step of the pattern-search refinement [m].
+    """
+    pts = finger_points(geometry, positions)
+    normals = _link_inner_normals(geometry, positions)
+    rho = geometry.contact_distance
+    r = geometry.object_radius
+    lo = pts.reshape(-1, 2).min(axis=0) - rho
+    hi = pts.reshape(-1, 2).max(axis=0) + rho
+    lo[1] = max(lo[1], geometry.table_z + r)
+    if hi[1] <= lo[1]:
+        return ObjectEstimate(np.full(2, np.nan), np.full(geometry.n_fingers, np.nan))
+    us = np.arange(lo[0], hi[0] + grid_step, grid_step)
+    zs = np.arange(lo[1], hi[1] + grid_step, grid_step)
+    grid = np.stack(np.meshgrid(us, zs, indexing='ij'), axis=-1).reshape(-1, 2)
+    pen_tol = 0.02 * rho
+
+    def cost(centres: np.ndarray) -> np.ndarray:
+        d, inner = _distances(pts, normals, centres)
+        ok = (inner.all(axis=1) & (d >= rho - pen_tol).all(axis=1)
+              & (centres[:, 1] >= geometry.table_z + r - 1e-12))
+        c = np.sum((d - rho) ** 2, axis=1)
+        return np.where(ok, c, np.inf)
+
+    costs = cost(grid)
+    best = int(np.argmin(costs))
+    if not np.isfinite(costs[best]):
+        return ObjectEstimate(np.full(2, np.nan), np.full(geometry.n_fingers, np.nan))
+    centre = grid[best].copy()
+    best_cost = costs[best]
+    step = grid_step / 2.0
+    moves = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]],
+                     dtype=np.float64)
+    while step >= tolerance:
+        trial = centre[None, :] + step * moves
+        c = cost(trial)
+        k = int(np.argmin(c))
+        if c[k] < best_cost:
+            centre, best_cost = trial[k], c[k]
+        else:
+            step /= 2.0
+    d, _ = _distances(pts, normals, centre[None, :])
+    return ObjectEstimate(centre, d[0] - rho)
+
+
+@dataclass(frozen=True)
+class ClassifierSettings:
+    """Thresholds of the joint-signal classifier.
+
+    Attributes
+    ----------
+    contact_tolerance
+        Largest ``|d_i - rho|`` for a finger to count as touching the object [m].
+    load_torque_threshold
+        Smallest compliant-joint torque that shows a held load [N*m].
+    lift_height
+        Smallest rise of the object centre that counts as lifted [m].
+    limit_margin
+        A joint this close to a limit counts as at its limit [rad].
+    cage_depth_ratio
+        Enveloped needs every fingertip this many object radii below the object centre [-]
+        (a fingertip pinch at the object's equator is not an enveloping grasp).
+    """
+
+    contact_tolerance: float = 2e-3
+    load_torque_threshold: float = 0.01
+    lift_height: float = 5e-3
+    limit_margin: float = math.radians(1.0)
+    cage_depth_ratio: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ('contact_tolerance', 'load_torque_threshold', 'lift_height',
+                     'limit_margin', 'cage_depth_ratio'):
+            object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
+                                                         positive=True))
+
+
+@dataclass(frozen=True)
+class Classification:
+    """Outcome and the criteria it was derived from (see the module docstring)."""
+
+    outcome: Outcome
+    contact: bool
+    load_held: bool
+    lifted: bool
+    enveloped: bool
+    estimate: ObjectEstimate
+    lift_m: float  # estimated rise of the object centre [m] (NaN if no estimate)
+    reason: str
+
+
+def _enveloped(geometry: HandGeometry, pts: np.ndarray, centre: np.ndarray,
+               cage_depth: float) -> bool:
+    tips = pts[:, 3, :]
+    if not np.all(tips[:, 1] <= centre[1] - cage_depth):
+        return False
+    # innermost tip of each side: the side closing towards +u sits at small u, and vice versa
+    plus = geometry.inward_sign > 0
+    tip_plus_side = float(tips[plus, 0].max())  # fingers coming from -u: their largest u
+    tip_minus_side = float(tips[~plus, 0].min())  # fingers coming from +u: their smallest u
+    gap = tip_minus_side - tip_plus_side - 2.0 * geometry.link_radius
+    return gap < 2.0 * geometry.object_radius
+
+
+def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.ndarray,
+                         positions: np.ndarray, efforts: np.ndarray,
+                         settings: ClassifierSettings | None = None,
+                         joint_names: Sequence[str] | None = None) -> Classification:
+    """Classify the settled final state of a grasp from joint angles and torques.
+
+    Parameters
+    ----------
+    geometry
+        Hand and object geometry (:meth:`HandGeometry.from_config`).
+    lower, upper
+        (3n,) joint limits [rad].
+    positions
+        (3n,) final joint angles [rad].
+    efforts
+        (3n,) final joint torques [N*m] (positive = flexion).
+    settings
+        Thresholds; defaults of :class:`ClassifierSettings` if ``None``.
+    joint_names
+        (3n,) names used in :attr:`Classification.reason`; indices if ``None``.
+    """
+    s = settings or ClassifierSettings()
+    n = geometry.n_fingers
+    names = list(joint_names) if joint_names is not None else [
+        f'joint {j}' for j in range(3 * n)]
+    if len(names) != 3 * n:
+        raise InputError(f'joint_names must have {3 * n} entries, got {len(names)}')
+    q = finite_vector('positions', positions, 3 * n)
+    tau = finite_vector('efforts', efforts, 3 * n)
+    lo = finite_vector('lower', lower, 3 * n)
+    hi = finite_vector('upper', upper, 3 * n)
+    est = estimate_object(geometry, q)
+    pts = finger_points(geometry, q)
+    contact = est.found and est.max_residual <= s.contact_tolerance
+    moving = np.zeros(3 * n, dtype=bool)
+    moving[0::3] = True
+    moving[2::3] = True
+    at_limit = moving & ((q <= lo + s.limit_margin) | (q >= hi - s.limit_margin))
+    loaded = tau[0::3] >= s.load_torque_threshold
+    load_held = bool(loaded.all() and not at_limit.any())
+    lift = float(est.centre[1] - geometry.object_z0) if est.found else math.nan
+    lifted = bool(est.found and lift >= s.lift_height)
+    enveloped = bool(contact and _enveloped(geometry, pts, est.centre,
+                                            s.cage_depth_ratio * geometry.object_radius))
+    if contact and load_held and lifted:
+        outcome = Outcome.SUCCESS if enveloped else Outcome.LIFTED_DAM_FAILED
+    else:
+        outcome = Outcome.FAILURE
+    reasons = []
+    if not est.found:
+        reasons.append('no admissible object centre fits the finger posture')
+    elif not contact:
+        reasons.append(f'fingers off the object by up to {est.max_residual * 1e3:.3g} mm')
+    if at_limit.any():
+        j = int(np.flatnonzero(at_limit)[0])
+        reasons.append(f'{names[j]} at {math.degrees(q[j]):.4g} deg is at its limit')
+    if not loaded.all():
+        j = 3 * int(np.flatnonzero(~loaded)[0])
+        reasons.append(f'{names[j]} torque {tau[j]:.3g} N*m shows no load (below '
+                       f'{s.load_torque_threshold:g} N*m)')
+    if est.found and not lifted:
+        reasons.append(f'object raised only {lift * 1e3:.3g} mm')
+    if contact and lifted and not enveloped:
+        reasons.append('object not caged by the fingertips')
+    return Classification(outcome=outcome, contact=bool(contact), load_held=load_held,
+                          lifted=lifted, enveloped=enveloped, estimate=est, lift_m=lift,
+                          reason='; '.join(reasons) or 'lifted and enveloped')
+
+
+def classify_with_object_height(joint_result: Classification, object_z: float,
+                                object_z0: float, lift_height: float = 5e-3) -> Outcome:
+    """Outcome using a ground-truth object height (e.g. the simulator's) for "lifted".
+
+    Parameters
+    ----------
+    joint_result
+        Result of :func:`classify_from_joints` (supplies ``enveloped`` and ``load_held``).
+    object_z, object_z0
+        Final and initial height of the object's centre [m].
+    lift_height
+        Smallest rise that counts as lifted [m].
+    """
+    z = finite_scalar('object_z', object_z)
+    z0 = finite_scalar('object_z0', object_z0)
+    h = finite_scalar('lift_height', lift_height, positive=True)
+    if z - z0 < h:
+        return Outcome.FAILURE
+    if joint_result.enveloped and joint_result.load_held:
+        return Outcome.SUCCESS
+    return Outcome.LIFTED_DAM_FAILED
