@@ -53,7 +53,7 @@ def _as_vector(field: str, value: ArrayLike) -> np.ndarray:
         raise InputError(f'{field}: empty list')
     bad = ~np.isfinite(arr)
     if np.any(bad):
-        raise InputError(f'{field}: non-finite value {arr[bad][0]!r} in {arr.tolist()!r}')
+        raise InputError(f'{field}: non-finite value {float(arr[bad][0])!r} in {arr.tolist()!r}')
     return arr
 
 

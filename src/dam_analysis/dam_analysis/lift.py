@@ -247,7 +247,7 @@ def enumerate_worst_case(jacobians: np.ndarray, span: list[np.ndarray], tau_s: n
         others = [j for j in range(n * n_faces) if j not in chosen]
         s_star = eye[others]
         d = s_star @ null
-        if abs(np.linalg.det(d)) < 1e-12 * max(1.0, np.linalg.norm(d) ** d.shape[0]):
+        if np.linalg.cond(d) > 1e12:  # singular D: the chosen edge gives no torque
             continue
         phi = -np.linalg.solve(d, s_star @ lam0)
         lam = lam0 + null @ phi
