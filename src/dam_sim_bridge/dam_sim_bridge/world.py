@@ -64,6 +64,7 @@ from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
+_TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 
 
 @dataclass(frozen=True)
@@ -487,14 +488,15 @@ class HandWorld:
                                        f'of {bad}')
         for j, q in zip(self._joints.indices, q0, strict=True):
             pb.resetJointState(self.hand_id, j, float(q), 0.0)
-        self._modes = np.full(self.n_joints, int(JointMode.HOLD), dtype=np.int64)
+        self._modes = np.full(self.n_joints, _HOLD, dtype=np.int64)
         self._targets = q0.copy()
         self._torque_cmd = np.zeros(self.n_joints)
         self._applied_torque = np.zeros(self.n_joints)
         self._saturated = np.zeros(self.n_joints, dtype=bool)
+        self._sent_servo: tuple[bytes, bytes] | None = None
         self._steps = 0
         self._stepped = False
-        self._send_servo_targets()
+        self._send_servo_targets(force=True)
 
     def joint_modes(self) -> np.ndarray:
         """(n,) current :class:`JointMode` of every joint."""
@@ -518,47 +520,47 @@ class HandWorld:
         CommandError
             Wrong length, an unknown mode, or a non-finite TORQUE/POSITION setpoint.
         """
-        m = np.asarray(modes)
+        m_in = np.asarray(modes)
         sp = np.asarray(setpoints, dtype=float)
-        if m.shape != (self.n_joints,) or sp.shape != (self.n_joints,):
-            raise CommandError(f'modes {m.shape} and setpoints {sp.shape} must both have shape '
-                               f'({self.n_joints},)')
+        if m_in.shape != (self.n_joints,) or sp.shape != (self.n_joints,):
+            raise CommandError(f'modes {m_in.shape} and setpoints {sp.shape} must both have '
+                               f'shape ({self.n_joints},)')
         try:
-            m = np.array([int(JointMode(int(v))) for v in m], dtype=np.int64)
+            m = m_in.astype(np.int64)
+            valid = (m == m_in) & ((m == _TORQUE) | (m == _POSITION) | (m == _HOLD))
         except (ValueError, TypeError) as exc:
-            raise CommandError(f'modes {np.asarray(modes).tolist()!r}: {exc}') from exc
-        active = m != JointMode.HOLD
+            raise CommandError(f'modes {m_in.tolist()!r} are not integers: {exc}') from exc
+        if not np.all(valid):
+            raise CommandError(f'modes {m_in.tolist()!r}: {m_in[~valid].tolist()!r} is not a '
+                               f'JointMode ({_TORQUE}, {_POSITION}, {_HOLD})')
+        torque_now = m == _TORQUE
+        position_now = m == _POSITION
+        active = torque_now | position_now
         if not np.all(np.isfinite(sp[active])):
             bad = [self.joint_names[i] for i in np.flatnonzero(active & ~np.isfinite(sp))]
             raise CommandError(f'non-finite setpoint for {bad}: {sp.tolist()!r}')
-        positions = None
-        entering_hold = (m == JointMode.HOLD) & (self._modes != JointMode.HOLD)
+        entering_hold = (m == _HOLD) & (self._modes != _HOLD)
         if np.any(entering_hold):
-            positions = self._read_positions()
-        for i in range(self.n_joints):
-            if m[i] == JointMode.TORQUE:
-                limit = self.options.torque_limit_nm
-                self._torque_cmd[i] = float(np.clip(sp[i], -limit, limit))
-                self._saturated[i] = abs(float(sp[i])) > limit
-            elif m[i] == JointMode.POSITION:
-                self._targets[i] = float(np.clip(sp[i], self._joints.lower[i],
-                                                 self._joints.upper[i]))
-            elif entering_hold[i] and positions is not None:
-                self._targets[i] = float(positions[i])
-        torque_now = m == JointMode.TORQUE
-        newly_torque = torque_now & (self._modes != JointMode.TORQUE)
+            self._targets[entering_hold] = self._read_positions()[entering_hold]
+        if np.any(position_now):
+            self._targets[position_now] = np.clip(sp[position_now],
+                                                  self._joints.lower[position_now],
+                                                  self._joints.upper[position_now])
+        limit = self.options.torque_limit_nm
+        self._torque_cmd = np.where(torque_now, np.clip(np.nan_to_num(sp), -limit, limit), 0.0)
+        self._saturated = torque_now & (np.abs(np.nan_to_num(sp)) > limit)
+        newly_torque = torque_now & (self._modes != _TORQUE)
         self._modes = m
         if np.any(newly_torque):
             idx = [self._joints.indices[i] for i in np.flatnonzero(newly_torque)]
             self._pb.setJointMotorControlArray(self.hand_id, idx, pybullet.VELOCITY_CONTROL,
                                                forces=[0.0] * len(idx))
-        self._torque_cmd[~torque_now] = 0.0
-        self._saturated[~torque_now] = False
         self._send_servo_targets()
 
-    def _send_servo_targets(self) -> None:
-        servo = np.flatnonzero(self._modes != JointMode.TORQUE)
-        if servo.size == 0:
+    def _send_servo_targets(self, force: bool = False) -> None:
+        servo = np.flatnonzero(self._modes != _TORQUE)
+        key = (servo.tobytes(), self._targets[servo].tobytes())
+        if servo.size == 0 or (key == self._sent_servo and not force):
             return
         n = int(servo.size)
         self._pb.setJointMotorControlArray(
@@ -567,6 +569,7 @@ class HandWorld:
             forces=[self.options.servo_force_limit_nm] * n,
             positionGains=[self.options.position_gain] * n,
             velocityGains=[self.options.velocity_gain] * n)
+        self._sent_servo = key
 
     # ---------------------------------------------------------------------------------------
     # Stepping and reading
@@ -582,7 +585,7 @@ class HandWorld:
         if self._closed:
             raise SimulationError('the world is closed')
         pb = self._pb
-        torque_idx = np.flatnonzero(self._modes == JointMode.TORQUE)
+        torque_idx = np.flatnonzero(self._modes == _TORQUE)
         joints = [self._joints.indices[i] for i in torque_idx]
         forces = self._torque_cmd[torque_idx].tolist()
         for _ in range(steps):
@@ -593,7 +596,7 @@ class HandWorld:
         if steps:
             self._steps += steps
             self._stepped = True
-            self._applied_torque = np.where(self._modes == JointMode.TORQUE,
+            self._applied_torque = np.where(self._modes == _TORQUE,
                                             self._torque_cmd, 0.0)
 
     def _read_positions(self) -> np.ndarray:
@@ -612,7 +615,7 @@ class HandWorld:
             torques = np.zeros(self.n_joints)
         else:
             motor = np.array([s[3] for s in states])
-            torques = np.where(self._modes == JointMode.TORQUE, self._applied_torque, motor)
+            torques = np.where(self._modes == _TORQUE, self._applied_torque, motor)
         return JointStates(positions, velocities, torques)
 
     def joint_faults(self, limit_tolerance_rad: float = 1e-3) -> np.ndarray:
