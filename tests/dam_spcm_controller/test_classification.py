@@ -198,3 +198,9 @@ def test_settings_and_inputs_are_validated():
         classify_from_joints(GEO, LAY.lower, LAY.upper, np.zeros(9), np.zeros(3))
     with pytest.raises(InputError, match='both sides'):
         HandGeometry(GEO.link_lengths, 0.005, GEO.base_uz, np.ones(3), 0.01, 0.01)
+
+
+def test_settings_from_config_use_the_contact_threshold():
+    s = ClassifierSettings.from_config(CFG, lift_height=0.01)
+    assert s.load_torque_threshold == CFG.controller.contact_torque_threshold_nm
+    assert s.lift_height == 0.01

@@ -43,3 +43,16 @@ def test_joint_command_mode_lookup():
     assert cmd.mode(0) is JointMode.HOLD
     assert cmd.mode(1) is JointMode.POSITION
     assert cmd.mode(2) is JointMode.TORQUE
+
+
+def test_index_of_reorders_message_arrays():
+    lay = HandLayout.from_hand_config(load_config().hand)
+    shuffled = list(reversed(lay.joint_names)) + ['wrist_joint']
+    values = np.arange(len(shuffled), dtype=float)
+    reordered = values[lay.index_of(shuffled)]
+    for k, name in enumerate(lay.joint_names):
+        assert reordered[k] == values[shuffled.index(name)]
+    with pytest.raises(InputError, match="missing: \\['finger3_position_joint'\\]"):
+        lay.index_of(lay.joint_names[:-1])
+    with pytest.raises(InputError, match="'finger1_locked_joint' appears twice"):
+        lay.index_of(list(lay.joint_names) + ['finger1_locked_joint'])

@@ -370,3 +370,37 @@ def test_params_validation():
         SequenceParams.from_config(CFG, envelope_torque=1.0)
     with pytest.raises(InputError, match='settle_time'):
         SequenceParams.from_config(CFG, settle_time=-1.0)
+
+
+def test_time_gap_longer_than_phase_timeout_fails_rolling_up(params):
+    seq, hand = _started(params)
+    t, _ = _run_to(seq, hand, Phase.ROLLING_UP, 0.051)
+    seq.step(t + params.phase_timeout + 0.01, hand.q, hand.qd, hand.effort)
+    assert seq.phase is Phase.FAILED
+    assert 'phase rolling_up exceeded phase_timeout' in seq.failure_reason
+
+
+def test_envelope_that_never_settles_times_out(params):
+    seq, hand = _started(params)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    t_env = t
+    moving = np.full(9, 2.0 * params.settle_speed)  # the fingers never come to rest
+    while seq.phase is Phase.ENVELOPE and t < t_env + 20.0:
+        t = round(t + 0.01, 9)
+        seq.step(t, hand.q, moving, hand.effort)
+    assert seq.phase is Phase.FAILED
+    assert 'phase envelope exceeded phase_timeout' in seq.failure_reason
+    assert t == pytest.approx(t_env + params.phase_timeout, abs=0.011)
+
+
+def test_envelope_settles_after_settle_time(params):
+    seq, hand = _started(params)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    t_env = t
+    still = np.zeros(9)
+    while seq.phase is Phase.ENVELOPE:
+        t = round(t + 0.001, 9)
+        seq.step(t, hand.q, still, hand.effort)
+    # the torque ramp must finish before the settle time starts counting
+    assert t == pytest.approx(t_env + params.torque_ramp_time + params.settle_time, abs=1.5e-3)
+    assert seq.phase is Phase.DONE

@@ -312,6 +312,13 @@ class ClassifierSettings:
     limit_margin: float = math.radians(1.0)
     cage_depth_ratio: float = 0.5
 
+    @classmethod
+    def from_config(cls, config: DamConfig, **overrides: float) -> ClassifierSettings:
+        """Defaults, with the load threshold taken from the controller's contact threshold."""
+        values = {'load_torque_threshold': config.controller.contact_torque_threshold_nm}
+        values.update(overrides)
+        return cls(**values)
+
     def __post_init__(self) -> None:
         for name in ('contact_tolerance', 'load_torque_threshold', 'lift_height',
                      'limit_margin', 'cage_depth_ratio'):

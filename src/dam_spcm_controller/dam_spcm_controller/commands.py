@@ -8,6 +8,7 @@ Joints are ordered finger by finger, base to tip, exactly as
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -133,6 +134,32 @@ class HandLayout:
     def position(self) -> slice:
         """Slice of the position-controlled joints in a (3n,) array."""
         return slice(2, None, 3)
+
+    def index_of(self, names: Sequence[str]) -> np.ndarray:
+        """Positions in ``names`` of this layout's joints, in layout order.
+
+        Use it to reorder a message's arrays: ``values[layout.index_of(msg_names)]``.
+
+        Parameters
+        ----------
+        names
+            Joint names in the order of some message (extra names are ignored).
+
+        Raises
+        ------
+        InputError
+            A joint of the layout is missing from ``names`` or appears twice.
+        """
+        where: dict[str, int] = {}
+        for i, name in enumerate(names):
+            if name in where:
+                raise InputError(f'joint name {name!r} appears twice (positions {where[name]} '
+                                 f'and {i})')
+            where[name] = i
+        missing = [n for n in self.joint_names if n not in where]
+        if missing:
+            raise InputError(f'joint names missing: {missing}')
+        return np.array([where[n] for n in self.joint_names], dtype=np.intp)
 
     def finger_name(self, finger: int) -> str:
         """Name of finger ``finger`` (0-based), taken from its compliant joint name."""
