@@ -404,3 +404,22 @@ def test_envelope_settles_after_settle_time(params):
     # the torque ramp must finish before the settle time starts counting
     assert t == pytest.approx(t_env + params.torque_ramp_time + params.settle_time, abs=1.5e-3)
     assert seq.phase is Phase.DONE
+
+
+def test_failure_relaxes_like_abort(params):
+    seq, hand = _started(params)
+    t, _ = _run_to(seq, hand, Phase.ROLLING_UP, 0.051)
+    _, log = run(seq, hand, t + 0.001, t + 1.0)
+    t_fail, _, last_cmd, _, _ = log[-1]
+    torque_joints = last_cmd.modes == JointMode.TORQUE
+    q = hand.q.copy()
+    q[3] = math.radians(61.0)  # finger2 compliant joint beyond its 60 deg limit
+    cmd = seq.step(t_fail + 0.001, q, hand.qd, hand.effort)
+    assert seq.phase is Phase.FAILED
+    assert 'finger2_compliant_joint at 61 deg reached its joint limit' in seq.failure_reason
+    assert not np.any(cmd.modes == JointMode.POSITION)
+    # the position joints hold their last trajectory setpoint
+    assert np.allclose(cmd.setpoints[2::3], last_cmd.setpoints[2::3])
+    end = seq.step(t_fail + 0.001 + params.torque_ramp_time, q, hand.qd, hand.effort)
+    assert np.all(end.setpoints[torque_joints] == 0.0)
+    assert seq.relaxed
