@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dam_analysis.config import DamConfig, load_config
-from dam_hand_driver.protocol import JointFault, JointMode
+from dam_hand_driver.protocol import Calibration, DeviceWatchdog, JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
@@ -421,6 +421,48 @@ def test_object_on_horizontal_fingers_sticks_below_and_slides_above_alpha(
 
 
 # --------------------------------------------------------------------------------------------
+# The device watchdog driving the world
+
+
+def test_watchdog_safe_state_zeroes_torque_and_holds_servoed_joints(
+        world: HandWorld, cfg: DamConfig) -> None:
+    now = [0.0]
+    watchdog = DeviceWatchdog(world.n_joints, cfg.device.watchdog_s, clock=lambda: now[0])
+    cal = Calibration.from_config(cfg)
+
+    def run(steps: int) -> bool:
+        for _ in range(steps):
+            modes, raw, tripped = watchdog.output()
+            world.set_joint_commands(modes, cal.setpoints_si(modes, raw))
+            world.step(1)
+            now[0] += world.time_step_s
+        return tripped
+
+    modes = np.array([T, H, P] * 3)
+    q0 = world.joint_states().positions
+    for i in range(50):  # a ramp on the position joints, fed every step
+        setpoints = np.where(modes == P, q0 + 0.5 * world.time_step_s * (i + 1), 0.02)
+        watchdog.feed(modes, cal.setpoints_raw(modes, setpoints))
+        assert not run(1)
+    moving = world.joint_states()
+    assert np.all(moving.velocities[2::3] > 0.3)  # position joints follow the ramp
+    np.testing.assert_allclose(moving.torques[0::3], 0.02, atol=cal.torque_scale[0])
+    tripped_at = moving.positions
+    assert run(int(cfg.device.watchdog_s / world.time_step_s) + 300)
+    assert world.joint_modes().tolist() == [T, H, H] * 3
+    safe = world.joint_states()
+    assert safe.torques[0::3].tolist() == [0.0] * 3
+    # The position joints stopped where the watchdog tripped.
+    assert np.all(np.abs(safe.velocities[2::3]) < 1e-3)
+    np.testing.assert_allclose(safe.positions[2::3], tripped_at[2::3], atol=0.01)
+    assert watchdog.trips == 1
+    # A fresh command takes effect at once.
+    watchdog.feed(modes, cal.setpoints_raw(modes, setpoints))
+    assert not run(1)
+    assert world.joint_modes().tolist() == modes.tolist()
+
+
+# --------------------------------------------------------------------------------------------
 # Lockstep speed (measured and printed; no timing assertion)
 
 
@@ -433,3 +475,16 @@ def test_lockstep_speed_is_measured(world: HandWorld) -> None:
     assert world.sim_time == pytest.approx(steps * world.time_step_s)
     print(f'lockstep: {steps} steps, {world.sim_time:.3f} s simulated in {wall:.3f} s wall: '
           f'{world.sim_time / wall:.1f}x real time')
+
+
+def test_lockstep_speed_with_a_command_every_step_is_measured(world: HandWorld) -> None:
+    steps = 2000
+    modes = np.array([T, H, P] * 3)
+    started = time.perf_counter()
+    for i in range(steps):
+        q = world.joint_states().positions
+        world.set_joint_commands(modes, np.where(modes == T, -0.05 * q, 0.3 + 1e-4 * i))
+        world.step(1)
+    wall = time.perf_counter() - started
+    assert world.sim_time == pytest.approx(steps * world.time_step_s)
+    print(f'lockstep with a command per step: {world.sim_time / wall:.1f}x real time')

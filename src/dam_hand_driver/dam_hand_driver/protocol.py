@@ -21,10 +21,14 @@ import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dam_hand_driver.errors import EncodeError, ParameterError
+
+if TYPE_CHECKING:
+    from dam_analysis.config import DamConfig
 
 # --------------------------------------------------------------------------------------------
 # Constants and enums
@@ -539,10 +543,10 @@ torque_offset_raw
         self.torque_offset = checked['torque_offset_raw']
 
     @classmethod
-    def from_config(cls, config: object) -> Calibration:
+    def from_config(cls, config: DamConfig) -> Calibration:
         """Build from a ``DamConfig`` (its ``hand`` joint order and ``device.calibration``)."""
-        hand = config.hand  # type: ignore[attr-defined]
-        cal = config.device.calibration  # type: ignore[attr-defined]
+        hand = config.hand
+        cal = config.device.calibration
         roles = [role for _ in hand.fingers for role in hand.joint_roles]
         return cls([cal[r].position_scale_rad_per_count for r in roles],
                    [cal[r].position_offset_counts for r in roles],
