@@ -141,3 +141,51 @@ def test_finding_alpha_5_small_sufficient_region(bounds):
     assert suff.any()
     assert csm.sum() > suff.sum()
     assert np.nanmin(b.sufficient) > 2.0 * np.nanmin(b.csm)
+
+
+def test_step_by_step_fallback_equals_closed_form(analyzer):
+    """The fallback used for reversing slip agrees with the closed form on the default path."""
+    from dam_analysis.regions import _csm_sequential_each, csm_evaluate, end_tables
+    dps = np.radians([0.0, 3.0, 12.5, 27.0, 44.0])
+    ends = end_tables(analyzer.table, dps)
+    k = np.array([0.02, 0.3, 4.0])
+    for i, end in enumerate(ends):
+        a = csm_evaluate(analyzer.table, i, end, k, math.radians(7.0))
+        b = _csm_sequential_each(analyzer.table, i, end, k, math.radians(7.0),
+                                 float(analyzer.model.contact_stiffness[1]))
+        np.testing.assert_allclose(a.f_n, b.f_n, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(a.f_t, b.f_t, rtol=1e-9, atol=1e-12)
+
+
+def test_csm_boundary_with_soft_contact_uses_exact_margin():
+    """With a soft tangential spring contacts still stick at the sliding estimate; the
+    boundary must still be where the exact CSM margin changes sign."""
+    import copy
+    from pathlib import Path
+
+    import yaml
+
+    from dam_analysis.analysis import LiftAnalyzer
+    from dam_analysis.config import config_from_dict
+    with open(Path(__file__).resolve().parents[2] / 'config' / 'dam.yaml',
+              encoding='utf-8') as fh:
+        raw = yaml.safe_load(fh)
+    raw = copy.deepcopy(raw)
+    raw['contact']['contact_stiffness_n_per_m'] = [30.0, 30.0, 30.0]
+    soft = LiftAnalyzer(config_from_dict(raw), path_step=math.radians(0.25))
+    alpha = math.radians(10.0)
+    dps = np.radians([4.0, 8.0, 16.0, 24.0])
+    b = soft.boundaries(alpha, dps)
+    stuck = 0
+    for j, dp in enumerate(dps):
+        k_star = b.csm[j]
+        if not math.isfinite(k_star):
+            continue
+        lo = soft.check_lift(k_star * (1 - 1e-6), dp, alpha).csm_margin
+        hi = soft.check_lift(k_star * (1 + 1e-6), dp, alpha).csm_margin
+        assert lo < 0.0 < hi
+        f = soft.check_lift(k_star, dp, alpha)
+        f_n = -np.einsum('ij,ij->i', f.csm_forces, f.normals)
+        f_t = np.linalg.norm(f.csm_forces + f_n[:, None] * f.normals, axis=1)
+        stuck += int(np.any(f_t < math.tan(alpha) * f_n * (1 - 1e-6)))
+    assert stuck >= 1  # the bisection branch was really needed

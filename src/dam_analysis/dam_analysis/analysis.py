@@ -236,7 +236,7 @@ class LiftAnalyzer:
             grid, gamma, s_grid, sign = entry
             cnt = bisect.bisect_left(grid, float(dp[i]))
             prev = float(np.min(k[i] * gamma[:cnt] - s_grid[:cnt])) if cnt else math.inf
-            s_end = sign * float(np.interp(dp[i], grid, s_grid * sign))
+            s_end = float(np.interp(dp[i], grid, s_grid))
             denom = float(h_n[i] + sign * mu * h_t[i])
             tau = float(tau_s[i])
             cap = mu * tau / (k_t * denom) if denom > 0.0 else math.inf
