@@ -11,7 +11,7 @@ import pytest
 
 from dam_analysis.config import DamConfig, load_config
 from dam_hand_driver.protocol import Calibration, DeviceWatchdog, JointFault, JointMode
-from dam_sim_bridge.errors import CommandError, WorldConfigError
+from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
@@ -313,6 +313,13 @@ def test_bad_options_are_refused() -> None:
         WorldOptions(link_masses_kg=(0.01, -0.01, 0.01))
     with pytest.raises(WorldConfigError, match='initial_compliant_angle_rad'):
         HandWorld(load_config(), WorldOptions(initial_compliant_angle_rad=-2.0))
+
+
+def test_gui_without_a_display_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv('DISPLAY', raising=False)
+    monkeypatch.delenv('WAYLAND_DISPLAY', raising=False)
+    with pytest.raises(SimulationError, match='DISPLAY'):
+        HandWorld(load_config(), WorldOptions(gui=True))
 
 
 def test_reset_refuses_postures_outside_the_limits(world: HandWorld) -> None:

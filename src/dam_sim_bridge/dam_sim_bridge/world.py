@@ -274,6 +274,10 @@ class HandWorld:
         self.n_joints = len(self.joint_names)
         self.link_masses_kg = np.asarray(self.options.link_masses_kg, dtype=float)
         mode = pybullet.GUI if self.options.gui else pybullet.DIRECT
+        if (self.options.gui and os.name == 'posix' and not os.environ.get('DISPLAY')
+                and not os.environ.get('WAYLAND_DISPLAY')):
+            raise SimulationError('gui=True but neither DISPLAY nor WAYLAND_DISPLAY is set; '
+                                  'use gui=False (headless DIRECT mode)')
         try:
             self._pb = bullet_client.BulletClient(connection_mode=mode)
         except Exception as exc:  # noqa: BLE001 - pybullet raises plain errors
