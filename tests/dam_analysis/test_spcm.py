@@ -103,3 +103,31 @@ def test_posture_problems_detected(model):
     # object moved onto link 1: a proximal link penetrates it
     inside = dataclasses.replace(g, object_center=np.array([0.0, -0.02]))
     assert 'proximal' in posture_problem(inside, 0.0, 0.0, 0.0, 1.0, lim_s, lim_p)
+
+
+def test_slip_rate_of_the_material_point_by_finite_difference(analyzer):
+    """The CSM slip rate is the tangential velocity of the finger's material point at the
+    contact: follow that point (fixed in the distal link) through a small SPCM step."""
+    model = analyzer.model
+    g = model.fingers[0]
+    path = analyzer.table.paths[0]
+    grid = analyzer.table.grid[0]
+    for j in (40, 300, 700, 1100):
+        dp = float(path.delta_theta_p[j])
+        fc = path.solve(dp)
+        phi3 = fc.theta_s + model.theta_l0 + fc.theta_p
+        axis_dir = np.array([math.sin(phi3), -math.cos(phi3)])
+        perp_dir = np.array([math.cos(phi3), math.sin(phi3)])
+        rel = np.array([(fc.contact_point - g.base_position) @ g.inward_direction,
+                        fc.contact_point[2] - g.base_position[2]]) - fc.joints[2]
+        local = np.array([rel @ axis_dir, rel @ perp_dir])
+        eps = 1e-6
+        fc2 = path.solve(dp + eps)
+        phi3b = fc2.theta_s + model.theta_l0 + fc2.theta_p
+        moved = (fc2.joints[2] + local[0] * np.array([math.sin(phi3b), -math.cos(phi3b)])
+                 + local[1] * np.array([math.cos(phi3b), math.sin(phi3b)]))
+        velocity = g.direction_to_world((moved - fc.joints[2] - rel) / eps)
+        tangent = np.cross(g.joint_axis, fc.normal_object)
+        assert grid.slip_rate[j] == pytest.approx(velocity @ tangent, rel=1e-4, abs=1e-9)
+        # and the material point does not penetrate: no normal velocity (rolling contact)
+        assert abs(velocity @ fc.normal_object) < 1e-5
