@@ -342,6 +342,14 @@ def test_reset_restores_posture_and_object(world: HandWorld, cfg: DamConfig) -> 
     np.testing.assert_allclose(world.object_pose().position, cfg.object.position_m)
 
 
+def test_reset_clears_contacts_of_the_previous_run(world: HandWorld) -> None:
+    world.set_joint_commands([T, H, H] * 3, [0.01, 0, 0] * 3)
+    world.step(500)
+    assert len(world.hand_object_contacts()) > 0  # the fingers closed on the object
+    world.reset()
+    assert world.hand_object_contacts() == []
+
+
 # --------------------------------------------------------------------------------------------
 # Friction
 

@@ -20,10 +20,11 @@ Model
   the solid cylinder's mass and inertia: Bullet's primitive cylinder creeps and rolls away on a
   flat table by itself (about 0.17 m in 5 s), the prism rests.
 * Friction. Bullet combines the lateral friction of two bodies by multiplying them. The finger
-  links get ``tan(alpha)``, the object ``1.0`` and the table ``contact.table_friction_
-  coefficient``, so finger-object = ``tan(alpha)`` and table-object = the table coefficient,
-  exactly, also for ``alpha = 0``. (Finger-table is their product; fingers do not touch the
-  table in the task.) Rolling and spinning friction are zero, restitution is zero.
+  links get ``tan(alpha)``, the object ``1.0`` and the table
+  ``contact.table_friction_coefficient``, so finger-object = ``tan(alpha)`` and table-object =
+  the table coefficient, exactly, also for ``alpha = 0``. Finger-table is their product
+  ``tan(alpha) * table coefficient`` (the fingers are not meant to touch the table). Rolling and
+  spinning friction are zero, restitution is zero.
 
 Joint control
 -------------
@@ -506,6 +507,9 @@ class HandWorld:
         self._steps = 0
         self._stepped = False
         self._send_servo_targets(force=True)
+        # Refresh the contact cache: otherwise contact queries return the pre-reset contacts
+        # until the next step.
+        pb.performCollisionDetection()
 
     def joint_modes(self) -> np.ndarray:
         """(n,) current :class:`JointMode` of every joint."""
