@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import socket
 import struct
 import time
 import zlib
@@ -199,6 +200,25 @@ def test_decoder_never_raises_on_non_bytes() -> None:
     assert dec.counters.internal_error == 1
 
 
+def test_frames_survive_a_loopback_udp_round_trip() -> None:
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.bind(('127.0.0.1', 0))
+        rx.settimeout(2.0)
+        dec = FrameDecoder(FrameKind.STATE, N)
+        sent = [_state(seq) for seq in range(1, 21)]
+        for data in sent:
+            tx.sendto(data, rx.getsockname())
+        received = [rx.recvfrom(2048)[0] for _ in sent]
+        assert received == sent  # one frame per datagram, unfragmented
+        assert all(dec.decode(d) is not None for d in received)
+        assert dec.decode(received[-1]) is None and dec.counters.replayed == 1
+    finally:
+        rx.close()
+        tx.close()
+
+
 # --------------------------------------------------------------------------------------------
 # Fuzz
 
@@ -287,6 +307,21 @@ def test_setpoints_per_mode() -> None:
     assert raw.tolist() == [10000, round(math.radians(15.0) / 1e-4), 0]
     si = cal.setpoints_si([T, P, H], raw)
     assert si[0] == pytest.approx(0.1) and math.isnan(si[2])
+
+
+def test_state_si_and_raw_round_trip_through_a_frame() -> None:
+    cal = Calibration.from_config(load_config())
+    q = np.linspace(-0.5, 1.5, N)
+    qd = np.linspace(2.0, -2.0, N)
+    tau = np.linspace(-0.3, 0.3, N)
+    raw = cal.state_raw(q, qd, tau)
+    frame = FrameDecoder(FrameKind.STATE, N).decode(encode_state(1, 0, *raw, [H] * N))
+    assert isinstance(frame, StateFrame)
+    q2, qd2, tau2 = cal.state_si(frame)
+    # Quantisation: half a count, half a raw torque unit.
+    np.testing.assert_allclose(q2, q, atol=0.5 * cal.position_scale.max() + 1e-15)
+    np.testing.assert_allclose(qd2, qd, atol=0.5 * cal.position_scale.max() + 1e-15)
+    np.testing.assert_allclose(tau2, tau, atol=0.5 * cal.torque_scale.max() + 1e-15)
 
 
 def test_calibration_rejects_bad_values() -> None:

@@ -350,6 +350,17 @@ def test_reset_clears_contacts_of_the_previous_run(world: HandWorld) -> None:
     assert world.hand_object_contacts() == []
 
 
+def test_identical_runs_are_bitwise_identical(cfg: DamConfig) -> None:
+    def run() -> tuple[np.ndarray, np.ndarray]:
+        with HandWorld(cfg) as w:
+            w.set_joint_commands([T, H, P] * 3, [0.01, 0.0, 0.6] * 3)
+            w.step(800)
+            return w.joint_states().positions, w.object_pose().position
+
+    (q1, o1), (q2, o2) = run(), run()
+    assert q1.tolist() == q2.tolist() and o1.tolist() == o2.tolist()
+
+
 # --------------------------------------------------------------------------------------------
 # Friction
 

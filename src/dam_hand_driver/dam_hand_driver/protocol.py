@@ -581,6 +581,19 @@ torque_offset_raw
         """Joint torques [N*m] -> torque units of the device (int64, rounded)."""
         return self._to_raw('torque', nm, self.torque_scale, self.torque_offset)
 
+    def state_si(self, frame: StateFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A state frame's joint positions [rad], velocities [rad/s] and torques [N*m]."""
+        return (self.position_si(frame.position_counts),
+                self.velocity_si(frame.velocity_counts_per_s), self.torque_si(frame.torque_raw))
+
+    def state_raw(self, positions_rad: np.ndarray | Sequence[float],
+                  velocities_rad_per_s: np.ndarray | Sequence[float],
+                  torques_nm: np.ndarray | Sequence[float]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """SI joint state -> raw (counts, counts/s, torque units) for :func:`encode_state`."""
+        return (self.position_raw(positions_rad), self.velocity_raw(velocities_rad_per_s),
+                self.torque_raw(torques_nm))
+
     def setpoints_raw(self, modes: np.ndarray | Sequence[int],
                       setpoints_si: np.ndarray | Sequence[float]) -> np.ndarray:
         """SI setpoints -> raw setpoints of a command frame, per joint mode.
