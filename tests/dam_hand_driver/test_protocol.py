@@ -7,6 +7,7 @@ import socket
 import struct
 import time
 import zlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -120,6 +121,19 @@ def test_encode_rejects_bad_values_and_names_them(kwargs: dict, word: str) -> No
     args.update(kwargs)
     with pytest.raises(EncodeError, match=word.replace('[', r'\[').replace(']', r'\]')):
         encode_command(**args)
+
+
+def _doc_example(marker: str) -> bytes:
+    doc = Path(__file__).resolve().parents[2] / 'docs' / 'device_protocol.md'
+    text = doc.read_text(encoding='utf-8')
+    block = text.split(f'<!-- {marker} -->', 1)[1].split('```', 2)[1]
+    return bytes.fromhex(block)
+
+
+def test_documented_examples_match_the_codec() -> None:
+    assert _doc_example('example-command') == encode_command(1, 0, [T], [1000])
+    assert _doc_example('example-state') == encode_state(7, 1_000_000, [2618], [-25], [150],
+                                                         [H], [0], status=2)
 
 
 # --------------------------------------------------------------------------------------------
