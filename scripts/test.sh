@@ -18,20 +18,9 @@ set -u
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 
 # Reserve a domain id nobody else on this machine is using for the length of this run.
-lock_dir="${TMPDIR:-/tmp}/dam-ros-domains"
-mkdir -p "$lock_dir"
-domain=""
-for offset in $(seq 0 100); do
-  candidate=$(( (offset + $$) % 101 + 1 ))  # 1..101, start at a PID-dependent id
-  exec {lock_fd}>"$lock_dir/$candidate.lock"
-  if flock -n "$lock_fd"; then
-    domain=$candidate
-    break
-  fi
-  exec {lock_fd}>&-
-done
-[ -n "$domain" ] || { echo "test.sh: every ROS_DOMAIN_ID 1..101 is in use" >&2; exit 1; }
-export ROS_DOMAIN_ID="$domain"
+# shellcheck disable=SC1091
+source "$REPO_ROOT/scripts/lib/ros_domain.sh"
+dam_reserve_ros_domain
 echo "==> Running tests (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, discovery $ROS_AUTOMATIC_DISCOVERY_RANGE)"
 
 cd "$REPO_ROOT"

@@ -29,6 +29,8 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
+            'check_lift_server = dam_analysis.check_lift_server:main',
+            'check_lift = dam_analysis.check_lift_client:entry_point',
         ],
     },
 )

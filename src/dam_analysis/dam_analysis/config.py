@@ -67,6 +67,7 @@ class HandConfig:
 
     link_lengths_m: np.ndarray  # (3,) base to tip [m]
     link_radius_m: float  # capsule radius of every link, the fingertip radius [m]
+    link_masses_kg: np.ndarray  # (3,) base to tip [kg] (simulator)
     joint_limits_rad: Mapping[str, tuple[float, float]]  # role -> (min, max) [rad]
     fingers: tuple[FingerConfig, ...]
     initial_locked_angle_rad: float
@@ -133,6 +134,33 @@ class ControllerConfig:
     approach_speed_rad_per_s: float
     phase_timeout_s: float
     state_timeout_s: float
+    torque_ramp_time_s: float
+    lost_contact_time_s: float
+    lost_contact_torque_ratio: float
+    envelope_settle_speed_rad_per_s: float
+    envelope_settle_time_s: float
+    limit_margin_rad: float
+
+
+@dataclass(frozen=True)
+class ClassificationConfig:
+    """Thresholds of the outcome classification from joint signals (paper Fig. 7)."""
+
+    contact_tolerance_m: float
+    lift_height_m: float
+    cage_depth_ratio: float
+    limit_margin_rad: float
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """The PyBullet stand-in hand."""
+
+    time_step_s: float
+    solver_iterations: int
+    initial_compliant_angle_rad: float
+    servo_force_limit_nm: float
+    object_faces: int
 
 
 @dataclass(frozen=True)
@@ -155,6 +183,7 @@ class DeviceConfig:
     probe_timeout_s: float
     state_timeout_s: float
     torque_rate_limit_nm_per_s: float
+    torque_limit_nm: float
     calibration: Mapping[str, Calibration]  # joint role -> calibration
 
 
@@ -167,6 +196,8 @@ class DamConfig:
     contact: ContactConfig
     task: TaskConfig
     controller: ControllerConfig
+    classification: ClassificationConfig
+    sim: SimConfig
     device: DeviceConfig
     source: str = field(default='<dict>')
 
@@ -242,15 +273,17 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
             f'unsupported format version {version} (this code reads {_FORMAT_VERSION})'
         )
     root.only_keys({'format_version', 'hand', 'object', 'contact', 'task', 'controller',
-                    'device'})
+                    'classification', 'sim', 'device'})
     hand = _hand(root.child('hand'))
     obj = _object(root.child('object'))
     contact = _contact(root.child('contact'))
     task = _task(root.child('task'), hand)
     controller = _controller(root.child('controller'))
+    classification = _classification(root.child('classification'))
+    sim = _sim(root.child('sim'), hand)
     device = _device(root.child('device'))
     return DamConfig(hand=hand, object=obj, contact=contact, task=task, controller=controller,
-                     device=device, source=source)
+                     classification=classification, sim=sim, device=device, source=source)
 
 
 # --------------------------------------------------------------------------------------------
@@ -258,7 +291,8 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
 
 
 def _hand(node: _Node) -> HandConfig:
-    node.only_keys({'joint_roles', 'link_lengths_m', 'link_radius_m', 'joint_limits_deg',
+    node.only_keys({'joint_roles', 'link_lengths_m', 'link_radius_m', 'link_masses_kg',
+                    'joint_limits_deg',
                     'fingers', 'initial_locked_angle_deg', 'initial_position_angle_deg'})
     roles = node.child('joint_roles')
     role_list = roles.sequence(length=3)
@@ -305,7 +339,9 @@ def _hand(node: _Node) -> HandConfig:
     pos = node.child('initial_position_angle_deg')
     pos_rad = math.radians(pos.number())
     _check_within(pos, pos_rad, limits['position'])
-    return HandConfig(link_lengths_m=lengths, link_radius_m=radius, joint_limits_rad=limits,
+    return HandConfig(link_lengths_m=lengths, link_radius_m=radius,
+                      link_masses_kg=node.child('link_masses_kg').vector(3, positive=True),
+                      joint_limits_rad=limits,
                       fingers=tuple(fingers), initial_locked_angle_rad=locked_rad,
                       initial_position_angle_rad=pos_rad)
 
@@ -377,7 +413,14 @@ def _task(node: _Node, hand: HandConfig) -> TaskConfig:
 def _controller(node: _Node) -> ControllerConfig:
     node.only_keys({'damping_nms_per_rad', 'torque_limit_nm', 'trajectory_duration_s',
                     'envelope_torque_nm', 'contact_torque_threshold_nm',
-                    'approach_speed_deg_per_s', 'phase_timeout_s', 'state_timeout_s'})
+                    'approach_speed_deg_per_s', 'phase_timeout_s', 'state_timeout_s',
+                    'torque_ramp_time_s', 'lost_contact_time_s', 'lost_contact_torque_ratio',
+                    'envelope_settle_speed_deg_per_s', 'envelope_settle_time_s',
+                    'limit_margin_deg'})
+    ratio = node.child('lost_contact_torque_ratio')
+    ratio_value = ratio.number(positive=True)
+    if ratio_value >= 1.0:
+        raise ratio.error(f'expected a ratio below 1, got {ratio_value!r}')
     limit = node.child('torque_limit_nm').number(positive=True)
     envelope = node.child('envelope_torque_nm')
     envelope_nm = envelope.number(positive=True)
@@ -394,13 +437,50 @@ def _controller(node: _Node) -> ControllerConfig:
             node.child('approach_speed_deg_per_s').number(positive=True)),
         phase_timeout_s=node.child('phase_timeout_s').number(positive=True),
         state_timeout_s=node.child('state_timeout_s').number(positive=True),
+        torque_ramp_time_s=node.child('torque_ramp_time_s').number(positive=True),
+        lost_contact_time_s=node.child('lost_contact_time_s').number(positive=True),
+        lost_contact_torque_ratio=ratio_value,
+        envelope_settle_speed_rad_per_s=math.radians(
+            node.child('envelope_settle_speed_deg_per_s').number(positive=True)),
+        envelope_settle_time_s=node.child('envelope_settle_time_s').number(positive=True),
+        limit_margin_rad=math.radians(node.child('limit_margin_deg').number(nonnegative=True)),
+    )
+
+
+def _classification(node: _Node) -> ClassificationConfig:
+    node.only_keys({'contact_tolerance_m', 'lift_height_m', 'cage_depth_ratio',
+                    'limit_margin_deg'})
+    return ClassificationConfig(
+        contact_tolerance_m=node.child('contact_tolerance_m').number(positive=True),
+        lift_height_m=node.child('lift_height_m').number(positive=True),
+        cage_depth_ratio=node.child('cage_depth_ratio').number(nonnegative=True),
+        limit_margin_rad=math.radians(node.child('limit_margin_deg').number(nonnegative=True)),
+    )
+
+
+def _sim(node: _Node, hand: HandConfig) -> SimConfig:
+    node.only_keys({'time_step_s', 'solver_iterations', 'initial_compliant_angle_deg',
+                    'servo_force_limit_nm', 'object_faces'})
+    step = node.child('time_step_s')
+    step_s = step.number(positive=True)
+    if step_s > 0.01:
+        raise step.error(f'{step_s!r} s is too coarse for contact dynamics (at most 0.01 s)')
+    angle = node.child('initial_compliant_angle_deg')
+    angle_rad = math.radians(angle.number())
+    _check_within(angle, angle_rad, hand.joint_limits_rad['compliant'])
+    return SimConfig(
+        time_step_s=step_s,
+        solver_iterations=node.child('solver_iterations').integer(minimum=1, maximum=1000),
+        initial_compliant_angle_rad=angle_rad,
+        servo_force_limit_nm=node.child('servo_force_limit_nm').number(positive=True),
+        object_faces=node.child('object_faces').integer(minimum=8, maximum=512),
     )
 
 
 def _device(node: _Node) -> DeviceConfig:
     node.only_keys({'host', 'state_port', 'command_port', 'rate_hz', 'watchdog_s',
                     'probe_timeout_s', 'state_timeout_s', 'torque_rate_limit_nm_per_s',
-                    'calibration'})
+                    'torque_limit_nm', 'calibration'})
     watchdog = node.child('watchdog_s')
     watchdog_s = watchdog.number(positive=True)
     if watchdog_s > 0.2:
@@ -433,6 +513,7 @@ def _device(node: _Node) -> DeviceConfig:
         state_timeout_s=node.child('state_timeout_s').number(positive=True),
         torque_rate_limit_nm_per_s=node.child('torque_rate_limit_nm_per_s').number(
             positive=True),
+        torque_limit_nm=node.child('torque_limit_nm').number(positive=True),
         calibration=calibration,
     )
 

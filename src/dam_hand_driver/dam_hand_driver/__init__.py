@@ -1,1 +1,3 @@
-"""Driver node for the DAM hand: device link, /joint_states, joint commands, diagnostics, recording."""
+"""Driver node for the DAM hand: device link, /joint_states, joint commands, diagnostics,
+recording.
+"""

@@ -1,1 +1,3 @@
-"""PyBullet stand-in for the three-fingered DAM hand, speaking the device link; simulated experiments."""
+"""PyBullet stand-in for the three-fingered DAM hand, speaking the device link; simulated
+experiments.
+"""

@@ -1,0 +1,118 @@
+"""``check_lift``: a small command-line client of ``/check_lift`` for users without ``ros2``.
+
+Examples::
+
+    ros2 run dam_analysis check_lift --k-theta 0.5 --delta-theta-p 40deg
+    ros2 run dam_analysis check_lift --k-theta 0.5 0.25 0.25 --delta-theta-p 0.7 \\
+        --friction-angle 5deg
+
+Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). Exit status: 0 when
+the server answered ``ok``, 2 when it rejected the request, 1 when no answer came.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+
+import rclpy
+from rclpy.utilities import remove_ros_args
+
+from dam_interfaces.srv import CheckLift
+
+
+def parse_angle(text: str) -> float:
+    """Parse ``'40deg'``, ``'0.7rad'`` or ``'0.7'`` (radians) into radians."""
+    value = text.strip().lower()
+    try:
+        if value.endswith('deg'):
+            return math.radians(float(value[:-3]))
+        if value.endswith('rad'):
+            return float(value[:-3])
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'{text!r} is not an angle (examples: 40deg, 0.7rad, 0.7)') from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='check_lift',
+        description='Ask /check_lift whether a (k_theta, delta_theta_p) pair lifts the object.')
+    parser.add_argument('--k-theta', type=float, nargs='+', required=True, metavar='N*m/rad',
+                        help='compliant-joint stiffness: one value (finger 1, the others from '
+                             'the configured ratios) or one per finger')
+    parser.add_argument('--delta-theta-p', type=parse_angle, nargs='+', required=True,
+                        metavar='ANGLE',
+                        help='position-joint displacement: one for all fingers or one per finger')
+    parser.add_argument('--friction-angle', type=parse_angle, default=None, metavar='ANGLE',
+                        help='friction angle alpha (default: the server\'s configured value)')
+    parser.add_argument('--service', default='/check_lift', help='service name')
+    parser.add_argument('--timeout', type=float, default=10.0, metavar='S',
+                        help='seconds to wait for the service and for the answer')
+    return parser
+
+
+def format_response(request: CheckLift.Request, response: CheckLift.Response) -> str:
+    """Human-readable rendering of a CheckLift answer."""
+    if not response.ok:
+        return f'REJECTED: {response.message}'
+    yes_no = {True: 'yes', False: 'no'}
+    lines = [
+        f'k_theta         [N*m/rad]: {", ".join(f"{v:g}" for v in request.k_theta)}',
+        f'delta_theta_p   [deg]    : '
+        f'{", ".join(f"{math.degrees(v):.4g}" for v in request.delta_theta_p)}',
+        f'lift guaranteed (eq. 18) : {yes_no[bool(response.lift_guaranteed)]}'
+        f'   worst-case margin {response.worst_case_margin:+.4g} N',
+        f'contact stiffness model  : {yes_no[bool(response.csm_lift)]}'
+        f'   margin {response.csm_margin:+.4g} N',
+        'finger  delta_theta_s [deg]  tau_s [N*m]',
+    ]
+    for i, (ds, tau) in enumerate(zip(response.delta_theta_s, response.compliant_torque,
+                                      strict=False), start=1):
+        lines.append(f'{i:>6}  {math.degrees(ds):>19.4f}  {tau:>11.5f}')
+    lines.append(response.message)
+    return '\n'.join(lines)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv if args is None else args)
+    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    node = rclpy.create_node('check_lift_client')
+    try:
+        client = node.create_client(CheckLift, options.service)
+        if not client.wait_for_service(timeout_sec=options.timeout):
+            print(f'check_lift: service {options.service} is not available '
+                  f'(is check_lift_server running in this ROS_DOMAIN_ID?)', file=sys.stderr)
+            return 1
+        request = CheckLift.Request()
+        request.k_theta = [float(v) for v in options.k_theta]
+        request.delta_theta_p = [float(v) for v in options.delta_theta_p]
+        request.friction_angle = (CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG
+                                  if options.friction_angle is None
+                                  else float(options.friction_angle))
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(node, future, timeout_sec=options.timeout)
+        if not future.done() or future.result() is None:
+            print(f'check_lift: no answer from {options.service} within {options.timeout} s',
+                  file=sys.stderr)
+            return 1
+        response = future.result()
+        print(format_response(request, response))
+        return 0 if response.ok else 2
+    except KeyboardInterrupt:
+        return 1
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def entry_point() -> None:
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    entry_point()

@@ -1,0 +1,122 @@
+"""``check_lift_server``: serves ``/check_lift`` (dam_interfaces/srv/CheckLift) from the core.
+
+Run it with ``ros2 run dam_analysis check_lift_server [--ros-args --params-file p.yaml]``.
+
+Parameters
+----------
+config_file : string, read-only
+    The DAM configuration file; empty means the installed ``config/dam.yaml`` (or ``DAM_CONFIG``).
+default_friction_angle : double [rad], in [0, pi/2)
+    Friction angle used when a request's ``friction_angle`` is negative. Defaults to the
+    configured ``contact.friction_angle_deg``. May be changed at run time.
+
+Every bad request gets ``ok = false`` and a message that names the field and the value; the
+server never dies on input.
+"""
+
+from __future__ import annotations
+
+import math
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from dam_analysis.analysis import LiftAnalyzer
+from dam_analysis.config import load_config
+from dam_analysis.errors import DamAnalysisError
+from dam_interfaces.srv import CheckLift
+
+_MAX_FRICTION_ANGLE = math.pi / 2
+
+
+class CheckLiftServer(Node):
+    """Answers CheckLift requests with the sufficient condition and the contact stiffness model."""
+
+    def __init__(self) -> None:
+        super().__init__('check_lift_server')
+        config_file = self.declare_parameter(
+            'config_file', '',
+            ParameterDescriptor(
+                description='DAM configuration file (YAML); empty: the installed config/dam.yaml',
+                read_only=True)).value
+        self._config = load_config(config_file or None)
+        self._analyzer = LiftAnalyzer(self._config)
+        self._default_friction_angle = self._config.contact.friction_angle_rad
+        self.declare_parameter(
+            'default_friction_angle', self._default_friction_angle,
+            ParameterDescriptor(
+                description='friction angle alpha [rad] used when a request gives a negative one',
+                floating_point_range=[FloatingPointRange(
+                    from_value=0.0, to_value=_MAX_FRICTION_ANGLE - 1e-9, step=0.0)]))
+        self._default_friction_angle = float(
+            self.get_parameter('default_friction_angle').value)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._service = self.create_service(CheckLift, 'check_lift', self._on_request)
+        self.get_logger().info(
+            f'serving {self._service.srv_name} with {self._config.source} '
+            f'(default friction angle {math.degrees(self._default_friction_angle):.3g} deg)')
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for param in params:
+            if param.name == 'default_friction_angle':
+                value = param.value
+                if not isinstance(value, float) or not math.isfinite(value) \
+                        or not 0.0 <= value < _MAX_FRICTION_ANGLE:
+                    return SetParametersResult(
+                        successful=False,
+                        reason=f'default_friction_angle must be in [0, pi/2) rad, got {value!r}')
+        for param in params:
+            if param.name == 'default_friction_angle':
+                self._default_friction_angle = float(param.value)
+        return SetParametersResult(successful=True)
+
+    def _on_request(self, request: CheckLift.Request,
+                    response: CheckLift.Response) -> CheckLift.Response:
+        friction_angle = float(request.friction_angle)
+        if friction_angle < 0.0:  # includes -inf; NaN falls through to the core's validation
+            friction_angle = self._default_friction_angle
+        try:
+            result = self._analyzer.check_lift(
+                list(request.k_theta), list(request.delta_theta_p), friction_angle)
+        except DamAnalysisError as exc:
+            response.ok = False
+            response.message = str(exc)
+            self.get_logger().warning(f'rejected request: {exc}')
+            return response
+        except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
+            response.ok = False
+            response.message = f'internal error while analysing the request: {exc!r}'
+            self.get_logger().error(response.message)
+            return response
+        response.ok = True
+        response.lift_guaranteed = bool(result.lift_guaranteed)
+        response.worst_case_margin = float(result.worst_case_margin)
+        response.csm_lift = bool(result.csm_lift)
+        response.csm_margin = float(result.csm_margin)
+        response.delta_theta_s = [float(v) for v in result.delta_theta_s]
+        response.compliant_torque = [float(v) for v in result.compliant_torque]
+        response.message = (
+            'lift guaranteed (eq. 18)' if result.lift_guaranteed else
+            'lift not guaranteed for every admissible contact force')
+        return response
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = CheckLiftServer()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
