@@ -314,8 +314,14 @@ class ClassifierSettings:
 
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: float) -> ClassifierSettings:
-        """Defaults, with the load threshold taken from the controller's contact threshold."""
-        values = {'load_torque_threshold': config.controller.contact_torque_threshold_nm}
+        """Settings from the ``classification`` section; the load threshold is the
+        controller's contact threshold. ``overrides`` replace individual attributes."""
+        cl = config.classification
+        values = {'load_torque_threshold': config.controller.contact_torque_threshold_nm,
+                  'contact_tolerance': cl.contact_tolerance_m,
+                  'lift_height': cl.lift_height_m,
+                  'cage_depth_ratio': cl.cage_depth_ratio,
+                  'limit_margin': cl.limit_margin_rad}
         values.update(overrides)
         return cls(**values)
 

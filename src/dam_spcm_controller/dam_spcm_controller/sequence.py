@@ -177,7 +177,13 @@ class SequenceParams:
                      contact_torque_threshold=c.contact_torque_threshold_nm,
                      approach_speed=c.approach_speed_rad_per_s,
                      phase_timeout=c.phase_timeout_s,
-                     delta_theta_p_max=config.task.delta_theta_p_max_rad)
+                     delta_theta_p_max=config.task.delta_theta_p_max_rad,
+                     torque_ramp_time=c.torque_ramp_time_s,
+                     lost_contact_time=c.lost_contact_time_s,
+                     lost_contact_ratio=c.lost_contact_torque_ratio,
+                     settle_speed=c.envelope_settle_speed_rad_per_s,
+                     settle_time=c.envelope_settle_time_s,
+                     limit_margin=c.limit_margin_rad)
         return replace(params, **overrides) if overrides else params
 
 
