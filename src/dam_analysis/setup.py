@@ -31,6 +31,7 @@ setup(
         'console_scripts': [
             'check_lift_server = dam_analysis.check_lift_server:main',
             'check_lift = dam_analysis.check_lift_client:entry_point',
+            'lift_map = dam_analysis.lift_map:entry_point',
         ],
     },
 )
