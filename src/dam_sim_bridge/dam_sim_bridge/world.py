@@ -54,7 +54,7 @@ import math
 import os
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -130,6 +130,33 @@ class WorldOptions:
             raise WorldConfigError(f'object_faces {self.object_faces!r} is outside [16, 256]')
         if int(self.solver_iterations) < 1:
             raise WorldConfigError(f'solver_iterations {self.solver_iterations!r} must be >= 1')
+
+    @classmethod
+    def from_config(cls, config: DamConfig, **overrides: object) -> WorldOptions:
+        """Options from ``config``: ``sim`` section, ``hand.link_masses_kg`` and
+        ``device.torque_limit_nm``; ``overrides`` (field name -> value) win.
+
+        Raises
+        ------
+        WorldConfigError
+            An override names no field of :class:`WorldOptions`, or a value is out of range.
+        """
+        sim = config.sim
+        values: dict[str, object] = {
+            'time_step_s': float(sim.time_step_s),
+            'link_masses_kg': tuple(float(m) for m in config.hand.link_masses_kg),
+            'initial_compliant_angle_rad': float(sim.initial_compliant_angle_rad),
+            'servo_force_limit_nm': float(sim.servo_force_limit_nm),
+            'torque_limit_nm': float(config.device.torque_limit_nm),
+            'solver_iterations': int(sim.solver_iterations),
+            'object_faces': int(sim.object_faces),
+        }
+        names = {f.name for f in fields(cls)}
+        for key, value in overrides.items():
+            if key not in names:
+                raise WorldConfigError(f'unknown world option {key!r} (known: {sorted(names)})')
+            values[key] = value
+        return cls(**values)  # type: ignore[arg-type]
 
 
 class JointStates(NamedTuple):
@@ -252,7 +279,7 @@ class HandWorld:
     config
         A ``DamConfig`` (``dam_analysis.config.load_config()``).
     options
-        Simulation settings; defaults to :class:`WorldOptions`.
+        Simulation settings; defaults to :meth:`WorldOptions.from_config` of ``config``.
 
     Raises
     ------
@@ -264,7 +291,7 @@ class HandWorld:
 
     def __init__(self, config: DamConfig, options: WorldOptions | None = None) -> None:
         self.config = config
-        self.options = options or WorldOptions()
+        self.options = options or WorldOptions.from_config(config)
         hand = config.hand
         lo, hi = hand.joint_limits_rad['compliant']
         if not lo <= self.options.initial_compliant_angle_rad <= hi:

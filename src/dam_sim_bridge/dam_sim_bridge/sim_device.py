@@ -1,0 +1,232 @@
+"""The simulated DAM hand as a device on the UDP link (no rclpy).
+
+:class:`SimDevice` plays the part of the hand's firmware for a :class:`HandWorld`: every device
+period (``1 / device.rate_hz``) it
+
+1. reads every pending command datagram on ``device.command_port`` through a
+   :class:`~dam_hand_driver.protocol.FrameDecoder` (command kind) and feeds the accepted ones to
+   a :class:`~dam_hand_driver.protocol.DeviceWatchdog`;
+2. applies the watchdog's output (the newest command, or the safe state) to the world, raw
+   setpoints converted to SI with :class:`~dam_hand_driver.protocol.Calibration`;
+3. steps the world by one period (``round(period / sim.time_step_s)`` physics steps);
+4. encodes the joint state in raw units, with fault and status bits, and sends it to the
+   driver's ``device.state_port``.
+
+:meth:`SimDevice.run` paces the cycles in real time (sleeping to absolute deadlines, skipping
+missed ones); :meth:`SimDevice.cycle` runs one cycle at once, for lockstep use. In lockstep
+mode the device clock (watchdog, timestamps) is the simulated time, so a test is independent of
+the machine's speed.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dam_hand_driver.protocol import (
+    Calibration,
+    DeviceStatus,
+    DeviceWatchdog,
+    FrameDecoder,
+    FrameKind,
+    JointFault,
+    encode_state,
+)
+from dam_sim_bridge.errors import WorldConfigError
+from dam_sim_bridge.world import HandWorld
+
+if TYPE_CHECKING:
+    from dam_analysis.config import DamConfig
+
+_MAX_DATAGRAM = 2048
+
+
+@dataclass
+class DeviceStats:
+    """Counters of a :class:`SimDevice` (read them for diagnostics)."""
+
+    cycles: int = 0  #: device cycles run
+    states_sent: int = 0  #: state frames sent
+    send_errors: int = 0  #: state frames that could not be sent (socket error)
+    encode_errors: int = 0  #: states that did not fit the raw fields
+    command_errors: int = 0  #: accepted commands the world refused (should stay 0)
+    missed_deadlines: int = 0  #: real-time cycles that started more than a period late
+    latency_cycles: int = -1  #: state seq - ref_state_seq of the newest command (-1: none yet)
+
+
+class SimDevice:
+    """A :class:`HandWorld` behind the device's UDP link.
+
+    Parameters
+    ----------
+    config
+        ``DamConfig``: ``device`` (addresses, rate, watchdog, calibration) and ``sim``.
+    world
+        The world to serve; by default ``HandWorld(config)``.
+    host, command_port, state_port
+        Override ``device.host``, ``device.command_port`` (bound here) and
+        ``device.state_port`` (state frames are sent there). ``command_port = 0`` binds a free
+        port (see :attr:`command_address`).
+    lockstep
+        Device clock = simulated time (for tests); otherwise ``clock``.
+    clock
+        Monotonic clock [s] for real-time operation.
+
+    Raises
+    ------
+    WorldConfigError
+        The device period is shorter than the physics step or the rate is not positive.
+    OSError
+        The command port cannot be bound.
+    """
+
+    def __init__(self, config: DamConfig, world: HandWorld | None = None, *,
+                 host: str | None = None, command_port: int | None = None,
+                 state_port: int | None = None, lockstep: bool = False,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        dev = config.device
+        rate = float(dev.rate_hz)
+        if not (math.isfinite(rate) and rate > 0.0):
+            raise WorldConfigError(f'device.rate_hz {dev.rate_hz!r} must be positive')
+        self.config = config
+        self.world = world if world is not None else HandWorld(config)
+        self.period_s = 1.0 / rate
+        steps = round(self.period_s / self.world.time_step_s)
+        if steps < 1:
+            raise WorldConfigError(f'device period {self.period_s!r} s is shorter than the '
+                                   f'physics step {self.world.time_step_s!r} s')
+        #: Physics steps per device cycle.
+        self.steps_per_cycle = int(steps)
+        self.lockstep = bool(lockstep)
+        self._rt_clock = clock
+        self._sim_clock_s = 0.0
+        n = self.world.n_joints
+        self.calibration = Calibration.from_config(config)
+        self.decoder = FrameDecoder(FrameKind.COMMAND, n)
+        self.watchdog = DeviceWatchdog(n, dev.watchdog_s, clock=self.now)
+        self.stats = DeviceStats()
+        self.lock = threading.RLock()  #: guards the world between the loop and other threads
+        self._seq = 0
+        self._host = host if host is not None else dev.host
+        self._state_addr = (self._host, int(state_port if state_port is not None
+                                            else dev.state_port))
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self.sock.bind((self._host, int(command_port if command_port is not None
+                                            else dev.command_port)))
+        except OSError:
+            self.sock.close()
+            raise
+        self.sock.setblocking(False)
+        self._stop = threading.Event()
+        self.tripped = True
+
+    # ---------------------------------------------------------------------------------------
+
+    @property
+    def command_address(self) -> tuple[str, int]:
+        """(host, port) the device receives command frames on."""
+        host, port = self.sock.getsockname()[:2]
+        return str(host), int(port)
+
+    def now(self) -> float:
+        """Device clock [s]: simulated time in lockstep mode, else the real-time clock."""
+        return self._sim_clock_s if self.lockstep else self._rt_clock()
+
+    def _drain_commands(self) -> None:
+        while True:
+            try:
+                data = self.sock.recv(_MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:  # e.g. ICMP port unreachable reported on a later call
+                continue
+            frame = self.decoder.decode(data)
+            if frame is not None:
+                self.watchdog.feed_frame(frame)
+                self.stats.latency_cycles = (self._seq - frame.ref_state_seq) % 2**32
+
+    def cycle(self) -> bytes | None:
+        """Run one device cycle: commands in, world stepped one period, state out.
+
+        Returns
+        -------
+        bytes | None
+            The state frame sent, or ``None`` if the state could not be encoded.
+        """
+        with self.lock:
+            self._drain_commands()
+            modes, setpoints, tripped = self.watchdog.output()
+            self.tripped = tripped
+            try:
+                self.world.set_joint_commands(
+                    modes, self.calibration.setpoints_si(modes, setpoints))
+            except ValueError:
+                self.stats.command_errors += 1
+            self.world.step(self.steps_per_cycle)
+            self._sim_clock_s += self.steps_per_cycle * self.world.time_step_s
+            q, dq, tau = self.world.joint_states()
+            faults = self.world.joint_faults()
+            status = int(DeviceStatus.SIMULATED)
+            if tripped:
+                faults = faults | int(JointFault.WATCHDOG)
+                status |= int(DeviceStatus.WATCHDOG_TRIPPED)
+            self.stats.cycles += 1
+            try:
+                pos, vel, tor = self.calibration.state_raw(q, dq, tau)
+                frame = encode_state(self._seq, int(self.now() * 1e9), pos, vel, tor,
+                                     self.world.joint_modes(), faults, status)
+            except ValueError:
+                self.stats.encode_errors += 1
+                return None
+            self._seq = (self._seq + 1) % 2**32
+        try:
+            self.sock.sendto(frame, self._state_addr)
+            self.stats.states_sent += 1
+        except OSError:
+            self.stats.send_errors += 1
+        return frame
+
+    def reset_world(self) -> None:
+        """Reset the world to its initial state (all joints HOLD, object at rest)."""
+        with self.lock:
+            self.world.reset()
+
+    def run(self, stop: threading.Event | None = None) -> None:
+        """Run cycles until :meth:`stop` (or ``stop`` is set): paced in real time, or as fast
+        as possible in lockstep mode."""
+        stop_event = stop if stop is not None else self._stop
+        next_deadline = self._rt_clock()
+        while not (stop_event.is_set() or self._stop.is_set()):
+            self.cycle()
+            if self.lockstep:
+                continue
+            next_deadline += self.period_s
+            delay = next_deadline - self._rt_clock()
+            if delay > 0.0:
+                time.sleep(delay)
+            elif delay < -self.period_s:
+                self.stats.missed_deadlines += 1
+                next_deadline = self._rt_clock()  # do not try to catch up a backlog
+
+    def stop(self) -> None:
+        """Ask :meth:`run` to return after the current cycle."""
+        self._stop.set()
+
+    def close(self) -> None:
+        """Close the socket and the world."""
+        self._stop.set()
+        self.sock.close()
+        self.world.close()
+
+    def joint_torques_si(self) -> np.ndarray:
+        """(n,) current torque-sensor readings of the world [N*m]."""
+        with self.lock:
+            return self.world.joint_states().torques
