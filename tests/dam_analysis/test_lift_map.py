@@ -1,0 +1,166 @@
+"""The lift_map tool (Fig. 5(b)): PNG and CSV output, checked against bisection on check_lift."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from dam_analysis import lift_map
+from dam_analysis.errors import NoSolutionError
+from ros_testing import installed_executable
+
+PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
+ALPHAS_DEG = (1.0, 5.0, 30.0)
+N_DP = 27  # 2.5 deg steps on [0, 65] deg
+
+
+def _read_csv(path):
+    with open(path, newline='') as stream:
+        rows = list(csv.reader(stream))
+    assert rows[0] == ['alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm']
+    out = []
+    for alpha, dp, ks, kc in rows[1:]:
+        out.append((float(alpha), float(dp), float(ks) if ks else math.nan,
+                    float(kc) if kc else math.nan))
+    return np.array(out)
+
+
+def _assert_png(path):
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC
+    assert len(data) > 10_000  # axes, two curves per angle, hatching and a legend
+
+
+@pytest.fixture(scope='module')
+def installed_run(tmp_path_factory):
+    """One run of the installed executable (what ``ros2 run dam_analysis lift_map`` runs)."""
+    out = tmp_path_factory.mktemp('lift_map') / 'map.png'
+    exe = installed_executable('dam_analysis', 'lift_map')
+    assert exe.is_file(), f'{exe} missing: build the workspace with scripts/setup.sh'
+    proc = subprocess.run(
+        [str(exe), '--friction-angles', *[f'{a:g}' for a in ALPHAS_DEG],
+         '--n-delta-theta-p', str(N_DP), '--out', str(out)],
+        capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    return out, proc
+
+
+def _smallest_lifting_k(analyzer, dp_rad, alpha_rad, field, k_hi):
+    """Bisection (in log k) for the smallest finger-1 stiffness with ``field`` True.
+
+    NaN if even ``k_hi`` does not lift or the SPCM has no solution at this displacement.
+    ``k_hi`` must stay moderate for the CSM: at very large stiffness (~1e4 N m/rad) the cap
+    ``mu f_n / k_t`` exceeds the accumulated slip, the contact sticks and the CSM stops lifting.
+    """
+    def lifts(k):
+        return bool(getattr(analyzer.check_lift(k, dp_rad, alpha_rad), field))
+
+    try:
+        if not lifts(k_hi):
+            return math.nan
+    except NoSolutionError:
+        return math.nan
+    lo, hi = 1e-4, k_hi
+    assert not lifts(lo)
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        if lifts(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def test_installed_executable_writes_png_csv_and_progress(installed_run):
+    out, proc = installed_run
+    _assert_png(out)
+    table = _read_csv(out.with_suffix('.csv'))
+    assert table.shape == (len(ALPHAS_DEG) * N_DP, 4)
+    for alpha in ALPHAS_DEG:
+        rows = table[table[:, 0] == alpha]
+        np.testing.assert_allclose(rows[:, 1], np.linspace(0.0, 65.0, N_DP), atol=1e-9)
+        assert f'alpha = {alpha:g} deg' in proc.stderr  # progress per friction angle
+
+
+def test_csv_boundaries_agree_with_bisection_on_check_lift(installed_run, analyzer):
+    table = _read_csv(installed_run[0].with_suffix('.csv'))
+    rng = np.random.default_rng(3)
+    checked_finite = 0
+    for alpha in ALPHAS_DEG:
+        rows = table[table[:, 0] == alpha]
+        picks = rng.choice(len(rows), size=7, replace=False)
+        for alpha_deg, dp_deg, k_suff, k_csm in rows[picks]:
+            dp, a = math.radians(dp_deg), math.radians(alpha_deg)
+            for field, value in (('lift_guaranteed', k_suff), ('csm_lift', k_csm)):
+                k_hi = 100.0 if math.isnan(value) else max(100.0, 2.0 * value)
+                ref = _smallest_lifting_k(analyzer, dp, a, field, k_hi)
+                where = (alpha_deg, dp_deg, field)
+                if math.isnan(ref):
+                    assert math.isnan(value), where
+                else:
+                    assert value == pytest.approx(ref, rel=1e-6), where
+                    checked_finite += 1
+    assert checked_finite >= 10  # the sample really compares finite boundaries
+
+
+def test_alpha_30_sufficient_region_empty_csm_not(installed_run):
+    table = _read_csv(installed_run[0].with_suffix('.csv'))
+    rows = table[table[:, 0] == 30.0]
+    assert np.all(np.isnan(rows[:, 2]))
+    assert np.sum(np.isfinite(rows[:, 3])) >= N_DP // 2
+    # beyond the end of the SPCM branch (61.7 deg) nothing lifts, at any friction angle
+    beyond = table[table[:, 1] > 61.7 + 1e-6]
+    assert beyond.size and np.all(np.isnan(beyond[:, 2:]))
+
+
+def test_main_in_process_with_explicit_csv_and_range(tmp_path, analyzer):
+    png, table_path = tmp_path / 'five.png', tmp_path / 'table.csv'
+    code = lift_map.main(['--friction-angles', '5', '--n-delta-theta-p', '5',
+                          '--delta-theta-p-max', '20', '--k-max', '12', '--out', str(png),
+                          '--csv', str(table_path)])
+    assert code == 0
+    _assert_png(png)
+    table = _read_csv(table_path)
+    np.testing.assert_allclose(table[:, 1], [0.0, 5.0, 10.0, 15.0, 20.0])
+    # the tabulated values of docs/analysis.md, section 7 (alpha = 5 deg, dp = 5, 10, 15)
+    np.testing.assert_allclose(table[1:4, 2], [7.40, 6.35, 34.7], rtol=5e-3)
+    np.testing.assert_allclose(table[1:4, 3], [2.69, 1.59, 1.35], rtol=5e-3)
+    assert math.isnan(table[0, 2]) and math.isnan(table[0, 3])  # no displacement, no torque
+
+
+@pytest.mark.parametrize(('argv', 'needle'), [
+    (['--friction-angles', '95'], '95'),
+    (['--friction-angles', '90'], '90'),
+    (['--friction-angles', '-1'], '-1'),
+    ([], '--friction-angles'),
+    (['--friction-angles', '5', '--n-delta-theta-p', '1'], '1'),
+    (['--friction-angles', '5', '--delta-theta-p-max', '80'], '80'),
+    (['--friction-angles', '5', '--k-max', '0'], '--k-max'),
+])
+def test_bad_arguments_exit_2_naming_the_value(argv, needle, tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        lift_map.main([*argv, '--out', str(tmp_path / 'x.png')])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert needle in err.split('error:', 1)[1]
+    assert not (tmp_path / 'x.png').exists()
+
+
+def test_bad_angle_via_installed_executable_exits_2():
+    proc = subprocess.run([str(installed_executable('dam_analysis', 'lift_map')),
+                           '--friction-angles', '1', '91.5'],
+                          capture_output=True, text=True, timeout=30)
+    assert proc.returncode == 2
+    assert '91.5 deg' in proc.stderr
+
+
+def test_module_runs_without_ros_imports():
+    code = ('import sys, dam_analysis.lift_map; '
+            'assert "rclpy" not in sys.modules, "lift_map imports rclpy"')
+    subprocess.run([sys.executable, '-c', code], check=True, timeout=30,
+                   env={'PYTHONPATH': ':'.join(p for p in sys.path if p)})
