@@ -1,0 +1,228 @@
+"""``sim_bridge``: the PyBullet stand-in of the DAM hand, served over the device link.
+
+Run it with ``ros2 run dam_sim_bridge sim_bridge [--gui] [--ros-args -p ...]``. A
+:class:`~dam_sim_bridge.sim_device.SimDevice` runs the world in real time in its own thread and
+speaks the UDP device link (``docs/device_protocol.md``) on ``device.host`` /
+``device.command_port`` / ``device.state_port``; the driver (``dam_hand_driver hand_driver``)
+is its client. The node adds what only a simulator has:
+
+Topics
+------
+/sim/object_pose : geometry_msgs/PoseStamped
+    Ground-truth pose of the cylinder, frame ``world``, at ``pose_rate_hz``.
+/clock : rosgraph_msgs/Clock
+    Simulated time, at ``pose_rate_hz``, when ``publish_clock`` is true.
+
+Services
+--------
+~/reset : std_srvs/Trigger
+    Put the world back in its initial state (hand open, all joints HOLD, object at rest).
+~/set_friction_angle : dam_interfaces/SetFrictionAngle
+    Finger-object friction angle [rad]; the coefficient becomes ``tan(alpha)``.
+
+Parameters
+----------
+config_file : string, read-only
+    DAM configuration file; empty: ``DAM_CONFIG`` or the installed ``config/dam.yaml``.
+gui : bool, read-only
+    Open the PyBullet window (also ``--gui`` on the command line); refused without a display.
+publish_clock : bool, read-only
+    Publish ``/clock`` from the simulated time.
+pose_rate_hz : double [Hz], in [1, 1000]
+    Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+
+from dam_analysis.config import load_config
+from dam_analysis.errors import DamAnalysisError
+from dam_interfaces.srv import SetFrictionAngle
+from dam_sim_bridge.errors import SimBridgeError
+from dam_sim_bridge.sim_device import SimDevice
+from dam_sim_bridge.world import HandWorld, WorldOptions
+
+_POSE_RATE_RANGE = (1.0, 1000.0)
+
+
+def _sim_stamp(seconds: float) -> Time:
+    ns = int(round(seconds * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class SimBridgeNode(Node):
+    """Runs the simulated device and publishes the simulator's ground truth.
+
+    Parameters
+    ----------
+    gui_flag
+        ``--gui`` was given on the command line (same as the ``gui`` parameter).
+
+    Raises
+    ------
+    SimBridgeError
+        The world cannot be built (e.g. a GUI was requested without a display).
+    OSError
+        The device's command port is already in use.
+    """
+
+    def __init__(self, gui_flag: bool = False) -> None:
+        super().__init__('sim_bridge')
+        config_file = self.declare_parameter(
+            'config_file', '',
+            ParameterDescriptor(
+                description='DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
+                            'config/dam.yaml', read_only=True)).value
+        gui = bool(self.declare_parameter(
+            'gui', False, ParameterDescriptor(
+                description='open the PyBullet window (needs a display)',
+                read_only=True)).value) or gui_flag
+        self._publish_clock = bool(self.declare_parameter(
+            'publish_clock', False, ParameterDescriptor(
+                description='publish /clock from the simulated time', read_only=True)).value)
+        self._pose_rate_hz = float(self.declare_parameter(
+            'pose_rate_hz', 100.0, ParameterDescriptor(
+                description='rate of /sim/object_pose and /clock [Hz]',
+                floating_point_range=[FloatingPointRange(
+                    from_value=_POSE_RATE_RANGE[0], to_value=_POSE_RATE_RANGE[1],
+                    step=0.0)])).value)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._config = load_config(config_file or None)
+        world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
+        try:
+            self._device = SimDevice(self._config, world)
+        except BaseException:
+            world.close()
+            raise
+        self._thread = threading.Thread(target=self._device.run, name='sim_device',
+                                        daemon=True)
+        self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose', 10)
+        self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
+                           if self._publish_clock else None)
+        self._timer = self.create_timer(1.0 / self._pose_rate_hz, self._on_timer)
+        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._friction_srv = self.create_service(
+            SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
+        self._thread.start()
+        dev = self._config.device
+        self.get_logger().info(
+            f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '
+            f'states to port {dev.state_port} at {dev.rate_hz:g} Hz '
+            f'({self._device.steps_per_cycle} physics steps per cycle), config '
+            f'{self._config.source}{", GUI" if gui else ""}')
+
+    # ---------------------------------------------------------------------------------------
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for param in params:
+            if param.name == 'pose_rate_hz':
+                value = param.value
+                if not isinstance(value, float) or not math.isfinite(value) or not (
+                        _POSE_RATE_RANGE[0] <= value <= _POSE_RATE_RANGE[1]):
+                    return SetParametersResult(
+                        successful=False,
+                        reason=f'pose_rate_hz must be in [{_POSE_RATE_RANGE[0]:g}, '
+                               f'{_POSE_RATE_RANGE[1]:g}] Hz, got {value!r}')
+        for param in params:
+            if param.name == 'pose_rate_hz' and hasattr(self, '_timer'):
+                self._pose_rate_hz = float(param.value)
+                self._timer.cancel()
+                self.destroy_timer(self._timer)
+                self._timer = self.create_timer(1.0 / self._pose_rate_hz, self._on_timer)
+        return SetParametersResult(successful=True)
+
+    def _on_timer(self) -> None:
+        with self._device.lock:
+            pose = self._device.world.object_pose()
+        stamp = _sim_stamp(pose.sim_time) if self._publish_clock \
+            else self.get_clock().now().to_msg()
+        msg = PoseStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = 'world'
+        p, q = pose.position, pose.quaternion
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = (
+            float(p[0]), float(p[1]), float(p[2]))
+        (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+         msg.pose.orientation.w) = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        self._pose_pub.publish(msg)
+        if self._clock_pub is not None:
+            self._clock_pub.publish(Clock(clock=_sim_stamp(pose.sim_time)))
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        try:
+            self._device.reset_world()
+        except Exception as exc:  # noqa: BLE001 - the node stays up whatever happens
+            response.success = False
+            response.message = f'reset failed: {exc}'
+            self.get_logger().error(response.message)
+            return response
+        response.success = True
+        response.message = 'world reset: hand open, all joints HOLD, object at rest'
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_set_friction_angle(self, request: SetFrictionAngle.Request,
+                               response: SetFrictionAngle.Response
+                               ) -> SetFrictionAngle.Response:
+        alpha = float(request.friction_angle)
+        try:
+            with self._device.lock:
+                self._device.world.set_friction_angle(alpha)
+        except (SimBridgeError, ValueError) as exc:
+            response.success = False
+            response.message = str(exc)
+            self.get_logger().warning(f'rejected friction angle: {exc}')
+            return response
+        response.success = True
+        response.message = (f'friction angle {alpha!r} rad ({math.degrees(alpha):.3g} deg), '
+                            f'finger-object coefficient {math.tan(alpha):.4g}')
+        self.get_logger().info(response.message)
+        return response
+
+    def destroy_node(self) -> None:
+        """Stop the device thread, close the socket and the physics server."""
+        device = getattr(self, '_device', None)
+        if device is not None:
+            device.stop()
+            if self._thread.is_alive():
+                self._thread.join(timeout=2.0)
+            device.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    argv = sys.argv if args is None else args
+    gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = SimBridgeNode(gui_flag=gui_flag)
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (SimBridgeError, DamAnalysisError, OSError) as exc:
+        sys.stderr.write(f'sim_bridge: cannot start: {exc}\n')
+        code = 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if code:
+        sys.exit(code)
