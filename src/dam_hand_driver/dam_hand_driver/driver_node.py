@@ -1,0 +1,486 @@
+"""``hand_driver``: the ROS 2 driver of the DAM hand.
+
+Run it with ``ros2 run dam_hand_driver hand_driver [--ros-args -p backend:=sim]``. A control
+thread exchanges frames with the device (``docs/device_protocol.md``): for every state frame it
+publishes ``/joint_states`` and answers with one command frame computed from the newest
+``/hand/command``.
+
+Topics
+------
+/joint_states : sensor_msgs/JointState (published)
+    Names from the configuration; positions [rad] and velocities [rad/s] from the encoders,
+    efforts [N*m] from the joint torque sensors. Not published in ERROR.
+/hand/command : dam_interfaces/HandCommand (subscribed)
+    Mode and setpoint per named joint; joints not named keep their command. A malformed
+    message (unknown or duplicate name, length mismatch, unknown mode, NaN/inf, a torque beyond
+    ``device.torque_limit_nm``, an angle beyond the joint limits) is rejected as a whole with a
+    logged reason (throttled). Torques are clamped and slew-limited to
+    ``device.torque_rate_limit_nm_per_s``.
+/diagnostics : diagnostic_msgs/DiagnosticArray (published, 1 Hz)
+    Driver state, backend, achieved rate, frame counts by rejection reason, loop latency,
+    device watchdog state.
+
+Services
+--------
+~/reset : std_srvs/Trigger
+    Leave ERROR: succeeds when state frames arrive again; every joint then HOLDs its measured
+    position and torque restarts from zero.
+
+Parameters
+----------
+config_file : string, read-only
+    DAM configuration file; empty: ``DAM_CONFIG`` or the installed ``config/dam.yaml``.
+backend : string, read-only, one of auto, hardware, sim
+    ``auto`` probes the device for ``device.probe_timeout_s`` and starts the simulated
+    stand-in (``dam_sim_bridge sim_bridge``, a child process) when nothing answers;
+    ``hardware`` never falls back; ``sim`` always starts the stand-in.
+
+States
+------
+WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, HOLD, zero
+torque) -> ERROR (no state frame for ``device.state_timeout_s``: no more /joint_states, no
+more command frames, so the device's watchdog takes it to its safe state) -> ACTIVE only
+through ``~/reset``.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
+
+from dam_analysis.config import load_config
+from dam_analysis.errors import DamAnalysisError
+from dam_hand_driver.errors import HandDriverError
+from dam_hand_driver.link import DeviceLink
+from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
+from dam_interfaces.msg import HandCommand
+
+BACKENDS = ('auto', 'hardware', 'sim')
+#: HandCommand mode -> wire protocol mode (the values differ: map explicitly).
+MSG_TO_WIRE_MODE: dict[int, JointMode] = {
+    HandCommand.MODE_TORQUE: JointMode.TORQUE,
+    HandCommand.MODE_POSITION: JointMode.POSITION,
+    HandCommand.MODE_HOLD: JointMode.HOLD,
+}
+_STANDIN_START_TIMEOUT_S = 20.0
+_LOG_THROTTLE_S = 1.0
+
+
+class DriverState(enum.Enum):
+    WAITING = 'WAITING'
+    ACTIVE = 'ACTIVE'
+    ERROR = 'ERROR'
+
+
+class CommandRejected(HandDriverError, ValueError):
+    """A HandCommand message is malformed; the message names the field and the value."""
+
+
+def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: float,
+                     lower_rad: np.ndarray, upper_rad: np.ndarray
+                     ) -> list[tuple[int, JointMode, float]]:
+    """Check a HandCommand and turn it into (joint index, wire mode, SI setpoint) triples.
+
+    Raises
+    ------
+    CommandRejected
+        Length mismatch, unknown or duplicate joint name, unknown mode, non-finite setpoint,
+        torque beyond ``torque_limit_nm`` [N*m], angle outside the joint limits [rad].
+    """
+    names, modes, setpoints = list(msg.name), list(msg.mode), list(msg.setpoint)
+    if not (len(names) == len(modes) == len(setpoints)):
+        raise CommandRejected(f'name, mode and setpoint differ in length: {len(names)}, '
+                              f'{len(modes)}, {len(setpoints)}')
+    seen: set[str] = set()
+    out: list[tuple[int, JointMode, float]] = []
+    for name, mode, value in zip(names, modes, setpoints, strict=True):
+        if name not in index:
+            raise CommandRejected(f'unknown joint name {name!r} (known: {sorted(index)})')
+        if name in seen:
+            raise CommandRejected(f'joint {name!r} appears more than once')
+        seen.add(name)
+        if int(mode) not in MSG_TO_WIRE_MODE:
+            raise CommandRejected(f'joint {name!r}: mode {int(mode)} is not MODE_TORQUE (0), '
+                                  f'MODE_POSITION (1) or MODE_HOLD (2)')
+        wire = MSG_TO_WIRE_MODE[int(mode)]
+        sp = float(value)
+        if not math.isfinite(sp):
+            raise CommandRejected(f'joint {name!r}: setpoint {sp!r} is not finite')
+        j = index[name]
+        if wire is JointMode.TORQUE and abs(sp) > torque_limit_nm:
+            raise CommandRejected(f'joint {name!r}: torque {sp!r} N*m is beyond the limit '
+                                  f'+-{torque_limit_nm!r} N*m')
+        if wire is JointMode.POSITION and not lower_rad[j] <= sp <= upper_rad[j]:
+            raise CommandRejected(f'joint {name!r}: angle {sp!r} rad is outside the joint '
+                                  f'limits [{lower_rad[j]!r}, {upper_rad[j]!r}] rad')
+        out.append((j, wire, sp))
+    return out
+
+
+def slew_torque(previous_nm: np.ndarray, target_nm: np.ndarray, limit_nm: float,
+                rate_nm_per_s: float, dt_s: float) -> np.ndarray:
+    """Clamp ``target_nm`` to +-``limit_nm`` and move towards it from ``previous_nm`` by at
+    most ``rate_nm_per_s * dt_s`` [N*m]."""
+    target = np.clip(target_nm, -limit_nm, limit_nm)
+    step = rate_nm_per_s * max(0.0, dt_s)
+    return previous_nm + np.clip(target - previous_nm, -step, step)
+
+
+class HandDriverNode(Node):
+    """Device link, /joint_states, /hand/command, /diagnostics, backend selection.
+
+    Raises
+    ------
+    DamAnalysisError
+        The configuration cannot be read.
+    HandDriverError
+        A bad parameter (backend) or the stand-in could not be started.
+    OSError
+        The state port is in use.
+    """
+
+    def __init__(self) -> None:
+        super().__init__('hand_driver')
+        config_file = self.declare_parameter(
+            'config_file', '', ParameterDescriptor(
+                description='DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
+                            'config/dam.yaml', read_only=True)).value
+        self.backend = str(self.declare_parameter(
+            'backend', 'auto', ParameterDescriptor(
+                description='auto: probe the device, else start the simulator; hardware: '
+                            'never fall back; sim: always start the simulator',
+                additional_constraints='one of auto, hardware, sim',
+                read_only=True)).value)
+        if self.backend not in BACKENDS:
+            raise HandDriverError(f'backend {self.backend!r} is not one of {BACKENDS}')
+        self.config = load_config(config_file or None)
+        dev = self.config.device
+        hand = self.config.hand
+        self.joint_names = list(hand.joint_names)
+        self.n = len(self.joint_names)
+        self._index = {name: j for j, name in enumerate(self.joint_names)}
+        roles = [r for _ in hand.fingers for r in hand.joint_roles]
+        self._lower = np.array([hand.joint_limits_rad[r][0] for r in roles])
+        self._upper = np.array([hand.joint_limits_rad[r][1] for r in roles])
+        self.calibration = Calibration.from_config(self.config)
+        self.period_s = 1.0 / float(dev.rate_hz)
+        self.state_timeout_s = float(dev.state_timeout_s)
+        self.torque_limit_nm = float(dev.torque_limit_nm)
+        self.torque_rate_nm_per_s = float(dev.torque_rate_limit_nm_per_s)
+        self.link = DeviceLink(self.n, dev.host, dev.state_port, dev.command_port)
+
+        self._lock = threading.Lock()
+        self._modes = np.full(self.n, int(JointMode.HOLD), dtype=np.int64)
+        self._setpoints = np.zeros(self.n)
+        self._tau_out = np.zeros(self.n)
+        self._last_send_t: float | None = None
+        self.state = DriverState.WAITING
+        self._error_reason = ''
+        self._last_frame: StateFrame | None = None
+        self._rejected_commands = 0
+        self._last_reject_reason = ''
+        self._published = 0
+        self._latencies_s: deque[float] = deque(maxlen=2000)
+        self._diag_prev = (time.monotonic(), 0, 0)
+        self._child: subprocess.Popen[bytes] | None = None
+        self._running = True
+
+        self._js_pub = self.create_publisher(JointState, '/joint_states', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._cmd_sub = self.create_subscription(HandCommand, '/hand/command',
+                                                 self._on_command, 10)
+        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+
+        self._select_backend()
+        self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
+        self._thread.start()
+
+    # ---------------------------------------------------------------------------------------
+    # Backend
+
+    def _select_backend(self) -> None:
+        dev = self.config.device
+        addr = f'{dev.host}:{dev.command_port} (states to port {dev.state_port})'
+        if self.backend == 'sim':
+            self._start_standin('backend sim')
+            return
+        probe = self.link.receive(float(dev.probe_timeout_s))
+        if probe is not None:
+            kind = 'simulated' if probe.status & DeviceStatus.SIMULATED else 'hardware'
+            self.get_logger().info(f'device answered at {addr}: backend {self.backend}, '
+                                   f'{kind} device')
+            return
+        if self.backend == 'hardware':
+            self.get_logger().error(
+                f'no state frame from the hand at {addr} within {dev.probe_timeout_s} s; '
+                f'backend hardware never falls back to the simulator: waiting for the device')
+            return
+        self._start_standin(f'no device answered at {addr} within {dev.probe_timeout_s} s')
+
+    def _start_standin(self, why: str) -> None:
+        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+        try:
+            exe = Path(get_package_prefix('dam_sim_bridge')) / 'lib' / 'dam_sim_bridge' \
+                / 'sim_bridge'
+        except PackageNotFoundError as exc:
+            raise HandDriverError(f'{why}, and dam_sim_bridge is not installed: {exc}') from exc
+        if not exe.is_file():
+            raise HandDriverError(f'{why}, and the stand-in {str(exe)!r} does not exist')
+        cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim']
+        if os.path.isfile(self.config.source):
+            cmd += ['-p', f'config_file:={self.config.source}']
+        self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        self.get_logger().warning(
+            f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
+            f'(PID {self._child.pid})')
+        deadline = time.monotonic() + _STANDIN_START_TIMEOUT_S
+        while time.monotonic() < deadline and self._child.poll() is None:
+            if self.link.receive(0.1) is not None:
+                return
+        if self._child.poll() is not None:
+            raise HandDriverError(f'the stand-in exited with code {self._child.returncode} '
+                                  f'before sending a state frame')
+        self.get_logger().error(f'the stand-in sent no state frame within '
+                                f'{_STANDIN_START_TIMEOUT_S} s')
+
+    def _stop_standin(self) -> None:
+        child, self._child = self._child, None
+        if child is None or child.poll() is not None:
+            return
+        child.send_signal(signal.SIGINT)
+        try:
+            child.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait(timeout=5.0)
+
+    # ---------------------------------------------------------------------------------------
+    # Control loop (own thread)
+
+    def _activate(self, frame: StateFrame) -> None:
+        """Clean start: every joint HOLDs its measured position, torque output from zero."""
+        with self._lock:
+            self._modes[:] = int(JointMode.HOLD)
+            self._setpoints[:] = 0.0
+            self._tau_out[:] = 0.0
+            self._last_send_t = None
+            self.state = DriverState.ACTIVE
+            self._error_reason = ''
+        q = self.calibration.position_si(frame.position_counts)
+        self.get_logger().info(f'device link active: holding the measured posture '
+                               f'{np.round(q, 3).tolist()} rad, torque from zero')
+
+    def _enter_error(self, reason: str) -> None:
+        with self._lock:
+            if self.state is DriverState.ERROR:
+                return
+            self.state = DriverState.ERROR
+            self._error_reason = reason
+        self.get_logger().error(f'ERROR: {reason}; /joint_states and torque commands stopped, '
+                                f'call ~/reset to recover')
+
+    def _loop(self) -> None:
+        while self._running:
+            frame = self.link.receive(min(0.01, self.state_timeout_s / 4.0))
+            now = time.monotonic()
+            if frame is None:
+                last = self.link.last_state_time
+                if self.state is DriverState.ACTIVE and last is not None \
+                        and now - last > self.state_timeout_s:
+                    self._enter_error(f'no state frame for {now - last:.3f} s (timeout '
+                                      f'{self.state_timeout_s} s)')
+                continue
+            self._last_frame = frame
+            if self.state is DriverState.WAITING:
+                self._activate(frame)
+            if self.state is not DriverState.ACTIVE:
+                continue
+            try:
+                self._send_command(frame, now)
+            except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
+                self.get_logger().error(f'command not sent: {exc!r}',
+                                        throttle_duration_sec=_LOG_THROTTLE_S)
+            self._latencies_s.append(time.monotonic() - now)
+            if not self.context.ok():
+                return  # shutting down: the publishers are gone
+            try:
+                self._publish_joint_states(frame)
+            except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
+                if not self.context.ok():
+                    return
+                self.get_logger().error(f'/joint_states not published: {exc!r}',
+                                        throttle_duration_sec=_LOG_THROTTLE_S)
+
+    def _send_command(self, frame: StateFrame, now: float) -> None:
+        with self._lock:
+            modes = self._modes.copy()
+            target = self._setpoints.copy()
+            torque = modes == int(JointMode.TORQUE)
+            dt = self.period_s if self._last_send_t is None else min(
+                now - self._last_send_t, 4.0 * self.period_s)
+            tau = slew_torque(self._tau_out, np.where(torque, target, 0.0),
+                              self.torque_limit_nm, self.torque_rate_nm_per_s, dt)
+            self._tau_out = np.where(torque, tau, 0.0)  # leaving TORQUE restarts from zero
+            self._last_send_t = now
+            setpoints = np.where(torque, self._tau_out, target)
+        raw = self.calibration.setpoints_raw(modes, setpoints)
+        self.link.send(modes, raw, frame.seq)
+
+    def _publish_joint_states(self, frame: StateFrame) -> None:
+        q, dq, tau = self.calibration.state_si(frame)
+        msg = JointState()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = self.joint_names
+        msg.position = q.tolist()
+        msg.velocity = dq.tolist()
+        msg.effort = tau.tolist()
+        self._js_pub.publish(msg)
+        self._published += 1
+
+    # ---------------------------------------------------------------------------------------
+    # ROS callbacks
+
+    def _on_command(self, msg: HandCommand) -> None:
+        try:
+            items = validate_command(msg, self._index, self.torque_limit_nm, self._lower,
+                                     self._upper)
+        except CommandRejected as exc:
+            self._rejected_commands += 1
+            self._last_reject_reason = str(exc)
+            self.get_logger().warning(f'rejected /hand/command: {exc}',
+                                      throttle_duration_sec=_LOG_THROTTLE_S)
+            return
+        with self._lock:
+            for j, mode, sp in items:
+                if mode is not JointMode.TORQUE and self._modes[j] == int(JointMode.TORQUE):
+                    self._tau_out[j] = 0.0
+                self._modes[j] = int(mode)
+                self._setpoints[j] = sp if mode is not JointMode.HOLD else 0.0
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        if self.state is DriverState.ACTIVE:
+            response.success = True
+            response.message = 'already ACTIVE'
+            return response
+        self.link.reset()  # the device may have restarted its sequence numbers
+        with self._lock:
+            self.state = DriverState.WAITING
+        wait_s = max(0.5, 5.0 * self.state_timeout_s)
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and self.state is not DriverState.ACTIVE:
+            time.sleep(0.01)
+        if self.state is DriverState.ACTIVE:
+            response.success = True
+            response.message = 'device link ACTIVE again: holding the measured posture'
+            return response
+        with self._lock:
+            self.state = DriverState.ERROR
+            self._error_reason = 'reset failed: no state frame from the device'
+        response.success = False
+        response.message = (f'no state frame from the device within {wait_s:.2f} s; '
+                            f'still in ERROR')
+        return response
+
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        t0, accepted0, published0 = self._diag_prev
+        counters = self.link.decoder.counters
+        dt = max(now - t0, 1e-9)
+        state_rate = (counters.accepted - accepted0) / dt
+        js_rate = (self._published - published0) / dt
+        self._diag_prev = (now, counters.accepted, self._published)
+        frame = self._last_frame
+        tripped = bool(frame is not None and frame.status & DeviceStatus.WATCHDOG_TRIPPED)
+        simulated = bool(frame is not None and frame.status & DeviceStatus.SIMULATED)
+        lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
+        last = self.link.last_state_time
+        status = DiagnosticStatus()
+        status.name = 'dam_hand_driver: device link'
+        status.hardware_id = f'{self.config.device.host}:{self.config.device.command_port}'
+        state = self.state
+        if state is DriverState.ERROR:
+            status.level = DiagnosticStatus.ERROR
+            status.message = f'ERROR: {self._error_reason}'
+        elif state is DriverState.WAITING:
+            status.level = DiagnosticStatus.ERROR
+            status.message = 'waiting for the device'
+        elif state_rate < 0.8 * self.config.device.rate_hz or tripped:
+            status.level = DiagnosticStatus.WARN
+            status.message = ('device watchdog tripped' if tripped else
+                              f'state rate {state_rate:.0f} Hz below target')
+        else:
+            status.level = DiagnosticStatus.OK
+            status.message = 'ACTIVE' + (' (simulator)' if simulated else '')
+        values = {
+            'state': state.value,
+            'backend': self.backend + (' (simulator running)' if simulated else ''),
+            'standin_pid': str(self._child.pid) if self._child is not None else '',
+            'state_rate_hz': f'{state_rate:.1f}',
+            'joint_states_rate_hz': f'{js_rate:.1f}',
+            'target_rate_hz': f'{self.config.device.rate_hz:g}',
+            'state_age_s': f'{now - last:.4f}' if last is not None else 'never',
+            'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
+            'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',
+            'device_watchdog_tripped': str(tripped),
+            'commands_sent': str(self.link.stats.commands_sent),
+            'send_errors': str(self.link.stats.send_errors),
+            'hand_commands_rejected': str(self._rejected_commands),
+            'last_command_rejection': self._last_reject_reason,
+        }
+        values.update({f'frames_{k}': str(v) for k, v in counters.as_dict().items()})
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [status]
+        self._diag_pub.publish(msg)
+
+    def destroy_node(self) -> None:
+        """Stop the link thread, the stand-in (by PID) and close the socket."""
+        self._running = False
+        thread = getattr(self, '_thread', None)
+        if thread is not None and thread.is_alive():
+            thread.join(timeout=2.0)
+        self._stop_standin()
+        if hasattr(self, 'link'):
+            self.link.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = HandDriverNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (HandDriverError, DamAnalysisError, OSError) as exc:
+        sys.stderr.write(f'hand_driver: cannot start: {exc}\n')
+        code = 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    if code:
+        sys.exit(code)

@@ -1,0 +1,222 @@
+"""Hand I/O end to end: the driver and its simulated stand-in as real processes, real UDP
+link, real DDS. The driver (backend auto) finds no device and starts the stand-in itself.
+
+Timing asserts are deliberately loose (a loaded 2-core machine); bench/ holds the rate targets.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import socket
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from ros_testing import RosClient, installed_executable, node_process
+
+pytestmark = pytest.mark.integration
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+FINGER = 'finger1'
+
+
+def _free_udp_ports(n: int) -> list[int]:
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(('127.0.0.1', 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+class _Observer:
+    """Subscribes to /joint_states and /diagnostics, and publishes /hand/command."""
+
+    def __init__(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import JointState
+
+        from dam_interfaces.msg import HandCommand
+
+        self.client = RosClient()
+        node = self.client.node
+        self.joint_states: list[tuple[float, JointState]] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        node.create_subscription(JointState, '/joint_states',
+                                 lambda m: self.joint_states.append((time.monotonic(), m)), 200)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+        self.command_pub = node.create_publisher(HandCommand, '/hand/command', 10)
+
+    def spin(self, seconds: float) -> None:
+        self.client.spin_until(lambda: False, seconds)
+
+    def latest(self) -> dict[str, tuple[float, float, float]]:
+        msg = self.joint_states[-1][1]
+        return {n: (p, v, e) for n, p, v, e in zip(msg.name, msg.position, msg.velocity,
+                                                   msg.effort, strict=True)}
+
+    def diag_values(self) -> dict[str, str]:
+        status = self.diagnostics[-1].status[0]
+        return {kv.key: kv.value for kv in status.values}
+
+    def command(self, names: list[str], modes: list[int], setpoints: list[float]) -> None:
+        from dam_interfaces.msg import HandCommand
+
+        msg = HandCommand(name=names, mode=modes, setpoint=setpoints)
+        for _ in range(3):  # volatile QoS: repeat so that a late-matched publisher still lands
+            self.command_pub.publish(msg)
+            self.spin(0.05)
+
+
+@pytest.fixture(scope='module')
+def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    state_port, command_port = _free_udp_ports(2)
+    data['device']['state_port'] = state_port
+    data['device']['command_port'] = command_port
+    path = tmp_path_factory.mktemp('hand_io') / 'dam.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return path
+
+
+@pytest.fixture(scope='module')
+def cfg(config_file: Path):
+    from dam_analysis.config import load_config
+
+    return load_config(config_file)
+
+
+@pytest.fixture(scope='module')
+def system(config_file: Path) -> Iterator[tuple[object, _Observer]]:
+    env = {'DAM_CONFIG': str(config_file)}
+    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                       '--ros-args', '-p', 'backend:=auto'], env=env) as driver:
+        observer = _Observer()
+        try:
+            ok = observer.client.spin_until(lambda: len(observer.joint_states) > 50, 30.0)
+            assert ok, driver.output()
+            yield driver, observer
+        finally:
+            observer.client.close()
+
+
+def test_joint_states_rate_and_simulator_backend(system, cfg) -> None:
+    driver, obs = system
+    obs.joint_states.clear()
+    obs.spin(2.0)
+    stamps = np.array([t for t, _ in obs.joint_states])
+    rate = (len(stamps) - 1) / (stamps[-1] - stamps[0])
+    assert 0.5 * cfg.device.rate_hz < rate < 1.3 * cfg.device.rate_hz, rate
+    assert list(obs.joint_states[-1][1].name) == list(cfg.hand.joint_names)
+    assert 'RUNNING ON THE SIMULATOR' in driver.output()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    values = obs.diag_values()
+    assert values['state'] == 'ACTIVE'
+    assert values['standin_pid'].isdigit()
+    assert int(values['frames_accepted']) > 0
+
+
+def _gravity_torques(cfg, angles: np.ndarray) -> np.ndarray:
+    """Static joint torques [N*m] holding one finger against gravity (closed form)."""
+    lengths = np.asarray(cfg.hand.link_lengths_m)
+    masses = np.asarray(cfg.hand.link_masses_kg)
+    g = cfg.task.gravity_m_per_s2
+    phi = np.cumsum(angles)  # link directions from straight down, positive inward
+    joints_x = np.concatenate([[0.0], np.cumsum(lengths * np.sin(phi))])
+    com_x = joints_x[:3] + 0.5 * lengths * np.sin(phi)
+    return np.array([g * np.sum(masses[i:] * (com_x[i:] - joints_x[i])) for i in range(3)])
+
+
+def test_gravity_torques_of_a_finger_with_a_horizontal_distal_link(system, cfg) -> None:
+    _, obs = system
+    from dam_interfaces.msg import HandCommand
+
+    angles = np.radians([60.0, 0.0, 30.0])  # the distal link points horizontally inward
+    names = [f'{FINGER}_{role}_joint' for role in cfg.hand.joint_roles]
+    obs.command(names, [HandCommand.MODE_POSITION] * 3, angles.tolist())
+    obs.spin(1.5)
+    state = obs.latest()
+    measured_q = np.array([state[n][0] for n in names])
+    measured_tau = np.array([state[n][2] for n in names])
+    assert measured_q == pytest.approx(angles, abs=math.radians(1.0))
+    expected = _gravity_torques(cfg, measured_q)
+    # distal joint: m3 g L3 / 2 exactly, for a horizontal link
+    m3, l3 = cfg.hand.link_masses_kg[2], cfg.hand.link_lengths_m[2]
+    assert expected[2] == pytest.approx(m3 * cfg.task.gravity_m_per_s2 * l3 / 2, rel=0.02)
+    assert measured_tau == pytest.approx(expected, rel=0.05, abs=2e-4)
+
+
+def test_torque_command_flexes_a_compliant_joint(system, cfg) -> None:
+    _, obs = system
+    from dam_interfaces.msg import HandCommand
+
+    joint = 'finger2_compliant_joint'
+    q0 = obs.latest()[joint][0]
+    obs.command([joint], [HandCommand.MODE_TORQUE], [0.02])
+    obs.spin(0.5)
+    q1, _, tau1 = obs.latest()[joint]
+    assert q1 > q0 + math.radians(5.0), (q0, q1)
+    obs.command([joint], [HandCommand.MODE_TORQUE], [-0.02])
+    obs.spin(0.8)
+    q2, _, tau2 = obs.latest()[joint]
+    assert q2 < q1 - math.radians(5.0), (q1, q2)
+    assert tau2 == pytest.approx(-0.02, abs=1e-3)
+    obs.command([joint], [HandCommand.MODE_HOLD], [0.0])
+
+
+def test_bad_commands_are_rejected_and_the_driver_stays_up(system, cfg) -> None:
+    driver, obs = system
+    from dam_interfaces.msg import HandCommand
+
+    joint = 'finger3_compliant_joint'
+    q0 = obs.latest()[joint][0]
+    obs.command(['no_such_joint'], [HandCommand.MODE_TORQUE], [0.01])
+    obs.command([joint, joint], [HandCommand.MODE_TORQUE] * 2, [0.01, 0.01])
+    obs.command([joint], [HandCommand.MODE_TORQUE], [float('nan')])
+    obs.command([joint], [HandCommand.MODE_TORQUE], [5.0 * cfg.device.torque_limit_nm])
+    obs.command([joint], [HandCommand.MODE_POSITION, HandCommand.MODE_HOLD], [0.1])
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    assert int(obs.diag_values()['hand_commands_rejected']) >= 5
+    assert driver.alive()
+    assert obs.latest()[joint][0] == pytest.approx(q0, abs=math.radians(1.0))
+    out = driver.output()
+    assert 'no_such_joint' in out
+
+
+def test_killing_the_standin_puts_the_driver_in_error(system, cfg) -> None:
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    driver, obs = system
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    pid = int(obs.diag_values()['standin_pid'])
+    os.kill(pid, signal.SIGKILL)  # the stand-in the driver started for this test
+    killed = time.monotonic()
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(
+        lambda: bool(obs.diagnostics)
+        and obs.diagnostics[-1].status[0].level == DiagnosticStatus.ERROR, 5.0), \
+        driver.output()
+    assert obs.diag_values()['state'] == 'ERROR'
+    # /joint_states stopped within the state timeout (plus delivery slack)
+    last_js = obs.joint_states[-1][0]
+    assert last_js - killed < cfg.device.state_timeout_s + 0.5
+    count = len(obs.joint_states)
+    obs.spin(0.5)
+    assert len(obs.joint_states) == count
+    assert 'ERROR: no state frame' in driver.output()
+    # Without a device, ~/reset cannot recover.
+    from std_srvs.srv import Trigger
+
+    response = obs.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
+    assert response.success is False
+    assert driver.alive()
