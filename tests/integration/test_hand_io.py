@@ -220,3 +220,86 @@ def test_killing_the_standin_puts_the_driver_in_error(system, cfg) -> None:
     response = obs.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
     assert response.success is False
     assert driver.alive()
+
+
+# --- Stand-in started by hand, driver with backend hardware, recovery through ~/reset -------
+# Everything is remapped under /hw so that it cannot mix with the processes above.
+
+_HW_REMAPS = ['-r', '/joint_states:=/hw/joint_states', '-r', '/diagnostics:=/hw/diagnostics',
+              '-r', '/sim/object_pose:=/hw/object_pose', '-r', '/clock:=/hw/clock']
+
+
+def _sim_command() -> list[str]:
+    return [str(installed_executable('dam_sim_bridge', 'sim_bridge')), '--ros-args',
+            '-r', '__node:=hw_sim', '-p', 'publish_clock:=true', *_HW_REMAPS]
+
+
+def test_sim_bridge_services_and_driver_recovery(tmp_path: Path, cfg) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from geometry_msgs.msg import PoseStamped
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+
+    from dam_interfaces.srv import SetFrictionAngle
+
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['device']['state_port'], data['device']['command_port'] = _free_udp_ports(2)
+    config_file = tmp_path / 'dam.yaml'
+    config_file.write_text(yaml.safe_dump(data), encoding='utf-8')
+    env = {'DAM_CONFIG': str(config_file)}
+    client = RosClient()
+    poses: list[PoseStamped] = []
+    clocks: list[Clock] = []
+    states: list[JointState] = []
+    diags: list[DiagnosticArray] = []
+    node = client.node
+    node.create_subscription(PoseStamped, '/hw/object_pose', poses.append, 50)
+    node.create_subscription(Clock, '/hw/clock', clocks.append, 50)
+    node.create_subscription(JointState, '/hw/joint_states', states.append, 200)
+    node.create_subscription(DiagnosticArray, '/hw/diagnostics', diags.append, 10)
+    try:
+        with node_process(_sim_command(), env=env) as sim:
+            assert client.spin_until(lambda: len(poses) > 20 and len(clocks) > 20, 20.0), \
+                sim.output()
+            assert poses[-1].header.frame_id == 'world'
+            z = poses[-1].pose.position.z
+            assert z == pytest.approx(cfg.object.radius_m, abs=0.01)  # lies on the table
+            t0 = clocks[0].clock.sec + 1e-9 * clocks[0].clock.nanosec
+            t1 = clocks[-1].clock.sec + 1e-9 * clocks[-1].clock.nanosec
+            assert t1 > t0
+            bad = client.call(SetFrictionAngle, '/hw_sim/set_friction_angle',
+                              SetFrictionAngle.Request(friction_angle=2.0))
+            assert bad.success is False and '2.0' in bad.message
+            good = client.call(SetFrictionAngle, '/hw_sim/set_friction_angle',
+                               SetFrictionAngle.Request(friction_angle=0.3))
+            assert good.success is True
+            reset = client.call(Trigger, '/hw_sim/reset', Trigger.Request())
+            assert reset.success is True
+            clocks.clear()
+            assert client.spin_until(lambda: bool(clocks), 5.0)
+            assert clocks[-1].clock.sec < 2  # simulated time restarted from zero
+
+            with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                               '--ros-args', '-r', '__node:=hw_driver', '-p',
+                               'backend:=hardware', *_HW_REMAPS], env=env) as driver:
+                assert client.spin_until(lambda: len(states) > 50, 20.0), driver.output()
+                assert 'RUNNING ON THE SIMULATOR' not in driver.output()
+                assert sim.stop() == 0  # the device goes away ...
+                diags.clear()
+                assert client.spin_until(
+                    lambda: bool(diags)
+                    and diags[-1].status[0].level == DiagnosticStatus.ERROR, 5.0)
+                # ... and comes back: a new stand-in, then ~/reset
+                with node_process(_sim_command(), env=env):
+                    time.sleep(0.5)
+                    states.clear()
+                    client.spin_until(lambda: False, 2.0)
+                    assert not states  # still in ERROR: no recovery without ~/reset
+                    response = client.call(Trigger, '/hw_driver/reset', Trigger.Request(),
+                                           wait=10.0)
+                    assert response.success is True, response.message
+                    assert client.spin_until(lambda: len(states) > 20, 5.0)
+                assert driver.alive()
+    finally:
+        client.close()
