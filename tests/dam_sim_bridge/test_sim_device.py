@@ -140,3 +140,22 @@ def test_bad_datagrams_are_counted_not_applied(link) -> None:
     assert device.decoder.counters.bad_crc == 1
     assert device.decoder.counters.accepted == 0
     assert device.tripped
+
+
+def test_command_is_applied_again_after_a_world_reset(link) -> None:
+    device, driver = link
+    n = device.world.n_joints
+    modes = [T] * n
+    raw = device.calibration.setpoints_raw(modes, np.full(n, 0.01))
+    driver.send(device, modes, raw)
+    device.cycle()
+    driver.state()
+    assert np.all(device.world.joint_modes() == T)
+    device.reset_world()
+    assert np.all(device.world.joint_modes() == H)
+    driver.send(device, modes, raw)  # the same command again
+    device.cycle()
+    frame = driver.state()
+    assert np.all(frame.modes == T)
+    assert device.calibration.torque_si(frame.torque_raw) == pytest.approx(np.full(n, 0.01),
+                                                                          abs=1e-4)

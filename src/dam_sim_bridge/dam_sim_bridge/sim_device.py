@@ -126,6 +126,7 @@ class SimDevice:
             raise
         self.sock.setblocking(False)
         self._stop = threading.Event()
+        self._applied: tuple[bytes, bytes] | None = None
         self.tripped = True
 
     # ---------------------------------------------------------------------------------------
@@ -165,11 +166,14 @@ class SimDevice:
             self._drain_commands()
             modes, setpoints, tripped = self.watchdog.output()
             self.tripped = tripped
-            try:
-                self.world.set_joint_commands(
-                    modes, self.calibration.setpoints_si(modes, setpoints))
-            except ValueError:
-                self.stats.command_errors += 1
+            key = (modes.tobytes(), setpoints.tobytes())
+            if key != self._applied:  # the world keeps a command until the next call
+                try:
+                    self.world.set_joint_commands(
+                        modes, self.calibration.setpoints_si(modes, setpoints))
+                    self._applied = key
+                except ValueError:
+                    self.stats.command_errors += 1
             self.world.step(self.steps_per_cycle)
             self._sim_clock_s += self.steps_per_cycle * self.world.time_step_s
             q, dq, tau = self.world.joint_states()
@@ -198,6 +202,7 @@ class SimDevice:
         """Reset the world to its initial state (all joints HOLD, object at rest)."""
         with self.lock:
             self.world.reset()
+            self._applied = None  # reset() put every joint in HOLD: apply the command again
 
     def run(self, stop: threading.Event | None = None) -> None:
         """Run cycles until :meth:`stop` (or ``stop`` is set): paced in real time, or as fast
