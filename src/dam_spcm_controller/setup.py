@@ -23,6 +23,7 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
+            'spcm_controller = dam_spcm_controller.controller_node:main',
         ],
     },
 )

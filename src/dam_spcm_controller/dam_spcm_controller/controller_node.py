@@ -1,0 +1,557 @@
+"""``spcm_controller``: the ROS node around :class:`~dam_spcm_controller.sequence.DamSequence`.
+
+Run it with ``ros2 run dam_spcm_controller spcm_controller [--ros-args -p name:=value]``.
+
+Topics and services
+-------------------
+/joint_states : sensor_msgs/JointState, subscribed
+    Measured angles [rad], velocities [rad/s] and torques [N*m], reordered by joint name.
+    Messages with missing names, wrong array lengths or NaN/inf are dropped (throttled log).
+/hand/command : dam_interfaces/HandCommand, published
+    One command per received joint state while a grasp runs or its result is held (DONE keeps
+    the envelope torque, ABORTED/FAILED ramp the torque to zero); one hold-measured command
+    at the first valid joint state after start-up.
+/dam/status : dam_interfaces/DamStatus, published at ``status_rate`` and on phase change.
+/dam_grasp : dam_interfaces/action/DamGrasp, action server.
+    Goals follow the ``/check_lift`` conventions; invalid goals and goals arriving while a
+    grasp runs are rejected (the reason is logged and published in ``/dam/status``).
+/check_lift : dam_interfaces/srv/CheckLift, called before each grasp.
+
+Parameters
+----------
+See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only) and
+``require_lift_guarantee`` (bool). All but ``config_file`` may be changed while no grasp runs.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import replace
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.action.server import ServerGoalHandle
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.task import Future
+from sensor_msgs.msg import JointState
+
+from dam_analysis.analysis import check_delta_theta_p, check_k_theta
+from dam_analysis.config import load_config
+from dam_analysis.errors import DamAnalysisError
+from dam_interfaces.action import DamGrasp
+from dam_interfaces.msg import DamStatus, HandCommand
+from dam_interfaces.srv import CheckLift
+from dam_spcm_controller.classification import (
+    ClassifierSettings,
+    HandGeometry,
+    Outcome,
+    classify_from_joints,
+)
+from dam_spcm_controller.commands import JointCommand, JointMode
+from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
+
+#: JointMode of the core -> HandCommand.mode on the wire.
+_WIRE_MODE = {JointMode.HOLD: HandCommand.MODE_HOLD,
+              JointMode.POSITION: HandCommand.MODE_POSITION,
+              JointMode.TORQUE: HandCommand.MODE_TORQUE}
+
+_OUTCOME = {Outcome.SUCCESS: DamGrasp.Result.OUTCOME_SUCCESS,
+            Outcome.LIFTED_DAM_FAILED: DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED,
+            Outcome.FAILURE: DamGrasp.Result.OUTCOME_FAILURE}
+_OUTCOME_NAME = {DamGrasp.Result.OUTCOME_UNKNOWN: 'UNKNOWN',
+                 DamGrasp.Result.OUTCOME_SUCCESS: 'SUCCESS',
+                 DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED: 'LIFTED_DAM_FAILED',
+                 DamGrasp.Result.OUTCOME_FAILURE: 'FAILURE',
+                 DamGrasp.Result.OUTCOME_ABORTED: 'ABORTED'}
+
+#: name -> (SequenceParams attribute or None, description, lower, upper). Defaults come
+#: from the configuration file.
+_DOUBLE_PARAMETERS: dict[str, tuple[str | None, str, float, float]] = {
+    'damping': ('damping', 'compliant-joint damping d [N*m*s/rad]', 0.0, 1.0),
+    'torque_limit': ('torque_limit', '|tau| limit of every torque command [N*m]', 1e-6, 10.0),
+    'trajectory_duration': ('trajectory_duration',
+                            'position-joint motion time in ROLLING_UP [s]', 0.05, 60.0),
+    'envelope_torque': ('envelope_torque', 'torque of the enveloping grasp [N*m]', 1e-6, 10.0),
+    'contact_torque_threshold': ('contact_torque_threshold',
+                                 'compliant torque that signals contact [N*m]', 1e-6, 10.0),
+    'approach_speed': ('approach_speed', 'pre-shape and closing speed [rad/s]', 1e-3, 10.0),
+    'phase_timeout': ('phase_timeout', 'longest time of any active phase [s]', 0.1, 600.0),
+    'torque_ramp_time': ('torque_ramp_time', 'torque ramp-in/ramp-out time [s]', 0.0, 10.0),
+    'settle_speed': ('settle_speed', 'ENVELOPE settled below this speed [rad/s]', 1e-6, 10.0),
+    'settle_time': ('settle_time', 'ENVELOPE settled this long: DONE [s]', 1e-3, 10.0),
+    'state_timeout': (None, '/joint_states silence that fails a grasp [s]', 1e-3, 10.0),
+    'check_lift_timeout': (None, 'time allowed for the /check_lift answer [s]', 0.0, 60.0),
+    'status_rate': (None, '/dam/status and feedback rate [Hz] (read at start-up)', 0.1, 1000.0),
+}
+_READ_ONLY = {'status_rate'}
+
+
+def _phase_name(phase: Phase) -> str:
+    return phase.name
+
+
+class SpcmControllerNode(Node):
+    """Runs DAM grasps requested on ``/dam_grasp`` against ``/joint_states``."""
+
+    def __init__(self) -> None:
+        super().__init__('spcm_controller')
+        config_file = self.declare_parameter(
+            'config_file', '',
+            ParameterDescriptor(
+                description='DAM configuration file (YAML); empty: the installed config/dam.yaml',
+                read_only=True)).value
+        self._config = load_config(config_file or None)
+        self._base_params = SequenceParams.from_config(self._config)
+        self._layout = self._base_params.layout
+        self._geometry = HandGeometry.from_config(self._config)
+        self._classifier = ClassifierSettings.from_config(self._config)
+        defaults = {name: float(getattr(self._base_params, attr))
+                    for name, (attr, *_rest) in _DOUBLE_PARAMETERS.items() if attr}
+        defaults['state_timeout'] = float(self._config.controller.state_timeout_s)
+        defaults['check_lift_timeout'] = 2.0
+        defaults['status_rate'] = 20.0
+        for name, (_attr, description, lo, hi) in _DOUBLE_PARAMETERS.items():
+            self.declare_parameter(name, defaults[name], ParameterDescriptor(
+                description=description, read_only=name in _READ_ONLY,
+                floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi,
+                                                         step=0.0)]))
+        self.declare_parameter('require_lift_guarantee', False, ParameterDescriptor(
+            description='refuse (k_theta, delta_theta_p) pairs outside the sufficient-lift '
+                        'region reported by /check_lift'))
+        self._values = {name: float(self.get_parameter(name).value) for name in _DOUBLE_PARAMETERS}
+        self._require_lift = bool(self.get_parameter('require_lift_guarantee').value)
+        self._params = self._make_params(self._values)  # raises on an inconsistent start-up set
+
+        self._lock = threading.RLock()
+        self._seq = DamSequence(self._params)
+        self._busy = False  # a goal is accepted and not finished
+        self._publishing = False  # commands follow each joint state
+        self._hold_sent = False
+        self._last_state_time: float | None = None
+        self._last_pos = np.zeros(self._layout.n_joints)
+        self._last_eff = np.zeros(self._layout.n_joints)
+        self._last_cmd: JointCommand | None = None
+        self._last_phase = self._seq.phase
+        self._status_message = ''
+        self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN
+        self._state_timed_out = False
+        self._bad_state_count = 0
+        self._goal_handle: ServerGoalHandle | None = None  # the running goal
+        self._run_done: Future | None = None  # resolved when the running grasp has ended
+        self._cancel_sent = False
+        self._feedback = DamGrasp.Feedback()
+
+        self._command_pub = self.create_publisher(HandCommand, '/hand/command', 10)
+        self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
+        self._state_sub = self.create_subscription(
+            JointState, '/joint_states', self._on_joint_state, 10)
+        self._watchdog = self.create_timer(0.01, self._on_watchdog)
+        self._status_timer = self.create_timer(1.0 / self._values['status_rate'],
+                                               self._on_status_timer)
+        self._check_lift = self.create_client(CheckLift, '/check_lift')
+        self._action = ActionServer(
+            self, DamGrasp, '/dam_grasp', execute_callback=self._execute,
+            goal_callback=self._on_goal, cancel_callback=self._on_cancel)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.get_logger().info(f'spcm_controller ready ({self._config.source}); joints '
+                               f'{list(self._layout.joint_names)}')
+
+    # ------------------------------------------------------------------------------------
+    # Parameters
+
+    def _make_params(self, values: dict[str, float]) -> SequenceParams:
+        overrides = {attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items()
+                     if attr}
+        return replace(self._base_params, **overrides)
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        with self._lock:
+            if self._busy:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'a grasp is running (phase {_phase_name(self._seq.phase)}); '
+                           'parameters can only be changed while idle')
+            values = dict(self._values)
+            require = self._require_lift
+            for param in params:
+                if param.name in _DOUBLE_PARAMETERS:
+                    value = param.value
+                    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                            or not math.isfinite(float(value)):
+                        return SetParametersResult(
+                            successful=False,
+                            reason=f'{param.name} must be a finite number, got {value!r}')
+                    values[param.name] = float(value)
+                elif param.name == 'require_lift_guarantee':
+                    if not isinstance(param.value, bool):
+                        return SetParametersResult(
+                            successful=False,
+                            reason=f'require_lift_guarantee must be a bool, got {param.value!r}')
+                    require = param.value
+            try:
+                new_params = self._make_params(values)
+            except InputError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            self._values = values
+            self._require_lift = require
+            self._params = new_params
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------------------------
+    # Joint states and commands
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        now = time.monotonic()
+        try:
+            index = self._layout.index_of(list(msg.name))
+            n = len(msg.name)
+            for field in ('position', 'velocity', 'effort'):
+                if len(getattr(msg, field)) != n:
+                    raise InputError(f'{field} has {len(getattr(msg, field))} entries for '
+                                     f'{n} names')
+            pos = np.asarray(msg.position, dtype=np.float64)[index]
+            vel = np.asarray(msg.velocity, dtype=np.float64)[index]
+            eff = np.asarray(msg.effort, dtype=np.float64)[index]
+            for field, arr in (('position', pos), ('velocity', vel), ('effort', eff)):
+                if not np.isfinite(arr).all():
+                    j = int(np.flatnonzero(~np.isfinite(arr))[0])
+                    raise InputError(f'{field} of {self._layout.joint_names[j]} is '
+                                     f'{arr[j]!r}')
+        except InputError as exc:
+            self._bad_state_count += 1
+            self.get_logger().warning(
+                f'dropped /joint_states message ({self._bad_state_count} so far): {exc}',
+                throttle_duration_sec=1.0)
+            return
+        with self._lock:
+            self._last_state_time = now
+            self._last_pos = pos
+            self._last_eff = eff
+            if self._state_timed_out:
+                return  # the grasp already failed; the zero-torque command stands
+            try:
+                cmd = self._seq.step(now, pos, vel, eff)
+            except InputError as exc:
+                self.get_logger().warning(f'control step refused: {exc}',
+                                          throttle_duration_sec=1.0)
+                return
+            publish = self._publishing or not self._hold_sent
+            self._hold_sent = True
+            self._last_cmd = cmd
+            phase_changed = self._seq.phase is not self._last_phase
+            self._last_phase = self._seq.phase
+        if publish:
+            self._publish_command(cmd)
+        if phase_changed:
+            self._publish_status()
+        self._advance(feedback=phase_changed)
+
+    def _publish_command(self, cmd: JointCommand) -> None:
+        msg = HandCommand()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.name = list(self._layout.joint_names)
+        msg.mode = [_WIRE_MODE[JointMode(int(m))] for m in cmd.modes]
+        msg.setpoint = [float(v) for v in cmd.setpoints]
+        self._command_pub.publish(msg)
+
+    def _on_watchdog(self) -> None:
+        with self._lock:
+            if not self._seq.phase.active or self._state_timed_out:
+                return
+            timeout = self._values['state_timeout']
+            last = self._last_state_time
+            silent = math.inf if last is None else time.monotonic() - last
+            if silent <= timeout:
+                return
+            reason = (f'/joint_states silent for {silent:.3f} s (state_timeout '
+                      f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}')
+            self._seq.fail(reason)
+            self._state_timed_out = True
+            zero = self._zero_torque_command()
+            self._last_cmd = zero
+            self._last_phase = self._seq.phase
+        self.get_logger().error(reason + '; commanding zero torque')
+        self._publish_command(zero)
+        self._publish_status()
+        self._advance(feedback=True)
+
+    def _zero_torque_command(self) -> JointCommand:
+        """Torque joints at zero, moving position joints held at their last setpoint."""
+        n = self._layout.n_joints
+        if self._last_cmd is None:
+            return JointCommand(np.full(n, JointMode.HOLD, dtype=np.int8), self._last_pos.copy())
+        modes = self._last_cmd.modes.copy()
+        setpoints = self._last_cmd.setpoints.copy()
+        setpoints[modes == JointMode.TORQUE] = 0.0
+        modes[modes == JointMode.POSITION] = JointMode.HOLD
+        return JointCommand(modes, setpoints)
+
+    # ------------------------------------------------------------------------------------
+    # Status and progress of the running goal
+
+    def _on_status_timer(self) -> None:
+        self._publish_status()
+        self._advance(feedback=True)
+
+    def _advance(self, feedback: bool) -> None:
+        """Forward a cancel request, publish feedback, resolve the run when it has ended."""
+        handle = self._goal_handle
+        done = self._run_done
+        if handle is None or done is None or done.done():
+            return
+        with self._lock:
+            seq = self._seq
+            if handle.is_cancel_requested and not self._cancel_sent:
+                self._cancel_sent = True
+                if seq.cancel():
+                    feedback = True
+            phase = seq.phase
+            fb = self._feedback
+            fb.phase = _phase_name(phase)
+            fb.progress = float(seq.progress)
+            fb.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
+            ended = phase is Phase.DONE or (
+                phase in (Phase.ABORTED, Phase.FAILED) and (seq.relaxed or self._state_timed_out))
+        if feedback:
+            handle.publish_feedback(fb)
+        if ended:
+            done.set_result(phase)
+
+    def _publish_status(self) -> None:
+        with self._lock:
+            seq = self._seq
+            msg = DamStatus()
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.phase = _phase_name(seq.phase)
+            msg.progress = float(seq.progress)
+            msg.finger_names = [self._layout.finger_name(i)
+                                for i in range(self._layout.n_fingers)]
+            msg.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
+            msg.delta_theta_s = [float(v) for v in np.nan_to_num(seq.delta_theta_s)]
+            msg.outcome = self._outcome
+            msg.message = self._status_message
+        self._status_pub.publish(msg)
+
+    # ------------------------------------------------------------------------------------
+    # Action
+
+    def _validate_goal(self, goal: DamGrasp.Goal) -> tuple[float, float]:
+        """(k_theta of finger 1 [N*m/rad], delta_theta_p [rad]) or raise InputError."""
+        ratios = self._layout.stiffness_ratios
+        n = self._layout.n_fingers
+        try:
+            k = check_k_theta(list(goal.k_theta), ratios)
+            dp = check_delta_theta_p(list(goal.delta_theta_p), n,
+                                     self._config.task.delta_theta_p_max_rad)
+        except DamAnalysisError as exc:
+            raise InputError(str(exc)) from exc
+        expected = k[0] * ratios / ratios[0]
+        if not np.allclose(k, expected, rtol=1e-9, atol=0.0):
+            raise InputError(f'k_theta {k.tolist()!r} does not follow the configured stiffness '
+                             f'ratios {ratios.tolist()!r}; the controller sets finger i to '
+                             'ratio_i * k_theta')
+        if not np.allclose(dp, dp[0], rtol=0.0, atol=1e-12):
+            raise InputError(f'delta_theta_p {dp.tolist()!r} rad: the controller moves every '
+                             'position joint by the same displacement')
+        if dp[0] <= 0.0:
+            raise InputError(f'delta_theta_p must be positive, got {dp[0]!r} rad')
+        return float(k[0]), float(dp[0])
+
+    def _on_goal(self, goal: DamGrasp.Goal) -> GoalResponse:
+        try:
+            self._validate_goal(goal)
+        except InputError as exc:
+            self._reject(f'goal rejected: {exc}')
+            return GoalResponse.REJECT
+        with self._lock:
+            if self._busy:
+                phase = _phase_name(self._seq.phase)
+                busy = True
+            else:
+                self._busy = True
+                busy = False
+        if busy:
+            self._reject(f'goal rejected: a grasp is already running (phase {phase})')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _reject(self, message: str) -> None:
+        self.get_logger().warning(message)
+        with self._lock:
+            self._status_message = message
+        self._publish_status()
+
+    def _on_cancel(self, _goal_handle: ServerGoalHandle) -> CancelResponse:
+        return CancelResponse.ACCEPT
+
+    async def _ask_check_lift(self, k: float, dp: float) -> CheckLift.Response | None:
+        """The /check_lift answer for the pair, or ``None`` if none came within the timeout."""
+        request = CheckLift.Request()
+        request.k_theta = [k]
+        request.delta_theta_p = [dp]
+        request.friction_angle = CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG
+        answer: Future = Future()
+        deadline = time.monotonic() + self._values['check_lift_timeout']
+        sent = []
+
+        def on_answer(call: Future) -> None:
+            if not answer.done():
+                answer.set_result(call.result())
+
+        def poll() -> None:
+            if answer.done():
+                return
+            if not sent and self._check_lift.service_is_ready():
+                call = self._check_lift.call_async(request)
+                sent.append(call)
+                call.add_done_callback(on_answer)
+            if time.monotonic() >= deadline and not answer.done():
+                answer.set_result(None)
+
+        timer = self.create_timer(0.02, poll)
+        try:
+            poll()
+            return await answer
+        finally:
+            self.destroy_timer(timer)
+
+    def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
+                t0: float) -> DamGrasp.Result:
+        result = DamGrasp.Result()
+        result.outcome = outcome
+        result.outcome_name = _OUTCOME_NAME[outcome]
+        result.message = message
+        result.duration = time.monotonic() - t0
+        with self._lock:
+            self._outcome = outcome
+            self._status_message = message
+            self._busy = False
+        if status == 'succeed':
+            goal_handle.succeed()
+        elif status == 'canceled':
+            goal_handle.canceled()
+        else:
+            goal_handle.abort()
+        self._publish_status()
+        log = self.get_logger().info if outcome == DamGrasp.Result.OUTCOME_SUCCESS else \
+            self.get_logger().warning
+        log(f'grasp ended ({status}): {result.outcome_name}: {message}')
+        return result
+
+    async def _execute(self, goal_handle: ServerGoalHandle) -> DamGrasp.Result:
+        t0 = time.monotonic()
+        try:
+            return await self._run_goal(goal_handle, t0)
+        except Exception as exc:  # noqa: BLE001 - the node must stay up and accept goals
+            self.get_logger().error(f'internal error during the grasp: {exc!r}')
+            with self._lock:
+                self._goal_handle = None
+                self._run_done = None
+                self._seq.fail(f'internal error: {exc!r}')
+            return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_ABORTED,
+                                f'internal error: {exc!r}', t0)
+
+    async def _run_goal(self, goal_handle: ServerGoalHandle, t0: float) -> DamGrasp.Result:
+        aborted = DamGrasp.Result.OUTCOME_ABORTED
+        try:
+            k, dp = self._validate_goal(goal_handle.request)
+        except InputError as exc:  # validated on arrival; kept as a guard
+            return self._finish(goal_handle, 'abort', aborted, str(exc), t0)
+        with self._lock:
+            self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN
+            self._status_message = (f'grasp k_theta {k:g} N*m/rad, delta_theta_p '
+                                    f'{math.degrees(dp):.4g} deg')
+        feedback = DamGrasp.Feedback()
+        feedback.phase = 'CHECK_LIFT'
+        answer = await self._ask_check_lift(k, dp)
+        if answer is not None and answer.ok:
+            feedback.lift_checked = True
+            feedback.lift_guaranteed = bool(answer.lift_guaranteed)
+            feedback.worst_case_margin = float(answer.worst_case_margin)
+            feedback.csm_lift = bool(answer.csm_lift)
+            feedback.csm_margin = float(answer.csm_margin)
+        goal_handle.publish_feedback(feedback)
+        if self._require_lift:
+            if answer is None:
+                return self._finish(goal_handle, 'abort', aborted,
+                                    'require_lift_guarantee is set but /check_lift did not '
+                                    'answer in time', t0)
+            if not answer.ok:
+                return self._finish(goal_handle, 'abort', aborted,
+                                    f'require_lift_guarantee is set and /check_lift rejected '
+                                    f'the pair: {answer.message}', t0)
+            if not answer.lift_guaranteed:
+                return self._finish(
+                    goal_handle, 'abort', aborted,
+                    f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
+                    f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
+                    f'(worst-case margin {answer.worst_case_margin:.4g} N)', t0)
+        with self._lock:
+            last = self._last_state_time
+            if last is None or time.monotonic() - last > self._values['state_timeout']:
+                return self._finish(goal_handle, 'abort', aborted,
+                                    'no recent /joint_states: cannot start the grasp', t0)
+            self._seq = DamSequence(self._params)
+            self._last_phase = self._seq.phase
+            self._state_timed_out = False
+            try:
+                self._seq.start(k, dp)
+            except (InputError, StateError) as exc:
+                return self._finish(goal_handle, 'abort', aborted, str(exc), t0)
+            self._publishing = True
+            self._feedback = feedback
+            self._cancel_sent = False
+            self._run_done = Future()
+            self._goal_handle = goal_handle
+        run_done = self._run_done
+        phase = await run_done
+        with self._lock:
+            self._goal_handle = None
+            self._run_done = None
+            pos = self._last_pos.copy()
+            eff = self._last_eff.copy()
+            reason = self._seq.failure_reason
+            timed_out = self._state_timed_out
+        if phase is Phase.DONE:
+            return self._classify_and_finish(goal_handle, pos, eff, t0)
+        if phase is Phase.ABORTED:
+            return self._finish(goal_handle, 'canceled' if goal_handle.is_cancel_requested
+                                else 'abort', aborted, 'cancelled: torque ramped to zero', t0)
+        outcome = aborted if timed_out else DamGrasp.Result.OUTCOME_FAILURE
+        return self._finish(goal_handle, 'abort', outcome, f'failed: {reason}', t0)
+
+    def _classify_and_finish(self, goal_handle: ServerGoalHandle, pos: np.ndarray,
+                             eff: np.ndarray, t0: float) -> DamGrasp.Result:
+        try:
+            c = classify_from_joints(self._geometry, self._layout.lower, self._layout.upper,
+                                     pos, eff, self._classifier, self._layout.joint_names)
+        except Exception as exc:  # noqa: BLE001 - the node must stay up whatever happens
+            return self._finish(goal_handle, 'succeed', DamGrasp.Result.OUTCOME_UNKNOWN,
+                                f'grasp done, classification failed: {exc!r}', t0)
+        return self._finish(goal_handle, 'succeed', _OUTCOME[c.outcome],
+                            f'grasp done: {c.reason}', t0)
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SpcmControllerNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

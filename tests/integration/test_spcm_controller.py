@@ -1,0 +1,263 @@
+"""spcm_controller over DDS: real controller, fixture plant and check_lift_server processes."""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+
+from ros_testing import RosClient, fixture_command, installed_executable, node_process
+
+pytestmark = pytest.mark.integration
+
+REPO = Path(__file__).resolve().parents[2]
+CONTROLLER = installed_executable('dam_spcm_controller', 'spcm_controller')
+# Short motions keep a full grasp at a few seconds on the synthetic plant.
+FAST = ['-p', 'trajectory_duration:=1.0', '-p', 'approach_speed:=0.5']
+INSIDE = (7.0, math.radians(10.0))  # k_theta [N*m/rad], delta_theta_p [rad]: lift guaranteed
+OUTSIDE = (0.5, math.radians(40.0))  # outside the sufficient region at alpha = 5 deg
+
+
+def controller_command(*ros_args: str) -> list[str]:
+    return [str(CONTROLLER), '--ros-args', *FAST, *ros_args]
+
+
+class Harness:
+    """Client node: action client, /hand/command and /dam/status recorders."""
+
+    def __init__(self) -> None:
+        from rclpy.action import ActionClient
+
+        from dam_interfaces.action import DamGrasp
+        from dam_interfaces.msg import DamStatus, HandCommand
+
+        self.ros = RosClient()
+        self.node = self.ros.node
+        self.commands: list[tuple[float, HandCommand]] = []
+        self.statuses: list[DamStatus] = []
+        self.node.create_subscription(HandCommand, '/hand/command', self._on_command, 100)
+        self.node.create_subscription(DamStatus, '/dam/status', self.statuses.append, 100)
+        self.action = ActionClient(self.node, DamGrasp, '/dam_grasp')
+        self.feedback: list = []
+
+    def _on_command(self, msg) -> None:
+        self.commands.append((time.monotonic(), msg))
+
+    def wait_ready(self) -> None:
+        assert self.action.wait_for_server(timeout_sec=30.0), '/dam_grasp did not appear'
+        assert self.ros.spin_until(lambda: len(self.statuses) > 0, 30.0), 'no /dam/status'
+        from sensor_msgs.msg import JointState
+
+        states: list = []
+        sub = self.node.create_subscription(JointState, '/joint_states', states.append, 10)
+        assert self.ros.spin_until(lambda: len(states) > 0, 30.0), 'no /joint_states'
+        self.node.destroy_subscription(sub)
+        from dam_interfaces.srv import CheckLift
+
+        client = self.node.create_client(CheckLift, '/check_lift')
+        assert client.wait_for_service(timeout_sec=30.0), '/check_lift did not appear'
+        self.node.destroy_client(client)
+
+    def send(self, k: list[float], dp: list[float]):
+        """Send a goal; return the goal handle (accepted or not)."""
+        from dam_interfaces.action import DamGrasp
+
+        goal = DamGrasp.Goal()
+        goal.k_theta = k
+        goal.delta_theta_p = dp
+        future = self.action.send_goal_async(goal, feedback_callback=self.feedback.append)
+        assert self.ros.spin_until(future.done, 15.0), 'no goal response'
+        return future.result()
+
+    def result(self, handle, timeout: float = 30.0):
+        future = handle.get_result_async()
+        assert self.ros.spin_until(future.done, timeout), 'no result in time'
+        return future.result()
+
+    def wait_phase(self, handle, phase: str, timeout: float) -> None:
+        """Spin until feedback shows ``phase``; on failure report the goal's result."""
+        result = handle.get_result_async()
+        if self.ros.spin_until(lambda: phase in self.phases() or result.done(), timeout) \
+                and phase in self.phases():
+            return
+        detail = result.result().result.message if result.done() else 'still running'
+        raise AssertionError(f'phase {phase} not reached: {self.phases()}; {detail}')
+
+    def phases(self) -> list[str]:
+        seen: list[str] = []
+        for fb in self.feedback:
+            if not seen or seen[-1] != fb.feedback.phase:
+                seen.append(fb.feedback.phase)
+        return seen
+
+    def set_parameter(self, name: str, value):
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+
+        request = SetParameters.Request()
+        request.parameters = [Parameter(name, value=value).to_parameter_msg()]
+        return self.ros.call(SetParameters, '/spcm_controller/set_parameters', request).results[0]
+
+    def close(self) -> None:
+        self.action.destroy()
+        self.ros.close()
+
+
+@pytest.fixture
+def stack(request) -> Iterator[tuple[Harness, object, object]]:
+    extra = getattr(request, 'param', [])
+    env = {'PYTHONPATH': os.pathsep.join([str(REPO / 'src' / 'dam_analysis'),
+                                          os.environ.get('PYTHONPATH', '')])}
+    with ExitStack() as es:
+        plant = es.enter_context(node_process(fixture_command('spcm_plant_node.py'), env))
+        es.enter_context(node_process(
+            [str(installed_executable('dam_analysis', 'check_lift_server'))]))
+        ctl = es.enter_context(node_process(controller_command(*extra)))
+        harness = Harness()
+        es.callback(harness.close)
+        harness.wait_ready()
+        yield harness, ctl, plant
+        assert ctl.alive(), ctl.output()
+
+
+def _torques(msg) -> list[float]:
+    from dam_interfaces.msg import HandCommand
+
+    return [s for m, s in zip(msg.mode, msg.setpoint, strict=True) if m == HandCommand.MODE_TORQUE]
+
+
+def test_full_grasp_second_goal_and_parameters(stack) -> None:
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    h, ctl, _plant = stack
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'APPROACH', 10.0)
+    # A second goal while one runs is rejected, and so is a parameter change.
+    second = h.send([INSIDE[0]], [INSIDE[1]])
+    assert not second.accepted
+    refused = h.set_parameter('envelope_torque', 0.1)
+    assert not refused.successful and 'grasp is running' in refused.reason
+    res = h.result(handle, 40.0)
+    assert res.status == GoalStatus.STATUS_SUCCEEDED, (res.result.message, h.phases())
+    phases = h.phases()
+    for phase in ('APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'):
+        assert phase in phases, phases
+    assert phases.index('APPROACH') < phases.index('ROLLING_UP') < phases.index('ENVELOPE')
+    checked = [f.feedback for f in h.feedback if f.feedback.lift_checked]
+    assert checked and all(fb.lift_guaranteed for fb in checked)
+    assert res.result.outcome in (DamGrasp.Result.OUTCOME_SUCCESS,
+                                  DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED,
+                                  DamGrasp.Result.OUTCOME_FAILURE)
+    assert res.result.outcome_name in ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')
+    assert res.result.message.startswith('grasp done')
+    assert res.result.duration > 1.0  # at least the 1 s trajectory
+    # Idle again: the same parameter change is accepted; a bad value is refused.
+    assert h.set_parameter('envelope_torque', 0.1).successful
+    bad = h.set_parameter('envelope_torque', 5.0)  # above torque_limit 0.6 N*m
+    assert not bad.successful and 'torque_limit' in bad.reason
+    assert ctl.alive()
+
+
+BAD_GOALS = [
+    ([math.nan], [0.2], 'k_theta'),
+    ([-1.0], [0.2], 'positive'),
+    ([1.0, 2.0], [0.2], 'expected 1 or 3'),
+    ([1.0], [0.1, 0.2], 'expected 1 or 3'),
+    ([1.0], [math.radians(80.0)], 'delta_theta_p_max'),
+    ([1.0], [0.0], 'must be positive'),
+]
+
+
+def test_bad_goals_rejected_with_reason(stack) -> None:
+    h, ctl, _plant = stack
+    for k, dp, words in BAD_GOALS:
+        h.statuses.clear()
+        handle = h.send(k, dp)
+        assert not handle.accepted, (k, dp)
+        assert h.ros.spin_until(
+            lambda w=words: any('goal rejected' in s.message and w in s.message
+                                for s in h.statuses), 10.0), (k, dp, [s.message for s in
+                                                                      h.statuses])
+        assert ctl.alive()
+    # The node still serves a good goal afterwards.
+    good = h.send([INSIDE[0]], [INSIDE[1]])
+    assert good.accepted
+    h.wait_phase(good, 'APPROACH', 10.0)
+    good.cancel_goal_async()
+    h.result(good, 20.0)
+
+
+@pytest.mark.parametrize('stack', [['-p', 'require_lift_guarantee:=true']], indirect=True)
+def test_require_lift_guarantee_refuses_pair_outside_region(stack) -> None:
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    h, _ctl, _plant = stack
+    handle = h.send([OUTSIDE[0]], [OUTSIDE[1]])
+    assert handle.accepted
+    res = h.result(handle, 20.0)
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
+    assert 'sufficient-lift region' in res.result.message
+    assert any(f.feedback.lift_checked and not f.feedback.lift_guaranteed for f in h.feedback)
+    # The inside pair starts (reaches APPROACH), then is cancelled.
+    h.feedback.clear()
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'APPROACH', 10.0)
+    handle.cancel_goal_async()
+    assert h.result(handle, 20.0).status == GoalStatus.STATUS_CANCELED
+
+
+def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    h, _ctl, _plant = stack
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'ROLLING_UP', 15.0)
+    assert any(abs(t) > 1e-3 for _, m in h.commands[-20:] for t in _torques(m))
+    cancel = handle.cancel_goal_async()
+    res = h.result(handle, 20.0)
+    assert cancel.done()
+    assert res.status == GoalStatus.STATUS_CANCELED
+    assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
+    h.ros.spin_until(lambda: False, 0.3)
+    last = h.commands[-1][1]
+    assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
+
+
+def test_plant_silence_aborts_with_zero_torque(stack) -> None:
+    from action_msgs.msg import GoalStatus
+    from std_srvs.srv import Trigger
+
+    h, _ctl, _plant = stack
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'ROLLING_UP', 15.0)
+    assert h.ros.call(Trigger, '/plant/stop', Trigger.Request()).success
+    t_stop = time.monotonic()
+    res = h.result(handle, 10.0)
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert 'joint_states silent' in res.result.message
+    h.ros.spin_until(lambda: False, 0.3)
+    last_t, last = h.commands[-1]
+    assert last_t > t_stop  # the zero-torque command came after the plant went silent
+    assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
+    assert any(s.phase == 'FAILED' for s in h.statuses)
+
+
+if __name__ == '__main__':  # pragma: no cover
+    sys.exit(pytest.main([__file__, '-v']))
