@@ -188,6 +188,24 @@ def test_bad_goals_rejected_with_reason(stack) -> None:
                                 for s in h.statuses), 10.0), (k, dp, [s.message for s in
                                                                       h.statuses])
         assert ctl.alive()
+    # Bad joint states (unknown names, NaN) are dropped with a log; the node stays up.
+    from sensor_msgs.msg import JointState
+
+    pub = h.node.create_publisher(JointState, '/joint_states', 10)
+    wrong = JointState(name=['elbow'], position=[0.0], velocity=[0.0], effort=[0.0])
+    names = [f'finger{i}_{r}_joint' for i in (1, 2, 3)
+             for r in ('compliant', 'locked', 'position')]
+    nan = JointState(name=names, position=[math.nan] * 9, velocity=[0.0] * 9,
+                     effort=[0.0] * 9)
+    for _ in range(5):
+        pub.publish(wrong)
+        pub.publish(nan)
+        h.ros.spin_until(lambda: False, 0.05)
+    assert h.ros.spin_until(lambda: 'dropped /joint_states' in ctl.output(), 10.0), \
+        ctl.output()[-2000:]
+    assert 'position of finger1_compliant_joint is nan' in ctl.output() or \
+        'joint names missing' in ctl.output()
+    assert ctl.alive()
     # The node still serves a good goal afterwards.
     good = h.send([INSIDE[0]], [INSIDE[1]])
     assert good.accepted
@@ -231,7 +249,8 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     assert any(abs(t) > 1e-3 for _, m in h.commands[-20:] for t in _torques(m))
     cancel = handle.cancel_goal_async()
     res = h.result(handle, 20.0)
-    assert cancel.done()
+    assert h.ros.spin_until(cancel.done, 10.0)
+    assert len(cancel.result().goals_canceling) == 1
     assert res.status == GoalStatus.STATUS_CANCELED
     assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
     h.ros.spin_until(lambda: False, 0.3)
