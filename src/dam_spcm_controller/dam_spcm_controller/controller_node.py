@@ -10,7 +10,8 @@ Topics and services
 /hand/command : dam_interfaces/HandCommand, published
     One command per received joint state while a grasp runs or its result is held (DONE keeps
     the envelope torque, ABORTED/FAILED ramp the torque to zero); one hold-measured command
-    at the first valid joint state after start-up.
+    at the first valid joint state after start-up. The header stamp is that of the joint
+    state the command answers.
 /dam/status : dam_interfaces/DamStatus, published at ``status_rate`` and on phase change.
 /dam_grasp : dam_interfaces/action/DamGrasp, action server.
     Goals follow the ``/check_lift`` conventions; invalid goals and goals arriving while a
@@ -35,6 +36,7 @@ import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -248,14 +250,15 @@ class SpcmControllerNode(Node):
             phase_changed = self._seq.phase is not self._last_phase
             self._last_phase = self._seq.phase
         if publish:
-            self._publish_command(cmd)
+            self._publish_command(cmd, msg.header.stamp)
         if phase_changed:
             self._publish_status()
         self._advance(feedback=phase_changed)
 
-    def _publish_command(self, cmd: JointCommand) -> None:
+    def _publish_command(self, cmd: JointCommand, stamp=None) -> None:
+        """Publish ``cmd``; ``stamp`` is that of the joint state it answers (now if None)."""
         msg = HandCommand()
-        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.stamp = stamp if stamp is not None else self.get_clock().now().to_msg()
         msg.name = list(self._layout.joint_names)
         msg.mode = [_WIRE_MODE[JointMode(int(m))] for m in cmd.modes]
         msg.setpoint = [float(v) for v in cmd.setpoints]
@@ -547,6 +550,9 @@ def main(args: list[str] | None = None) -> None:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except (ParameterException, InputError) as exc:  # bad start-up parameter: clear message
+        rclpy.logging.get_logger('spcm_controller').fatal(f'cannot start: {exc}')
+        raise SystemExit(2) from None
     finally:
         if node is not None:
             node.destroy_node()
