@@ -164,6 +164,9 @@ def test_full_grasp_second_goal_and_parameters(stack) -> None:
     assert h.set_parameter('envelope_torque', 0.1).successful
     bad = h.set_parameter('envelope_torque', 5.0)  # above torque_limit 0.6 N*m
     assert not bad.successful and 'torque_limit' in bad.reason
+    assert not h.set_parameter('trajectory_duration', 1000.0).successful  # outside its range
+    assert not h.set_parameter('status_rate', 50.0).successful  # read-only
+    assert h.set_parameter('require_lift_guarantee', True).successful
     assert ctl.alive()
 
 
