@@ -21,9 +21,9 @@ BENCH_DIR = Path(__file__).resolve().parent
 def _round_trip(client: RosClient, cli, request) -> float:
     start = time.perf_counter()
     future = cli.call_async(request)
-    client.executor.spin_until_future_complete(future, timeout_sec=5.0)
+    done = client.wait_future(future, 5.0)
     elapsed = time.perf_counter() - start
-    if not future.done():
+    if not done:
         raise RuntimeError('service call timed out')
     return elapsed
 

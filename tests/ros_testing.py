@@ -50,7 +50,8 @@ class NodeProcess:
 
     def output(self) -> str:
         """Everything the process printed so far."""
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return Path(self._log.name).read_text(encoding='utf-8', errors='replace')
 
     def alive(self) -> bool:
@@ -117,12 +118,25 @@ class RosClient:
             if not client.wait_for_service(timeout_sec=wait):
                 raise AssertionError(f'service {name} did not appear within {wait} s')
             future = client.call_async(request)
-            self.executor.spin_until_future_complete(future, timeout_sec=timeout)
-            if not future.done():
+            if not self.wait_future(future, timeout):
                 raise AssertionError(f'service {name} did not answer within {timeout} s')
             return future.result()
         finally:
             self.node.destroy_client(client)
+
+    def wait_future(self, future: Any, timeout: float) -> bool:
+        """Spin until ``future`` is done or ``timeout`` seconds pass; return whether it is done.
+
+        A plain ``spin_once`` loop: rclpy's ``spin_until_future_complete`` with a time-out adds
+        about a millisecond per call, which dominates service round trips.
+        """
+        deadline = time.monotonic() + timeout
+        while not future.done():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                return False
+            self.executor.spin_once(timeout_sec=min(remaining, 0.1))
+        return True
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float) -> bool:
         """Spin until ``predicate()`` is true or ``timeout`` seconds pass; return the predicate."""

@@ -76,8 +76,8 @@ class CheckLiftServer(Node):
     def _on_request(self, request: CheckLift.Request,
                     response: CheckLift.Response) -> CheckLift.Response:
         friction_angle = float(request.friction_angle)
-        if friction_angle < 0.0:  # includes -inf; NaN falls through to the core's validation
-            friction_angle = self._default_friction_angle
+        if math.isfinite(friction_angle) and friction_angle < 0.0:
+            friction_angle = self._default_friction_angle  # NaN/inf: rejected by the core
         try:
             result = self._analyzer.check_lift(
                 list(request.k_theta), list(request.delta_theta_p), friction_angle)
