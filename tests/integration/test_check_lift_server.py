@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros_testing import RosClient, installed_executable, node_process
 
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.config import load_config
+from ros_testing import RosClient, installed_executable, node_process
 
 pytestmark = pytest.mark.integration
 
@@ -172,9 +172,10 @@ def test_fuzz_thousands_of_requests_then_a_valid_one(client: RosClient, server,
 
 
 def test_params_file_and_parameter_validation(tmp_path: Path) -> None:
-    from dam_interfaces.srv import CheckLift
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
+
+    from dam_interfaces.srv import CheckLift
 
     params = tmp_path / 'params.yaml'
     alpha = math.radians(30.0)
@@ -184,7 +185,8 @@ def test_params_file_and_parameter_validation(tmp_path: Path) -> None:
                        '--params-file', str(params)]) as proc:
         ros = RosClient()
         try:
-            req = _request([2.0], [math.radians(20.0)], CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG)
+            req = _request([2.0], [math.radians(20.0)],
+                           CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG)
             via_default = ros.call(CheckLift, '/paramtest/check_lift', req)
             req.friction_angle = alpha
             explicit = ros.call(CheckLift, '/paramtest/check_lift', req)
