@@ -151,12 +151,22 @@ def test_envelope_applies_constant_torque_after_ramp(params):
     seq, hand = _started(params)
     t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
     assert seq.phase is Phase.ENVELOPE
-    _, log = run(seq, hand, t + 0.001, t + 0.4)
+    t_end, log = run(seq, hand, t + 0.001, t + 0.4)
     first = log[0][2].setpoints
-    modes, sets = log[-1][2].modes, log[-1][2].setpoints
-    assert np.all(modes[0::3] == JointMode.TORQUE) and np.all(modes[2::3] == JointMode.TORQUE)
-    assert np.allclose(sets[0::3], params.envelope_torque)
-    assert np.allclose(sets[2::3], params.envelope_torque)
+    last = seq.step(t_end + 0.001, hand.q, hand.qd, hand.effort)
+    modes, sets = last.modes, last.setpoints
+    assert seq.phase is Phase.ENVELOPE
+    assert np.all(modes[0::3] == JointMode.TORQUE)
+    # the position joints stay servoed at the end of their trajectory (no torque on them)
+    assert np.all(modes[2::3] == JointMode.POSITION)
+    goal = params.layout.initial_position_angle + seq.delta_theta_p
+    assert np.allclose(sets[2::3], goal)
+    # finger i gets envelope_torque * ratio_i / max(ratio) (balanced: finger 1 opposes 2 and 3),
+    # minus the damping term
+    ratios = params.layout.stiffness_ratios
+    expected = params.envelope_torque * ratios / ratios.max() - params.damping * hand.qd[0::3]
+    assert np.allclose(sets[0::3], expected, atol=1e-9)
+    assert sets[0] == pytest.approx(2.0 * sets[3], rel=0.05, abs=1e-4)
     # bumpless: the first envelope command is close to the last rolling-up torque, not a jump
     assert np.all(np.abs(first[0::3] - params.envelope_torque) > 0.0)
 
@@ -165,9 +175,11 @@ def test_done_keeps_the_envelope_torque(params):
     seq, hand = _started(params)
     t, _ = _run_to(seq, hand, Phase.DONE, 0.051)
     assert seq.phase is Phase.DONE
-    _, log = run(seq, hand, t + 0.001, t + 1.0)
-    cmd = log[-1][2]
-    assert np.allclose(cmd.setpoints[0::3], params.envelope_torque)
+    t_end, log = run(seq, hand, t + 0.001, t + 1.0)
+    cmd = seq.step(t_end + 0.001, hand.q, hand.qd, hand.effort)
+    ratios = params.layout.stiffness_ratios
+    expected = params.envelope_torque * ratios / ratios.max() - params.damping * hand.qd[0::3]
+    assert np.allclose(cmd.setpoints[0::3], expected, atol=1e-9)
     assert log[-1][1] is Phase.DONE
 
 

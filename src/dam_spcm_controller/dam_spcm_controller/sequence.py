@@ -22,8 +22,12 @@ ROLLING_UP
     pre-shape angle by ``delta_theta_p`` over ``trajectory_duration``; compliant joints run the
     impedance law ``tau_s = k_theta_i (theta_0 - theta) - d theta_dot``.
 ENVELOPE
-    Constant torque ``envelope_torque`` on the compliant and the position joints closes the
-    enveloping grasp (paper Fig. 6(d)); it is ramped in from the torque at phase entry.
+    Constant torque ``envelope_torque`` (ramped in from the torque at phase entry, plus the
+    damping ``-d theta_dot``) on the compliant joints closes the enveloping grasp (paper Fig.
+    6(d)); the position joints stay position-controlled at the end of their trajectory. They
+    are not switched to torque control: a distal link has a moment of inertia of a few
+    1e-6 kg*m^2 about its joint, which no torque loop at the device rate can damp (``d dt / I``
+    is far above 2), so a constant torque there throws the object instead of wrapping it.
 DONE
     The envelope torque is kept (the object stays grasped).
 ABORTED, FAILED
@@ -248,6 +252,7 @@ class DamSequence:
         self._relax_from = np.zeros(self._nj)
         self._relax_scale = 1.0
         self._last_theta_c = np.zeros(n)
+        self._envelope_goal = np.zeros(n)
 
     # ------------------------------------------------------------------------------------
     # Public state
@@ -593,10 +598,10 @@ class DamSequence:
         self._progress = _PROGRESS_ROLLING
         self._tau_from[:] = 0.0
         self._tau_from[self._c] = self._set[self._c]  # last compliant torque command
-        self._tau_from[self._q] = np.clip(eff[self._q], -self._p.torque_limit,
-                                          self._p.torque_limit)  # position servo torque
+        ratios = self._p.layout.stiffness_ratios
+        self._envelope_goal = self._p.envelope_torque * ratios / float(ratios.max())
         self._modes[self._c] = JointMode.TORQUE
-        self._modes[self._q] = JointMode.TORQUE
+        self._modes[self._q] = JointMode.POSITION  # stays at the trajectory's goal
         self._modes[self._l] = JointMode.HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
         self._settled_since = None
@@ -605,8 +610,10 @@ class DamSequence:
         p = self._p
         elapsed = t - self._t_envelope
         frac = 1.0 if p.torque_ramp_time <= 0.0 else min(elapsed / p.torque_ramp_time, 1.0)
-        for sl in (self._c, self._q):
-            self._set[sl] = self._tau_from[sl] + (p.envelope_torque - self._tau_from[sl]) * frac
+        c = self._c
+        goal = self._envelope_goal
+        tau = self._tau_from[c] + (goal - self._tau_from[c]) * frac
+        self._set[c] = np.clip(tau - p.damping * vel[c], -p.torque_limit, p.torque_limit)
         if self._phase is Phase.DONE:
             return
         settled_frac = 0.0
