@@ -24,6 +24,7 @@ setup(
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
             'sim_bridge = dam_sim_bridge.sim_bridge_node:main',
+            'dam_experiment = dam_sim_bridge.experiment:main',
         ],
     },
 )

@@ -24,7 +24,9 @@ def cfg() -> DamConfig:
 
 @pytest.fixture
 def world(cfg: DamConfig) -> Iterator[HandWorld]:
-    w = HandWorld(cfg)
+    """The bare fingers (no drive inertia, no palm): the tests check the links' own dynamics."""
+    w = HandWorld(cfg, WorldOptions.from_config(cfg, compliant_rotor_inertia_kg_m2=0.0,
+                                                palm_thickness_m=0.0))
     yield w
     w.close()
 
@@ -267,6 +269,43 @@ def test_limit_fault_flags_joints_at_their_limits(world: HandWorld) -> None:
 
 # --------------------------------------------------------------------------------------------
 # Modes
+
+
+def test_rotor_inertia_adds_to_the_compliant_joint(cfg: DamConfig) -> None:
+    """The drive inertia J slows a torque-driven compliant joint to tau / (I_finger + J)."""
+    rotor = 5e-4
+    with HandWorld(cfg, WorldOptions.from_config(
+            cfg, compliant_rotor_inertia_kg_m2=rotor)) as w:
+        w.set_gravity((0.0, 0.0, 0.0))
+        q0 = w.joint_states().positions
+        tau = 0.004
+        w.set_joint_commands([T, H, H] * 3, [tau, math.nan, math.nan] * 3)
+        steps = 20
+        w.step(steps)
+        q = w.joint_states().positions
+        inertia = _finger_inertia(cfg, w, q0[0:3]) + rotor
+        expected = _displacement(tau / inertia, steps, w.time_step_s)
+        assert q[0] - q0[0] == pytest.approx(expected, rel=0.01)
+        # more than 4 times slower than the bare finger (~1.1e-4 kg*m^2)
+        assert expected < _displacement(tau / (inertia - rotor), steps, w.time_step_s) / 4.0
+
+
+def test_palm_stops_the_object_above_the_fingers(cfg: DamConfig) -> None:
+    """The palm's underside is the base plane; an object pushed up stops there, and the
+    palm does not touch the fingers at any joint angle."""
+    with HandWorld(cfg) as w:
+        assert w.palm_id is not None
+        base_z = max(float(f.base_position_m[2]) for f in cfg.hand.fingers)
+        r = cfg.object.radius_m
+        w.reset(object_position=[0.0, 0.0, base_z - r - 0.001])
+        w.set_gravity((0.0, 0.0, 9.81))  # "falls" upwards onto the palm
+        w.step(500)
+        z = float(w.object_pose().position[2])
+        assert z == pytest.approx(base_z - r, abs=1e-3)
+        hand = w.client.getContactPoints(w.palm_id, w.hand_id)
+        assert hand == ()
+    with HandWorld(cfg, WorldOptions.from_config(cfg, palm_thickness_m=0.0)) as w:
+        assert w.palm_id is None
 
 
 def test_hold_keeps_the_angle_at_the_switch(world: HandWorld) -> None:

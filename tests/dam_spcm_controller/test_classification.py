@@ -202,5 +202,10 @@ def test_settings_and_inputs_are_validated():
 
 def test_settings_from_config_use_the_contact_threshold():
     s = ClassifierSettings.from_config(CFG, lift_height=0.01)
-    assert s.load_torque_threshold == CFG.controller.contact_torque_threshold_nm
+    # scaled to the least stiff finger's share (fingers 2 and 3: ratio 0.5 of finger 1)
+    ratios = CFG.hand.stiffness_ratios
+    expected = CFG.controller.contact_torque_threshold_nm * ratios.min() / ratios.max()
+    assert s.load_torque_threshold == pytest.approx(expected)
+    assert s.load_torque_threshold == pytest.approx(
+        0.5 * CFG.controller.contact_torque_threshold_nm)
     assert s.lift_height == 0.01

@@ -13,7 +13,17 @@ Model
 * Link ``i`` is a capsule of radius ``hand.link_radius_m`` whose segment runs from joint ``i``
   to joint ``i + 1`` (``hand.link_lengths_m``); the last segment ends at the fingertip centre.
   Its mass is :attr:`WorldOptions.link_masses_kg`, its centre of mass the segment midpoint and
-  its inertia that of a solid cylinder of the segment's length and the link radius.
+  its inertia that of a solid cylinder of the segment's length and the link radius. The
+  compliant link also carries :attr:`WorldOptions.compliant_rotor_inertia_kg_m2` about its
+  joint axis: the reflected inertia of the joint's drive (motor and reduction). The first link
+  hangs from the fixed palm by the compliant joint alone, so this is exactly a rotor inertia
+  on that joint; it changes no mass, no gravity load and no static torque.
+* The palm is a static box (:attr:`WorldOptions.palm_thickness_m`) whose underside is the
+  plane of the finger bases, between the fingers (2 mm clear of the capsules at the base
+  joints; it never collides with the fingers). It is what the object is pressed against in
+  the enveloping grasp (paper section 2: "lifting it up toward the palm, and firmly
+  grasping"); without it a cylinder squeezed below its equator by constant finger torques
+  squirts upward out of the hand. Its friction with the object is the fingers' ``tan(alpha)``.
 * The table is a static box whose top is the plane ``z = 0``; the cylinder (``object``) lies on
   it with its axis along ``object.axis``. Its collision shape is a regular prism of
   :attr:`WorldOptions.object_faces` faces tangent to the cylinder (zero collision margin), with
@@ -98,6 +108,14 @@ class WorldOptions:
         and gravity tests hold to 1-3 %).
     object_faces
         Faces of the prism that stands in for the cylinder's collision shape.
+    compliant_rotor_inertia_kg_m2
+        Reflected drive inertia on every compliant joint [kg*m^2] (about 5e-4 for a small
+        motor, 1e-7 kg*m^2, through a 70:1 reduction). Without it a compliant joint has only
+        the finger's own ~1.1e-4 kg*m^2, and the impedance loop closed over the device link
+        (a few milliseconds of delay) is unstable at stiffnesses of the sufficient-lift
+        region (``k_theta`` of 6-35 N*m/rad). Zero disables it.
+    palm_thickness_m
+        Thickness of the palm box above the base plane [m]; zero: no palm.
     """
 
     time_step_s: float = 1.0e-3
@@ -110,6 +128,8 @@ class WorldOptions:
     velocity_gain: float = 1.0
     solver_iterations: int = 20
     object_faces: int = 64
+    compliant_rotor_inertia_kg_m2: float = 5.0e-4
+    palm_thickness_m: float = 0.01
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.time_step_s) and 1e-5 <= self.time_step_s <= 0.01):
@@ -128,6 +148,10 @@ class WorldOptions:
                                    f'{self.initial_compliant_angle_rad!r} is not finite')
         if not 16 <= int(self.object_faces) <= 256:
             raise WorldConfigError(f'object_faces {self.object_faces!r} is outside [16, 256]')
+        for name in ('compliant_rotor_inertia_kg_m2', 'palm_thickness_m'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise WorldConfigError(f'{name} {value!r} must be a number >= 0')
         if int(self.solver_iterations) < 1:
             raise WorldConfigError(f'solver_iterations {self.solver_iterations!r} must be >= 1')
 
@@ -220,7 +244,8 @@ def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
     return transverse, transverse, 0.5 * mass_kg * radius_m**2
 
 
-def hand_urdf(config: DamConfig, link_masses_kg: Sequence[float]) -> str:
+def hand_urdf(config: DamConfig, link_masses_kg: Sequence[float],
+              compliant_rotor_inertia_kg_m2: float = 0.0) -> str:
     """URDF text of the hand (fixed palm, three joints per finger) built from ``config``.
 
     Parameters
@@ -229,6 +254,9 @@ def hand_urdf(config: DamConfig, link_masses_kg: Sequence[float]) -> str:
         A ``DamConfig``.
     link_masses_kg
         Mass of each link, base to tip [kg].
+    compliant_rotor_inertia_kg_m2
+        Added to the first (compliant) link's inertia about the joint axis (local y)
+        [kg*m^2].
     """
     hand = config.hand
     r = hand.link_radius_m
@@ -242,6 +270,10 @@ def hand_urdf(config: DamConfig, link_masses_kg: Sequence[float]) -> str:
             length = float(hand.link_lengths_m[i])
             mass = float(link_masses_kg[i])
             ixx, iyy, izz = solid_cylinder_inertia(mass, length, r)
+            if i == 0:  # a disc rotor about y (valid tensor: J/2 about the other axes,
+                # which the joint does not let turn)
+                rotor = float(compliant_rotor_inertia_kg_m2)
+                ixx, iyy, izz = ixx + rotor / 2.0, iyy + rotor, izz + rotor / 2.0
             lo, hi = hand.joint_limits_rad[role]
             link = f'{finger.name}_{role}_link'
             if i == 0:
@@ -324,7 +356,8 @@ class HandWorld:
 
     def _build(self) -> None:
         pb = self._pb
-        urdf = hand_urdf(self.config, self.link_masses_kg)
+        urdf = hand_urdf(self.config, self.link_masses_kg,
+                         self.options.compliant_rotor_inertia_kg_m2)
         fd, path = tempfile.mkstemp(suffix='.urdf', prefix='dam_hand_')
         try:
             with os.fdopen(fd, 'w', encoding='utf-8') as handle:
@@ -357,6 +390,7 @@ class HandWorld:
         box_vis = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=[hx, hy, hz],
                                        rgbaColor=[0.6, 0.5, 0.4, 1.0])
         self.table_id = pb.createMultiBody(0.0, box, box_vis, basePosition=[0.0, 0.0, -hz])
+        self.palm_id = self._build_palm()
         # Object: the cylinder, local z along object.axis.
         obj = self.config.object
         cyl = pb.createCollisionShape(
@@ -379,6 +413,33 @@ class HandWorld:
         self._pb.setJointMotorControlArray(
             self.hand_id, self._joints.indices, pybullet.VELOCITY_CONTROL,
             forces=[0.0] * self.n_joints)
+
+    def _build_palm(self) -> int | None:
+        """The static palm box (see the module docstring); ``None`` if disabled."""
+        thickness = float(self.options.palm_thickness_m)
+        if thickness <= 0.0:
+            return None
+        hand = self.config.hand
+        bases = np.array([f.base_position_m for f in hand.fingers], dtype=float)
+        clear = float(hand.link_radius_m) + 0.002
+        half_x = float(np.abs(bases[:, 0]).min()) - clear
+        half_y = float(np.abs(bases[:, 1]).max()) + clear
+        if half_x <= 0.0:
+            raise WorldConfigError('the finger bases leave no room for a palm; set '
+                                   'palm_thickness_m = 0')
+        half = [half_x, half_y, thickness / 2.0]
+        centre = [float(bases[:, 0].mean()), float(bases[:, 1].mean()),
+                  float(bases[:, 2].max()) + thickness / 2.0]
+        pb = self._pb
+        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        vis = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=half,
+                                   rgbaColor=[0.3, 0.3, 0.3, 1.0])
+        palm = pb.createMultiBody(0.0, box, vis, basePosition=centre)
+        for j in [-1, *self._joints.indices]:
+            pb.setCollisionFilterPair(palm, self.hand_id, -1, j, 0)
+        pb.changeDynamics(palm, -1, restitution=0.0, rollingFriction=0.0,
+                          spinningFriction=0.0)
+        return int(palm)
 
     # ---------------------------------------------------------------------------------------
     # Settings
@@ -434,6 +495,8 @@ class HandWorld:
         mu = math.tan(a)
         for j in self._joints.indices:
             self._pb.changeDynamics(self.hand_id, j, lateralFriction=mu)
+        if self.palm_id is not None:
+            self._pb.changeDynamics(self.palm_id, -1, lateralFriction=mu)
         self._pb.changeDynamics(self.object_id, -1, lateralFriction=1.0)
 
     def set_table_friction(self, coefficient: float) -> None:

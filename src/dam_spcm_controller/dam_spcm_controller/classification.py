@@ -315,9 +315,14 @@ class ClassifierSettings:
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: float) -> ClassifierSettings:
         """Settings from the ``classification`` section; the load threshold is the
-        controller's contact threshold. ``overrides`` replace individual attributes."""
+        controller's contact threshold scaled by the smallest over the largest stiffness ratio
+        (the least stiff finger's share). ``overrides`` replace individual attributes."""
         cl = config.classification
-        values = {'load_torque_threshold': config.controller.contact_torque_threshold_nm,
+        # The weakest finger carries the smallest share of the load: fingers 2 and 3 have
+        # half finger 1's stiffness and hold the object with half its torque.
+        ratios = [float(f.stiffness_ratio) for f in config.hand.fingers]
+        load = config.controller.contact_torque_threshold_nm * min(ratios) / max(ratios)
+        values = {'load_torque_threshold': load,
                   'contact_tolerance': cl.contact_tolerance_m,
                   'lift_height': cl.lift_height_m,
                   'cage_depth_ratio': cl.cage_depth_ratio,

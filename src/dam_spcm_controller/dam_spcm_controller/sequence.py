@@ -15,21 +15,26 @@ APPROACH
     ``initial_position_angle`` (15 deg), both at ``approach_speed``; compliant joints stay
     under impedance around their measured angle. Closing: the equilibrium of each compliant
     joint moves inward at ``approach_speed`` until the compliant-joint torque sensor of that
-    finger reads at least ``contact_torque_threshold``; then ``theta_0`` of that finger is
-    latched at its measured angle, so that ``tau_s = 0`` in the initial state (section 3.2).
+    finger has read at least ``contact_torque_threshold`` for ``contact_confirm_time`` (a
+    single reading is not enough: the impedance loop's transients after the torque ramp-in
+    reach the threshold on a stiff joint); then ``theta_0`` of that finger is latched at its
+    measured angle, so that ``tau_s = 0`` in the initial state (section 3.2).
 ROLLING_UP
     SPCM{K_theta, delta_theta_p}: position joints follow a minimum-jerk trajectory from the
     pre-shape angle by ``delta_theta_p`` over ``trajectory_duration``; compliant joints run the
     impedance law ``tau_s = k_theta_i (theta_0 - theta) - d theta_dot``.
 ENVELOPE
-    Constant torque ``envelope_torque`` (ramped in from the torque at phase entry, plus the
-    damping ``-d theta_dot``) on the compliant joints closes the enveloping grasp (paper Fig.
-    6(d)); the position joints stay position-controlled at the end of their trajectory. They
-    are not switched to torque control: a distal link has a moment of inertia of a few
-    1e-6 kg*m^2 about its joint, which no torque loop at the device rate can damp (``d dt / I``
-    is far above 2), so a constant torque there throws the object instead of wrapping it.
+    The fingers hold the SPCM grasp that lifted the object: the compliant joints keep the
+    impedance law around ``theta_0``, its torque capped at the finger's envelope torque
+    ``envelope_torque * stiffness_ratio_i / max(stiffness_ratio)`` (balanced: finger 1
+    opposes fingers 2 and 3); the position joints stay at the end of their trajectory.
+    Why not the paper's constant torque (Fig. 6(d))? In the simulator a constant torque has
+    no stiffness: a cylinder held below its equator with a 5 deg friction angle slides up
+    between fingertips that keep closing and leaves the hand sideways, and a constant torque
+    on a position joint (a distal link of a few 1e-6 kg*m^2, which no torque loop at the
+    device rate can damp) throws it. Ends when the fingers have settled.
 DONE
-    The envelope torque is kept (the object stays grasped).
+    The ENVELOPE commands are kept (the object stays grasped).
 ABORTED, FAILED
     The fingers relax: every torque command ramps linearly to zero over ``torque_ramp_time``;
     moving position setpoints become HOLD at their last value.
@@ -114,7 +119,9 @@ class SequenceParams:
         Torque ramp-in at APPROACH and ENVELOPE entry, ramp-out on abort/failure [s].
     lost_contact_time
         During ROLLING_UP a finger counts as loaded once its static compliant torque
-        ``tau_s = -k_theta_i delta_theta_s`` reaches ``contact_torque_threshold``; a loaded
+        ``tau_s = -k_theta_i delta_theta_s`` has stayed at or above
+        ``contact_torque_threshold`` this long (a bounce at first contact does not arm the
+        check); a loaded
         finger whose ``tau_s`` then stays below ``lost_contact_ratio *
         contact_torque_threshold`` this long has lost contact [s].
     lost_contact_ratio
@@ -126,6 +133,8 @@ class SequenceParams:
     limit_margin
         A torque-controlled joint fails this close to a joint limit; a position-controlled
         joint fails this far beyond one [rad].
+    contact_confirm_time
+        The contact torque must persist this long during APPROACH [s].
     """
 
     layout: HandLayout
@@ -143,9 +152,10 @@ class SequenceParams:
     settle_speed: float = 0.05
     settle_time: float = 0.3
     limit_margin: float = math.radians(0.5)
+    contact_confirm_time: float = 0.03
 
     def __post_init__(self) -> None:
-        for name in ('damping', 'torque_ramp_time'):
+        for name in ('damping', 'torque_ramp_time', 'contact_confirm_time'):
             object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
                                                          nonnegative=True))
         for name in ('torque_limit', 'trajectory_duration', 'envelope_torque',
@@ -241,6 +251,8 @@ class DamSequence:
         self._contact = np.zeros(n, dtype=bool)
         self._loaded = np.zeros(n, dtype=bool)
         self._below_since = np.full(n, np.nan)
+        self._above_since = np.full(n, np.nan)  # APPROACH: torque above threshold since
+        self._loaded_since = np.full(n, np.nan)  # ROLLING_UP: tau_s above threshold since
         self._eq_start = np.zeros(n)
         self._preshape_from = np.zeros(self._nj)
         self._preshape_to = np.zeros(self._nj)
@@ -469,7 +481,7 @@ class DamSequence:
         elif phase is Phase.ROLLING_UP:
             self._step_rolling(t, pos, vel, eff)
         if self._phase is Phase.ENVELOPE or self._phase is Phase.DONE:
-            self._step_envelope(t, vel)
+            self._step_envelope(t, pos, vel)
         if self._phase is Phase.ABORTED or self._phase is Phase.FAILED:
             self._step_relax(t)
         return JointCommand(modes=self._modes.copy(), setpoints=self._set.copy())
@@ -519,7 +531,10 @@ class DamSequence:
         closing_time = max(elapsed - self._preshape_time, 0.0)
         theta_eq = self._eq_start + p.approach_speed * closing_time
         if preshaped:
-            new = (~self._contact) & (eff[self._c] >= p.contact_torque_threshold)
+            above = (~self._contact) & (eff[self._c] >= p.contact_torque_threshold)
+            self._above_since = np.where(above, np.where(np.isnan(self._above_since), t,
+                                                         self._above_since), np.nan)
+            new = above & (t - self._above_since >= p.contact_confirm_time - _TIME_EPS)
             if new.any():
                 self._theta_0[new] = pos[self._c][new]
                 self._contact |= new
@@ -555,6 +570,7 @@ class DamSequence:
             start, np.full(self._n, self._delta_theta_p), p.trajectory_duration)
         self._loaded[:] = False
         self._below_since[:] = np.nan
+        self._loaded_since[:] = np.nan
         self._modes[self._q] = JointMode.POSITION
         self._modes[self._c] = JointMode.TORQUE
         self._modes[self._l] = JointMode.HOLD
@@ -576,7 +592,10 @@ class DamSequence:
         # the paper's tau_s = -K_theta delta_theta_s from the encoders (the torque sensor would
         # still show the approach torque for a cycle after the contact posture is latched).
         tau_c = self._k_theta_i * (self._theta_0 - pos[self._c])
-        self._loaded |= tau_c >= p.contact_torque_threshold
+        over = tau_c >= p.contact_torque_threshold
+        self._loaded_since = np.where(over, np.where(np.isnan(self._loaded_since), t,
+                                                     self._loaded_since), np.nan)
+        self._loaded |= over & (t - self._loaded_since >= p.lost_contact_time - _TIME_EPS)
         release = p.lost_contact_ratio * p.contact_torque_threshold
         below = self._loaded & (tau_c < release)
         self._below_since = np.where(below, np.where(np.isnan(self._below_since), t,
@@ -606,14 +625,14 @@ class DamSequence:
         self._set[self._l] = self._p.layout.initial_locked_angle
         self._settled_since = None
 
-    def _step_envelope(self, t: float, vel: np.ndarray) -> None:
+    def _step_envelope(self, t: float, pos: np.ndarray, vel: np.ndarray) -> None:
         p = self._p
         elapsed = t - self._t_envelope
         frac = 1.0 if p.torque_ramp_time <= 0.0 else min(elapsed / p.torque_ramp_time, 1.0)
         c = self._c
-        goal = self._envelope_goal
-        tau = self._tau_from[c] + (goal - self._tau_from[c]) * frac
-        self._set[c] = np.clip(tau - p.damping * vel[c], -p.torque_limit, p.torque_limit)
+        hold = self._compliant_torque(self._theta_0, pos, vel)
+        cap = self._tau_from[c] + (self._envelope_goal - self._tau_from[c]) * frac
+        self._set[c] = np.minimum(hold, np.maximum(cap, 0.0))
         if self._phase is Phase.DONE:
             return
         settled_frac = 0.0

@@ -1,0 +1,377 @@
+"""DAM grasp experiment in lockstep: :class:`HandWorld` and the controller core, no ROS.
+
+:func:`run_experiment` steps a :class:`~dam_sim_bridge.world.HandWorld` and a
+:class:`~dam_spcm_controller.sequence.DamSequence` together at the device rate
+(``device.rate_hz``): each cycle the sequence sees the joint state and its command reaches the
+world ``latency_cycles`` later, torque commands slew-limited like the driver does
+(``device.torque_rate_limit_nm_per_s``). It returns the controller's end phase, the outcome as
+the controller would classify it from joint signals alone, the ground-truth lift of the object
+and, on request, the recorded signals.
+
+``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
+friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
+
+    ros2 run dam_sim_bridge dam_experiment --alpha 5 30 --k-theta 0.5 2 7 15 \\
+        --delta-theta-p 5 10 15 25 40 --out results.csv
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dam_hand_driver.protocol import JointMode as WireMode
+from dam_sim_bridge.world import HandWorld
+from dam_spcm_controller.classification import (
+    ClassifierSettings,
+    HandGeometry,
+    Outcome,
+    classify_from_joints,
+)
+from dam_spcm_controller.commands import JointMode
+from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
+
+#: Controller JointMode -> world (wire protocol) JointMode.
+_TO_WORLD = {int(JointMode.HOLD): int(WireMode.HOLD),
+             int(JointMode.POSITION): int(WireMode.POSITION),
+             int(JointMode.TORQUE): int(WireMode.TORQUE)}
+#: Phase -> small integer for the recorded signals.
+PHASE_CODES = {phase: i for i, phase in enumerate(Phase)}
+
+
+@dataclass
+class ExperimentResult:
+    """What one lockstep DAM grasp did.
+
+    Attributes
+    ----------
+    k_theta
+        Finger-1 stiffness [N*m/rad].
+    delta_theta_p
+        Position-joint displacement [rad].
+    friction_angle
+        Finger-object friction angle [rad].
+    phase
+        Phase the sequence ended in (DONE, FAILED, or the phase at ``max_time``).
+    failure_reason
+        The sequence's reason for FAILED, else ``None``.
+    outcome
+        Outcome the controller reports: classification of the final joint state when DONE,
+        ``Outcome.FAILURE`` otherwise (as ``spcm_controller`` does).
+    joint_reason
+        The classifier's explanation (or the failure reason).
+    lifted
+        Ground truth: the object centre ended at least ``lift_height`` above its start.
+    lift_final
+        Rise of the object centre at the end [m].
+    lift_max
+        Largest rise during the run [m].
+    lift_rolling_end
+        Rise at the end of ROLLING_UP [m] (NaN if not reached).
+    phase_times
+        Simulated time at which each phase was entered [s].
+    sim_time
+        Simulated duration of the run [s].
+    wall_time
+        Wall-clock duration [s].
+    signals
+        Recorded arrays (see :func:`run_experiment`), empty unless ``record=True``.
+    """
+
+    k_theta: float
+    delta_theta_p: float
+    friction_angle: float
+    phase: Phase
+    failure_reason: str | None
+    outcome: Outcome
+    joint_reason: str
+    lifted: bool
+    lift_final: float
+    lift_max: float
+    lift_rolling_end: float
+    phase_times: dict[str, float]
+    sim_time: float
+    wall_time: float
+    signals: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def row(self) -> dict[str, object]:
+        """One CSV row (angles in degrees, lengths in millimetres)."""
+        return {
+            'alpha_deg': round(math.degrees(self.friction_angle), 6),
+            'k_theta_nm_per_rad': self.k_theta,
+            'delta_theta_p_deg': round(math.degrees(self.delta_theta_p), 6),
+            'phase': self.phase.name,
+            'outcome': self.outcome.name,
+            'lifted_ground_truth': int(self.lifted),
+            'lift_final_mm': round(self.lift_final * 1e3, 3),
+            'lift_max_mm': round(self.lift_max * 1e3, 3),
+            'lift_rolling_end_mm': round(self.lift_rolling_end * 1e3, 3),
+            'sim_time_s': round(self.sim_time, 3),
+            'reason': self.failure_reason or self.joint_reason,
+        }
+
+
+def _slew(previous: np.ndarray, target: np.ndarray, limit: float, rate: float,
+          dt: float) -> np.ndarray:
+    """The driver's torque slew: clamp to +-``limit`` [N*m], move by at most ``rate * dt``."""
+    target = np.clip(target, -limit, limit)
+    return previous + np.clip(target - previous, -rate * dt, rate * dt)
+
+
+def run_experiment(config, k_theta: float, delta_theta_p: float, *,
+                   friction_angle: float | None = None, world: HandWorld | None = None,
+                   latency_cycles: int = 2, max_time: float = 20.0, settle_after: float = 0.0,
+                   record: bool = False, record_every: int = 5,
+                   **param_overrides: float) -> ExperimentResult:
+    """Run one DAM grasp ``SPCM{k_theta, delta_theta_p}`` in lockstep.
+
+    Parameters
+    ----------
+    config
+        ``DamConfig`` (``dam_analysis.config.load_config()``).
+    k_theta
+        Finger-1 stiffness [N*m/rad] (the others by their stiffness ratio).
+    delta_theta_p
+        Position-joint displacement [rad].
+    friction_angle
+        Finger-object friction angle [rad]; ``None``: the configured one.
+    world
+        A world to reuse (it is reset); by default a new one, closed at the end.
+    latency_cycles
+        Device cycles between a state and the command computed from it reaching the world
+        (>= 1; the ROS path has about 1-3).
+    max_time
+        Longest simulated time [s].
+    settle_after
+        Keep running this long after DONE (the object must stay up) [s].
+    record
+        Record ``t`` [s], ``positions`` [rad], ``velocities`` [rad/s], ``efforts`` [N*m],
+        ``object_position`` [m], ``phase`` (codes of :data:`PHASE_CODES`) every
+        ``record_every`` cycles.
+    param_overrides
+        Replace :class:`SequenceParams` attributes (e.g. ``damping=0.02``).
+
+    Raises
+    ------
+    ValueError
+        ``latency_cycles`` < 1, or a bad ``max_time``.
+    dam_spcm_controller.errors.InputError
+        A bad ``k_theta``, ``delta_theta_p`` or parameter override.
+    """
+    if int(latency_cycles) < 1:
+        raise ValueError(f'latency_cycles must be >= 1, got {latency_cycles!r}')
+    if not (math.isfinite(max_time) and max_time > 0.0):
+        raise ValueError(f'max_time must be positive, got {max_time!r} s')
+    wall0 = time.monotonic()
+    own_world = world is None
+    w = world if world is not None else HandWorld(config)
+    try:
+        alpha = (float(config.contact.friction_angle_rad) if friction_angle is None
+                 else float(friction_angle))
+        w.reset(friction_angle_rad=alpha)
+        params = SequenceParams.from_config(config, **param_overrides)
+        seq = DamSequence(params)
+        geometry = HandGeometry.from_config(config)
+        settings = ClassifierSettings.from_config(config)
+        dev = config.device
+        dt = 1.0 / float(dev.rate_hz)
+        steps = max(1, round(dt / w.time_step_s))
+        z0 = float(w.object_pose().position[2])
+        js = w.joint_states()
+        seq.step(0.0, js.positions, js.velocities, js.torques)
+        seq.start(k_theta, delta_theta_p)
+        pending: list[tuple[np.ndarray, np.ndarray]] = []
+        tau_out = np.zeros(w.n_joints)
+        rec: dict[str, list[np.ndarray | float]] = {
+            k: [] for k in ('t', 'positions', 'velocities', 'efforts', 'object_position',
+                            'phase')}
+        phase_times: dict[str, float] = {}
+        last_phase: Phase | None = None
+        lift_max = -math.inf
+        lift_rolling_end = math.nan
+        t = 0.0
+        t_done: float | None = None
+        cycle = 0
+        while t < max_time:
+            js = w.joint_states()
+            cmd = seq.step(t, js.positions, js.velocities, js.torques)
+            if seq.phase is not last_phase:
+                phase_times[seq.phase.name] = t
+                if last_phase is Phase.ROLLING_UP:
+                    lift_rolling_end = float(w.object_pose().position[2]) - z0
+                last_phase = seq.phase
+            modes = np.array([_TO_WORLD[int(m)] for m in cmd.modes], dtype=np.int64)
+            pending.append((modes, cmd.setpoints.copy()))
+            if len(pending) >= latency_cycles:
+                modes_w, sets_w = pending.pop(0)
+                torque = modes_w == int(WireMode.TORQUE)
+                tau = _slew(tau_out, np.where(torque, sets_w, 0.0),
+                            float(dev.torque_limit_nm),
+                            float(dev.torque_rate_limit_nm_per_s), dt)
+                tau_out = np.where(torque, tau, 0.0)
+                w.set_joint_commands(modes_w, np.where(torque, tau_out, sets_w))
+            w.step(steps)
+            t = round(t + dt, 9)
+            pos = w.object_pose().position
+            lift_max = max(lift_max, float(pos[2]) - z0)
+            if record and cycle % record_every == 0:
+                rec['t'].append(t)
+                rec['positions'].append(js.positions)
+                rec['velocities'].append(js.velocities)
+                rec['efforts'].append(js.torques)
+                rec['object_position'].append(pos)
+                rec['phase'].append(float(PHASE_CODES[seq.phase]))
+            cycle += 1
+            if seq.phase is Phase.DONE and t_done is None:
+                t_done = t
+            if (seq.phase is Phase.DONE and t_done is not None
+                    and t - t_done >= settle_after) or (seq.phase.terminal
+                                                        and seq.phase is not Phase.DONE
+                                                        and seq.relaxed):
+                break
+        js = w.joint_states()
+        lift_final = float(w.object_pose().position[2]) - z0
+        if seq.phase is Phase.DONE:
+            c = classify_from_joints(geometry, params.layout.lower, params.layout.upper,
+                                     js.positions, js.torques, settings,
+                                     params.layout.joint_names)
+            outcome, reason = c.outcome, c.reason
+        else:
+            outcome = Outcome.FAILURE
+            reason = seq.failure_reason or f'still in phase {seq.phase.name} at {t:.3g} s'
+        signals = {k: np.asarray(v, dtype=float) for k, v in rec.items()} if record else {}
+        return ExperimentResult(
+            k_theta=float(k_theta), delta_theta_p=float(delta_theta_p), friction_angle=alpha,
+            phase=seq.phase, failure_reason=seq.failure_reason, outcome=outcome,
+            joint_reason=reason, lifted=lift_final >= float(settings.lift_height),
+            lift_final=lift_final, lift_max=lift_max, lift_rolling_end=lift_rolling_end,
+            phase_times=phase_times, sim_time=t, wall_time=time.monotonic() - wall0,
+            signals=signals)
+    finally:
+        if own_world:
+            w.close()
+
+
+def save_signals(result: ExperimentResult, path: str | Path) -> Path:
+    """Write ``result.signals`` and its parameters to a compressed ``.npz`` file."""
+    if not result.signals:
+        raise ValueError('the result has no recorded signals (run with record=True)')
+    out = Path(path)
+    np.savez_compressed(
+        out, **result.signals, k_theta=result.k_theta, delta_theta_p=result.delta_theta_p,
+        friction_angle=result.friction_angle, end_phase=result.phase.name,
+        outcome=result.outcome.name, lifted=result.lifted, lift_final=result.lift_final)
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# Command line
+
+
+def _analysis_region(analyzer, k: float, dp: float, alpha: float) -> tuple[str, str]:
+    """'yes'/'no' of the sufficient condition and of the CSM; '-' where the analysis has no
+    answer (e.g. beyond the end of the SPCM path)."""
+    try:
+        r = analyzer.check_lift([k], [dp], friction_angle=alpha)
+    except Exception:  # noqa: BLE001 - the table still prints without the analysis
+        return '-', '-'
+    return ('yes' if r.lift_guaranteed else 'no'), ('yes' if r.csm_lift else 'no')
+
+
+def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog='dam_experiment',
+        description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
+                    'grid; prints outcome and ground-truth lift, optionally writes a CSV.')
+    p.add_argument('--alpha', type=float, nargs='+', default=None,
+                   help='friction angles [deg] (default: the configured one)')
+    p.add_argument('--k-theta', type=float, nargs='+', default=[0.5, 2.0, 7.0, 15.0],
+                   help='finger-1 stiffness values [N*m/rad]')
+    p.add_argument('--delta-theta-p', type=float, nargs='+', default=[5.0, 10.0, 25.0, 40.0],
+                   help='position-joint displacements [deg]')
+    p.add_argument('--out', type=Path, default=None, help='CSV file to write')
+    p.add_argument('--config', default=None, help='configuration file (default: DAM_CONFIG '
+                   'or the installed config/dam.yaml)')
+    p.add_argument('--latency-cycles', type=int, default=2,
+                   help='device cycles from a state to its command (default 2)')
+    p.add_argument('--max-time', type=float, default=20.0, help='simulated time limit [s]')
+    p.add_argument('--fixtures', type=Path, default=None,
+                   help='directory: also save every run\'s signals as .npz there')
+    return p.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments."""
+    from dam_analysis.config import load_config  # noqa: PLC0415
+    from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415
+
+    args = _parse(sys.argv[1:] if argv is None else argv)
+    try:
+        config = load_config(args.config)
+    except DamAnalysisError as exc:
+        sys.stderr.write(f'dam_experiment: {exc}\n')
+        return 2
+    bad = [v for v in args.k_theta if not (math.isfinite(v) and v > 0.0)]
+    bad += [v for v in args.delta_theta_p if not (math.isfinite(v) and v > 0.0)]
+    if bad:
+        sys.stderr.write(f'dam_experiment: k_theta and delta_theta_p must be positive, got '
+                         f'{bad}\n')
+        return 2
+    alphas = ([math.radians(a) for a in args.alpha] if args.alpha
+              else [float(config.contact.friction_angle_rad)])
+    if args.fixtures is not None:
+        args.fixtures.mkdir(parents=True, exist_ok=True)
+    rows = []
+    header = (f'{"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} {"outcome":>17} '
+              f'{"lift":>7} {"max":>7} {"suff":>5} {"csm":>5}  reason')
+    print(header)
+    try:
+        from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
+
+        analyzer = LiftAnalyzer(config)
+    except Exception as exc:  # noqa: BLE001 - the experiment runs without the analysis
+        sys.stderr.write(f'dam_experiment: analysis unavailable ({exc}); columns show -\n')
+        analyzer = None
+    world = HandWorld(config)
+    try:
+        for alpha in alphas:
+            for dp in args.delta_theta_p:
+                for k in args.k_theta:
+                    r = run_experiment(config, k, math.radians(dp), friction_angle=alpha,
+                                       world=world, latency_cycles=args.latency_cycles,
+                                       max_time=args.max_time,
+                                       record=args.fixtures is not None)
+                    suff, csm = (('-', '-') if analyzer is None else
+                                 _analysis_region(analyzer, k, math.radians(dp), alpha))
+                    row = r.row()
+                    row['sufficient_region'] = suff
+                    row['csm_region'] = csm
+                    rows.append(row)
+                    print(f'{math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} {r.phase.name:>8} '
+                          f'{r.outcome.name:>17} {r.lift_final * 1e3:6.1f}mm '
+                          f'{r.lift_max * 1e3:5.1f}mm {suff:>5} {csm:>5}  '
+                          f'{(r.failure_reason or r.joint_reason)[:70]}', flush=True)
+                    if args.fixtures is not None:
+                        name = f'dam_a{math.degrees(alpha):g}_k{k:g}_dp{dp:g}.npz'
+                        save_signals(r, args.fixtures / name)
+    finally:
+        world.close()
+    if args.out is not None:
+        with args.out.open('w', newline='', encoding='utf-8') as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+        print(f'wrote {len(rows)} rows to {args.out}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
