@@ -24,6 +24,7 @@ setup(
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
             'spcm_controller = dam_spcm_controller.controller_node:main',
+            'dam_grasp = dam_spcm_controller.grasp_client:main',
         ],
     },
 )

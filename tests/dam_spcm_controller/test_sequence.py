@@ -21,9 +21,15 @@ K_THETA = 0.5
 DP = math.radians(65.0)
 
 
+#: The synthetic plant is massless with viscous friction b = 0.02 N*m*s/rad; a controller
+#: damping above b makes that idealised plant alternate from step to step (a real joint has
+#: inertia, the simulator's drive inertia). These tests check the sequence logic, not the gains.
+PLANT_DAMPING = 0.005
+
+
 @pytest.fixture
 def params() -> SequenceParams:
-    return SequenceParams.from_config(CFG)
+    return SequenceParams.from_config(CFG, damping=PLANT_DAMPING)
 
 
 def _new(params, **hand_kw):
@@ -196,7 +202,7 @@ def test_approach_without_object_fails_at_joint_limit(params):
 
 
 def test_phase_timeout_fails(params):
-    short = SequenceParams.from_config(CFG, phase_timeout=4.0)
+    short = SequenceParams.from_config(CFG, phase_timeout=4.0, damping=PLANT_DAMPING)
     # a very far object: the equilibrium will not reach it before the timeout
     seq, hand = _started(short, theta_c0_deg=55.0)
     t, _ = _run_to(seq, hand, Phase.ROLLING_UP, 0.051, 15.0)

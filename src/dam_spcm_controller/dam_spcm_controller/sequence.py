@@ -127,7 +127,7 @@ class SequenceParams:
     lost_contact_ratio
         Release level of the lost-contact hysteresis, in (0, 1] [-].
     settle_speed
-        ENVELOPE ends when every compliant and position joint turns slower than this [rad/s]
+        ENVELOPE ends when every compliant joint turns slower than this [rad/s]
     settle_time
         ... for this long [s].
     limit_margin
@@ -637,7 +637,9 @@ class DamSequence:
             return
         settled_frac = 0.0
         if frac >= 1.0:
-            moving = max(float(np.abs(vel[self._c]).max()), float(np.abs(vel[self._q]).max()))
+            # The position joints are servoed at a fixed angle: their readings show only the
+            # servo's buzz against the contacts, not whether the grasp has settled.
+            moving = float(np.abs(vel[self._c]).max())
             if moving < p.settle_speed:
                 if self._settled_since is None:
                     self._settled_since = t

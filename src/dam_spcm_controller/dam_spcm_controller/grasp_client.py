@@ -1,0 +1,164 @@
+"""``dam_grasp``: send one DAM grasp to ``spcm_controller`` and report what happened.
+
+::
+
+    ros2 run dam_spcm_controller dam_grasp --k-theta 7 --delta-theta-p 40deg [--cancel-after S]
+
+Prints the feedback phases as they change (with the ``/check_lift`` answer) and the result.
+Exit codes: 0 the outcome is SUCCESS; 3 any other outcome (not lifted, lifted but not
+enveloped, aborted, cancelled); 2 the goal was rejected (or bad arguments); 1 no action server.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+import time
+from collections.abc import Sequence
+
+EXIT_SUCCESS = 0
+EXIT_NO_SERVER = 1
+EXIT_REJECTED = 2
+EXIT_OTHER_OUTCOME = 3
+
+_ANGLE = re.compile(r'^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(deg|rad)?\s*$')
+
+
+def parse_angle(text: str) -> float:
+    """An angle in radians from ``'40deg'``, ``'0.7rad'`` or ``'0.7'`` (radians).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not a number with an optional ``deg``/``rad`` unit, or not finite.
+    """
+    m = _ANGLE.match(text)
+    if m is None:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an angle (e.g. 40deg, 0.7rad, 0.7)')
+    value = float(m.group(1))
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f'{text!r} is not finite')
+    return math.radians(value) if m.group(2) == 'deg' else value
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'{text!r} must be a positive number')
+    return value
+
+
+def _parse(argv: Sequence[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog='dam_grasp', description='Run one DAM grasp on /dam_grasp and print the result.')
+    p.add_argument('--k-theta', type=_positive, required=True,
+                   help='finger-1 compliant-joint stiffness [N*m/rad]')
+    p.add_argument('--delta-theta-p', type=parse_angle, required=True,
+                   help='position-joint displacement, e.g. 40deg or 0.7rad (plain: rad)')
+    p.add_argument('--cancel-after', type=_positive, default=None, metavar='S',
+                   help='cancel the goal this many seconds after it was accepted')
+    p.add_argument('--server-timeout', type=_positive, default=10.0, metavar='S',
+                   help='how long to wait for the action server [s] (default 10)')
+    p.add_argument('--timeout', type=_positive, default=120.0, metavar='S',
+                   help='how long to wait for the result [s] (default 120)')
+    return p.parse_args(list(argv))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Send the goal described by ``args``; return the exit code."""
+    import rclpy
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+
+    from dam_interfaces.action import DamGrasp
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    node = rclpy.create_node('dam_grasp_client', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    client = ActionClient(node, DamGrasp, '/dam_grasp')
+
+    def spin_until(future, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+        return future.done()
+
+    last = {'phase': None}
+
+    def on_feedback(msg) -> None:
+        fb = msg.feedback
+        if fb.phase == last['phase']:
+            return
+        last['phase'] = fb.phase
+        line = f'[{time.monotonic() - t0:7.2f} s] phase {fb.phase:<10} progress {fb.progress:.2f}'
+        if fb.lift_checked:
+            line += (f'  check_lift: guaranteed={fb.lift_guaranteed} '
+                     f'(margin {fb.worst_case_margin:.3g} N), csm={fb.csm_lift} '
+                     f'(margin {fb.csm_margin:.3g} N)')
+        print(line, flush=True)
+
+    t0 = time.monotonic()
+    try:
+        if not client.wait_for_server(timeout_sec=args.server_timeout):
+            print(f'dam_grasp: no action server /dam_grasp within {args.server_timeout:g} s',
+                  file=sys.stderr)
+            return EXIT_NO_SERVER
+        goal = DamGrasp.Goal(k_theta=[float(args.k_theta)],
+                             delta_theta_p=[float(args.delta_theta_p)])
+        print(f'goal: k_theta {args.k_theta:g} N*m/rad, delta_theta_p '
+              f'{math.degrees(args.delta_theta_p):.4g} deg', flush=True)
+        t0 = time.monotonic()
+        send = client.send_goal_async(goal, feedback_callback=on_feedback)
+        if not spin_until(send, 10.0):
+            print('dam_grasp: the server did not answer the goal within 10 s', file=sys.stderr)
+            return EXIT_NO_SERVER
+        handle = send.result()
+        if not handle.accepted:
+            print('dam_grasp: goal rejected (see /dam/status or the controller log for why)',
+                  file=sys.stderr)
+            return EXIT_REJECTED
+        result_future = handle.get_result_async()
+        if args.cancel_after is not None:
+            spin_until(result_future, args.cancel_after)
+            if not result_future.done():
+                print(f'[{time.monotonic() - t0:7.2f} s] cancelling', flush=True)
+                spin_until(handle.cancel_goal_async(), 5.0)
+        if not spin_until(result_future, args.timeout):
+            print(f'dam_grasp: no result within {args.timeout:g} s; cancelling',
+                  file=sys.stderr)
+            spin_until(handle.cancel_goal_async(), 5.0)
+            return EXIT_OTHER_OUTCOME
+        result = result_future.result().result
+        print(f'result: {result.outcome_name} ({result.message}); duration '
+              f'{result.duration:.2f} s', flush=True)
+        ok = result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
+        return EXIT_SUCCESS if ok else EXIT_OTHER_OUTCOME
+    finally:
+        client.destroy()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Entry point of ``dam_grasp`` (exits with the code of :func:`run`)."""
+    try:
+        args = _parse(sys.argv[1:] if argv is None else argv)
+    except SystemExit as exc:  # argparse: 2 on bad arguments, 0 on --help
+        sys.exit(exc.code)
+    try:
+        code = run(args)
+    except KeyboardInterrupt:
+        code = EXIT_OTHER_OUTCOME
+    sys.exit(code)
+
+
+if __name__ == '__main__':
+    main()
