@@ -443,9 +443,13 @@ class SpcmControllerNode(Node):
         else:
             goal_handle.abort()
         self._publish_status()
-        log = self.get_logger().info if outcome == DamGrasp.Result.OUTCOME_SUCCESS else \
-            self.get_logger().warning
-        log(f'grasp ended ({status}): {result.outcome_name}: {message}')
+        # One call site per severity: rclpy refuses a call site whose severity changes
+        # ("Logger severity cannot be changed between calls").
+        text = f'grasp ended ({status}): {result.outcome_name}: {message}'
+        if outcome == DamGrasp.Result.OUTCOME_SUCCESS:
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text)
         return result
 
     async def _execute(self, goal_handle: ServerGoalHandle) -> DamGrasp.Result:
