@@ -1,0 +1,205 @@
+"""A real DAM grasp end to end: simulated stand-in, driver, /check_lift server and controller as
+separate processes over DDS and the UDP device link; the ground truth comes from the
+simulator's /sim/object_pose.
+
+One stack serves the three scenarios, in this order (each starts where the last one ended):
+
+1. ``k_theta = 0.5`` (below both analysis regions at 10 deg): the object stays on the table and
+   the result is not SUCCESS;
+2. ``k_theta = 10`` (inside the sufficient region at 10 deg, ``k* = 6.35``): the object rises
+   by well over 5 mm, stays up while the hand holds it, and the result is SUCCESS;
+3. after a world reset, a grasp cancelled mid-way: the controller commands zero torque on the
+   compliant joints and the simulated joints report zero torque.
+
+Timing asserts are loose (a loaded 2-core machine).
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ros_testing import RosClient, installed_executable, node_process
+
+pytestmark = pytest.mark.integration
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DELTA_THETA_P = math.radians(10.0)
+LIFT_M = 0.005
+
+
+def _free_udp_ports(n: int) -> list[int]:
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    try:
+        for s in socks:
+            s.bind(('127.0.0.1', 0))
+        return [s.getsockname()[1] for s in socks]
+    finally:
+        for s in socks:
+            s.close()
+
+
+class _Grasper:
+    """Action client of /dam_grasp plus observers of the ground truth and the commands."""
+
+    def __init__(self) -> None:
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.action import ActionClient
+        from sensor_msgs.msg import JointState
+
+        from dam_interfaces.action import DamGrasp
+        from dam_interfaces.msg import HandCommand
+
+        self.client = RosClient()
+        node = self.client.node
+        self.poses: list[tuple[float, float]] = []  # (monotonic time, object z [m])
+        self.command: HandCommand | None = None
+        self.joint_state: JointState | None = None
+        self.feedback_phases: list[str] = []
+        node.create_subscription(
+            PoseStamped, '/sim/object_pose',
+            lambda m: self.poses.append((time.monotonic(), m.pose.position.z)), 50)
+        node.create_subscription(HandCommand, '/hand/command',
+                                 lambda m: setattr(self, 'command', m), 10)
+        node.create_subscription(JointState, '/joint_states',
+                                 lambda m: setattr(self, 'joint_state', m), 10)
+        self.action = ActionClient(node, DamGrasp, '/dam_grasp')
+        self.goal_type = DamGrasp.Goal
+
+    def z(self) -> float:
+        return self.poses[-1][1]
+
+    def z_between(self, t0: float, t1: float) -> list[float]:
+        return [z for t, z in self.poses if t0 <= t <= t1]
+
+    def send(self, k_theta: float, delta_theta_p: float):
+        def on_feedback(msg) -> None:
+            phase = msg.feedback.phase
+            if not self.feedback_phases or self.feedback_phases[-1] != phase:
+                self.feedback_phases.append(phase)
+
+        self.feedback_phases = []
+        future = self.action.send_goal_async(
+            self.goal_type(k_theta=[k_theta], delta_theta_p=[delta_theta_p]),
+            feedback_callback=on_feedback)
+        assert self.client.wait_future(future, 10.0), 'no answer to the goal'
+        handle = future.result()
+        assert handle.accepted
+        return handle
+
+    def result(self, handle, timeout: float = 30.0):
+        future = handle.get_result_async()
+        assert self.client.wait_future(future, timeout), 'no result in time'
+        return future.result()
+
+    def close(self) -> None:
+        self.action.destroy()
+        self.client.close()
+
+
+@pytest.fixture(scope='module')
+def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['device']['state_port'], data['device']['command_port'] = _free_udp_ports(2)
+    path = tmp_path_factory.mktemp('dam_grasp') / 'dam.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return path
+
+
+@pytest.fixture(scope='module')
+def stack(config_file: Path) -> Iterator[_Grasper]:
+    env = {'DAM_CONFIG': str(config_file)}
+    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                       '--ros-args', '-p', 'backend:=sim'], env=env) as driver, \
+            node_process([installed_executable('dam_analysis', 'check_lift_server')],
+                         env=env) as analysis, \
+            node_process([installed_executable('dam_spcm_controller', 'spcm_controller')],
+                         env=env) as controller:
+        grasper = _Grasper()
+        try:
+            ready = grasper.client.spin_until(
+                lambda: bool(grasper.poses) and grasper.joint_state is not None, 40.0)
+            assert ready, driver.output()
+            assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
+            grasper.controller = controller
+            yield grasper
+        finally:
+            grasper.close()
+            for proc in (controller, analysis, driver):
+                assert proc.alive(), proc.output()
+
+
+def _done_result(grasper: _Grasper, k_theta: float) -> tuple[object, float, float, float]:
+    """Run a grasp to its end; (result, z before [m], z at the end [m], end time)."""
+    grasper.client.spin_until(lambda: False, 0.3)
+    z_before = grasper.z()
+    handle = grasper.send(k_theta, DELTA_THETA_P)
+    answer = grasper.result(handle)
+    t_end = time.monotonic()
+    grasper.client.spin_until(lambda: False, 0.3)
+    return answer.result, z_before, grasper.z(), t_end
+
+
+def test_too_little_stiffness_does_not_lift(stack: _Grasper) -> None:
+    from dam_interfaces.action import DamGrasp
+
+    result, z0, z_end, _ = _done_result(stack, 0.5)
+    phases = [p for p in stack.feedback_phases if p != 'IDLE']  # IDLE: before the first step
+    assert phases[:3] == ['CHECK_LIFT', 'APPROACH', 'ROLLING_UP'], stack.feedback_phases
+    assert z_end - z0 < 0.002, f'object rose by {(z_end - z0) * 1e3:.2f} mm'
+    assert max(stack.z_between(0.0, math.inf)) - z0 < 0.002
+    assert result.outcome != DamGrasp.Result.OUTCOME_SUCCESS, result.message
+    assert result.outcome in (DamGrasp.Result.OUTCOME_FAILURE,
+                              DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED), result.message
+
+
+def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper) -> None:
+    from dam_interfaces.action import DamGrasp
+
+    z_table = stack.poses[0][1]
+    result, _, z_end, t_end = _done_result(stack, 10.0)
+    assert stack.feedback_phases[-3:] == ['ROLLING_UP', 'ENVELOPE', 'DONE'], \
+        stack.feedback_phases
+    assert result.outcome == DamGrasp.Result.OUTCOME_SUCCESS, stack.controller.output()
+    assert z_end - z_table > LIFT_M, f'object rose by only {(z_end - z_table) * 1e3:.2f} mm'
+    # it stays up while the hand holds it
+    stack.client.spin_until(lambda: False, 2.0)
+    held = stack.z_between(t_end, math.inf)
+    assert len(held) > 50
+    assert min(held) - z_table > LIFT_M, f'dropped to {(min(held) - z_table) * 1e3:.2f} mm'
+
+
+def test_cancel_mid_grasp_zeroes_the_torque(stack: _Grasper) -> None:
+    from std_srvs.srv import Trigger
+
+    from dam_interfaces.action import DamGrasp
+    from dam_interfaces.msg import HandCommand
+
+    reset = stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
+    assert reset.success, reset.message
+    handle = stack.send(10.0, DELTA_THETA_P)
+    assert stack.client.spin_until(lambda: 'ROLLING_UP' in stack.feedback_phases, 15.0), \
+        stack.feedback_phases
+    stack.client.spin_until(lambda: False, 0.5)
+    cancel = handle.cancel_goal_async()
+    assert stack.client.wait_future(cancel, 5.0)
+    answer = stack.result(handle, 10.0)
+    assert answer.result.outcome == DamGrasp.Result.OUTCOME_ABORTED, answer.result.message
+    stack.command = None
+    stack.client.spin_until(lambda: False, 0.5)  # the ramp (0.2 s) is over
+    cmd = stack.command
+    assert cmd is not None
+    compliant = [i for i, name in enumerate(cmd.name) if name.endswith('_compliant_joint')]
+    assert len(compliant) == 3
+    for i in compliant:
+        assert cmd.mode[i] == HandCommand.MODE_TORQUE and cmd.setpoint[i] == 0.0, cmd
+    js = stack.joint_state
+    efforts = dict(zip(js.name, js.effort, strict=True))
+    for i in compliant:
+        assert efforts[cmd.name[i]] == pytest.approx(0.0, abs=1e-4), efforts
