@@ -1,0 +1,127 @@
+"""The lockstep DAM experiment (HandWorld + DamSequence, no ROS) and the joint-signal
+classifier checked against the simulator's ground truth on recorded runs.
+
+The recordings are made once per session (a few seconds of CPU); ``dam_experiment --fixtures
+DIR`` writes the same signals as ``.npz`` files for inspection.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dam_analysis.config import DamConfig, load_config
+from dam_sim_bridge.experiment import (
+    PHASE_CODES,
+    ExperimentResult,
+    main,
+    run_experiment,
+    save_signals,
+)
+from dam_sim_bridge.world import HandWorld
+from dam_spcm_controller.classification import (
+    ClassifierSettings,
+    HandGeometry,
+    Outcome,
+    classify_from_joints,
+    classify_with_object_height,
+)
+from dam_spcm_controller.commands import HandLayout
+from dam_spcm_controller.sequence import Phase
+
+DP = math.radians(10.0)
+
+
+@pytest.fixture(scope='module')
+def cfg() -> DamConfig:
+    return load_config()
+
+
+@pytest.fixture(scope='module')
+def recorded(cfg: DamConfig) -> dict[str, ExperimentResult]:
+    """Three recorded grasps at alpha = 5 deg, delta_theta_p = 10 deg: far below both
+    analysis regions (k 0.5), inside the CSM region only (k 3), inside the sufficient region
+    (k 10)."""
+    with HandWorld(cfg) as world:
+        return {name: run_experiment(cfg, k, DP, world=world, record=True, settle_after=1.0)
+                for name, k in (('weak', 0.5), ('csm', 3.0), ('stiff', 10.0))}
+
+
+def test_stiff_pair_lifts_and_holds(recorded: dict[str, ExperimentResult]) -> None:
+    r = recorded['stiff']
+    assert r.phase is Phase.DONE, r.failure_reason
+    assert list(r.phase_times) == ['APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE']
+    assert r.lifted and r.lift_final > 0.005
+    assert r.lift_rolling_end > 0.005  # the SPCM lifted it, the envelope kept it up
+    assert r.outcome is Outcome.SUCCESS, r.joint_reason
+    # the object is still up one second after DONE
+    sig = r.signals
+    done = sig['phase'] == PHASE_CODES[Phase.DONE]
+    assert done.sum() > 50
+    assert np.all(sig['object_position'][done, 2] - sig['object_position'][0, 2] > 0.005)
+
+
+def test_weak_pair_does_not_lift(recorded: dict[str, ExperimentResult]) -> None:
+    r = recorded['weak']
+    assert not r.lifted and r.lift_max < 0.002
+    assert r.outcome is not Outcome.SUCCESS
+
+
+def test_lift_grows_with_stiffness(recorded: dict[str, ExperimentResult]) -> None:
+    """Paper Fig. 7 trend at a fixed displacement: more stiffness, more lift."""
+    lifts = [recorded[n].lift_rolling_end for n in ('weak', 'csm', 'stiff')]
+    assert lifts[0] < 0.001 < lifts[1] <= lifts[2] + 0.002
+
+
+def test_classifier_agrees_with_the_ground_truth(
+        cfg: DamConfig, recorded: dict[str, ExperimentResult]) -> None:
+    """Recorded simulator signals as classification fixtures: the joint-only outcome matches
+    the outcome from the true object height."""
+    geometry = HandGeometry.from_config(cfg)
+    layout = HandLayout.from_hand_config(cfg.hand)
+    settings = ClassifierSettings.from_config(cfg)
+    for name, r in recorded.items():
+        final_q = r.signals['positions'][-1]
+        final_tau = r.signals['efforts'][-1]
+        z = r.signals['object_position'][:, 2]
+        joints = classify_from_joints(geometry, layout.lower, layout.upper, final_q,
+                                      final_tau, settings)
+        truth = classify_with_object_height(joints, float(z[-1]), float(z[0]),
+                                            settings.lift_height)
+        assert joints.outcome is truth, (name, joints.reason)
+        if joints.estimate.found:  # the fitted centre is the true one within 2 mm
+            assert joints.lift_m == pytest.approx(float(z[-1] - z[0]), abs=2e-3), name
+
+
+def test_signals_round_trip_through_npz(recorded: dict[str, ExperimentResult],
+                                        tmp_path: Path) -> None:
+    r = recorded['stiff']
+    path = save_signals(r, tmp_path / 'stiff.npz')
+    with np.load(path) as data:
+        assert data['positions'].shape == r.signals['positions'].shape
+        assert data['positions'].shape[1] == 9
+        assert str(data['outcome']) == 'SUCCESS' and bool(data['lifted'])
+        assert float(data['k_theta']) == 10.0
+    assert path.stat().st_size < 200_000
+
+
+def test_bad_arguments(cfg: DamConfig) -> None:
+    with pytest.raises(ValueError, match='latency_cycles'):
+        run_experiment(cfg, 1.0, DP, latency_cycles=0)
+    with pytest.raises(ValueError, match='max_time'):
+        run_experiment(cfg, 1.0, DP, max_time=math.nan)
+    assert main(['--k-theta', '-1', '--delta-theta-p', '10']) == 2
+
+
+def test_command_line_writes_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'grid.csv'
+    assert main(['--k-theta', '0.5', '--delta-theta-p', '10', '--max-time', '3',
+                 '--out', str(out)]) == 0
+    text = out.read_text(encoding='utf-8').splitlines()
+    assert text[0].startswith('alpha_deg,k_theta_nm_per_rad,delta_theta_p_deg,phase')
+    assert len(text) == 2
+    assert 'no' in text[1]  # k 0.5 is outside both analysis regions
+    assert 'k_theta' in capsys.readouterr().out
