@@ -25,7 +25,7 @@ import numpy as np
 
 from dam_analysis.config import DamConfig, load_config
 from dam_analysis.errors import InputError
-from dam_analysis.lift import STATUS_BOUNDED, worst_case_vertical_force
+from dam_analysis.lift import STATUS_BOUNDED, worst_case_finger
 from dam_analysis.model import HandModel, build_hand_model
 from dam_analysis.regions import (
     Boundaries,
@@ -36,7 +36,7 @@ from dam_analysis.regions import (
     lift_map,
     region_boundaries,
 )
-from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths, plane_contact
+from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths
 
 ArrayLike = float | Sequence[float] | np.ndarray
 
@@ -55,6 +55,45 @@ def _as_vector(field: str, value: ArrayLike) -> np.ndarray:
     if np.any(bad):
         raise InputError(f'{field}: non-finite value {float(arr[bad][0])!r} in {arr.tolist()!r}')
     return arr
+
+
+def _plain_floats(value: ArrayLike) -> list[float] | None:
+    """A number or a flat non-empty list/tuple of numbers as finite floats; None otherwise
+    (then the numpy path of the ``check_*`` functions decides, with its messages)."""
+    if type(value) is float:
+        items = [value]
+    elif isinstance(value, (list, tuple)) and value \
+            and all(type(v) is float or type(v) is int for v in value):
+        items = [float(v) for v in value]
+    elif isinstance(value, (float, int)):
+        items = [float(value)]
+    else:
+        return None
+    # a non-finite sum (inf, NaN or an overflow) sends the request down the numpy path
+    return items if math.isfinite(sum(items)) else None
+
+
+def _interp(x: float, xp: list[float], fp: list[float]) -> float:
+    """``np.interp(x, xp, fp)`` for one x inside ``[xp[0], xp[-1]]``, same arithmetic."""
+    j = bisect.bisect_right(xp, x) - 1
+    if j >= len(xp) - 1:
+        return fp[-1]
+    if j < 0:
+        return fp[0]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    return slope * (x - xp[j]) + fp[j]
+
+
+def _world(frame: tuple[list[float], list[float]], u: float, z: float, point: bool
+           ) -> list[float]:
+    """Plane ``(u, z)`` -> world (3,): a point (relative to the base) or a direction."""
+    base, inward = frame
+    out = [b + u * w for b, w in zip(base, inward, strict=True)] if point \
+        else [u * w for w in inward]
+    out[2] += z  # the plane z axis is the world z axis
+    return out
 
 
 def check_k_theta(k_theta: ArrayLike, stiffness_ratios: np.ndarray) -> np.ndarray:
@@ -143,6 +182,63 @@ class LiftResult:
     delta_theta_p: np.ndarray
     friction_angle: float
 
+    def __getattr__(self, name: str) -> np.ndarray:
+        """Build the per-contact arrays of a :meth:`LiftAnalyzer.check_lift` answer on first use.
+
+        ``check_lift`` leaves ``csm_separation``, ``csm_forces``, ``contact_points``,
+        ``normals`` and ``on_fingertip`` unset and keeps their plane data; Python calls this
+        method only for attributes that are missing, so an ordinary instance never gets here.
+        """
+        lazy = self.__dict__.get('_lazy_contacts')
+        if lazy is None or name not in _LAZY_FIELDS:
+            raise AttributeError(f'{type(self).__name__!r} object has no attribute {name!r}')
+        arrays = _contact_arrays(*lazy)
+        self.__dict__.update(arrays)
+        del self.__dict__['_lazy_contacts']
+        return arrays[name]
+
+    @classmethod
+    def _with_lazy_contacts(cls, lazy: tuple, **values: object) -> LiftResult:
+        """Instance whose per-contact arrays come from ``_contact_arrays(*lazy)`` when read."""
+        obj = object.__new__(cls)
+        obj.__dict__.update(values)
+        obj.__dict__['_lazy_contacts'] = lazy
+        return obj
+
+
+_LAZY_FIELDS = frozenset({'csm_separation', 'csm_forces', 'contact_points', 'normals',
+                          'on_fingertip'})
+
+
+def _contact_arrays(frames: list[tuple[list[float], list[float]]],
+                    states: list[tuple[float, float, float, float, float, bool]],
+                    f_n: list[float], f_t: list[float]) -> dict[str, np.ndarray]:
+    """World-frame per-contact arrays of :class:`LiftResult` from the plane states.
+
+    Parameters
+    ----------
+    frames : per finger (base position (3,) [m], inward direction (3,)).
+    states : per finger ``(theta_s, p_u, p_z, n_u, n_z, on_fingertip)``
+        (:meth:`SpcmPath.plane_state`).
+    f_n, f_t : per finger CSM normal (pressing) and tangential force [N].
+
+    Returns
+    -------
+    ``csm_separation`` (n,) ``f_n < 0``; ``csm_forces`` (n, 3) ``-f_n n_CB + f_t t`` [N];
+    ``contact_points`` (n, 3) [m]; ``normals`` (n, 3) n_CB; ``on_fingertip`` (n,).
+    """
+    points, normals, forces = [], [], []
+    for frame, (_, p_u, p_z, n_u, n_z, _), fn, ft in zip(frames, states, f_n, f_t,
+                                                         strict=True):
+        points.append(_world(frame, p_u, p_z, True))
+        nrm = _world(frame, n_u, n_z, False)
+        tan = _world(frame, -n_z, n_u, False)  # t = b x n_CB
+        normals.append(nrm)
+        forces.append([-fn * a + ft * b for a, b in zip(nrm, tan, strict=True)])
+    return {'csm_separation': np.array([v < 0.0 for v in f_n]),
+            'csm_forces': np.array(forces), 'contact_points': np.array(points),
+            'normals': np.array(normals), 'on_fingertip': np.array([st[5] for st in states])}
+
 
 class LiftAnalyzer:
     """Lift analysis of the configured hand and object (sections 3.1-3.3 of the paper).
@@ -164,6 +260,15 @@ class LiftAnalyzer:
         self._phi = 2.0 * np.pi * np.arange(self.model.cone_faces) / self.model.cone_faces
         self._cos_phi = np.cos(self._phi)  # the axial parts add no torque, no lift
         self._cache: dict[float, list] = {}
+        # plain floats for the scalar fast path of check_lift
+        self._cos_phi_list: list[float] = self._cos_phi.tolist()
+        self._ratios: list[float] = np.asarray(self.model.stiffness_ratios,
+                                               dtype=np.float64).tolist()
+        self._dp_limit = float(self.model.delta_theta_p_max + 1e-12)
+        self._k_t = float(self.model.contact_stiffness[1])
+        self._frames = [(g.base_position.tolist(), g.inward_direction.tolist())
+                        for g in self.model.fingers]
+        self._csm_data: list[tuple | None] | None = None
 
     @property
     def n_fingers(self) -> int:
@@ -186,6 +291,12 @@ class LiftAnalyzer:
                    friction_angle: float = -1.0) -> LiftResult:
         """Sufficient condition (eq. 18) and CSM verdict for one request.
 
+        Scalar fast path: plain floats per finger (n = 3, L = 8 is far too small for numpy to
+        pay off), the SPCM from :meth:`SpcmPath.plane_state`, the worst case from
+        :func:`~dam_analysis.lift.worst_case_finger` and the CSM play operator in closed form
+        with the slip history cached per friction angle. The vectorised map functions of
+        :mod:`dam_analysis.regions` compute the same quantities (tests compare both).
+
         Parameters
         ----------
         k_theta : (n,) or scalar [N m/rad]; delta_theta_p : (n,) or scalar [rad];
@@ -198,97 +309,129 @@ class LiftAnalyzer:
         NoSolutionError
             No valid SPCM posture for this ``delta_theta_p``.
         """
-        k, dp, alpha = self.validate(k_theta, delta_theta_p, friction_angle)
-        model = self.model
-        n = self.n_fingers
+        k, dp, alpha = self._validate_floats(k_theta, delta_theta_p, friction_angle)
+        paths = self.table.paths
+        states = [path.plane_state(d) for path, d in zip(paths, dp, strict=True)]
         mu = math.tan(alpha)
-        k_t = float(model.contact_stiffness[1])
-        plane = np.empty((n, 4))  # p_u, p_z, n_u, n_z
-        tip = np.zeros(n, dtype=bool)
-        delta_theta_s = np.empty(n)
-        for i, path in enumerate(self.table.paths):
-            theta_s = path.solve_theta_s(float(dp[i]))
-            p_u, p_z, n_u, n_z, tip[i] = plane_contact(
-                model.fingers[i], theta_s, model.theta_l0, model.theta_p0 + float(dp[i]))
-            plane[i] = (p_u, p_z, n_u, n_z)
-            delta_theta_s[i] = theta_s - path.theta_s0
-        tau_s = -k * delta_theta_s  # tau_s = -K_theta delta_theta_s
-        p_u, p_z, n_u, n_z = plane.T
-        # plane forms of J^T n_in, J^T t and the vertical components (module regions/docs)
-        h_n = p_z * n_u - p_u * n_z
-        h_t = p_z * n_z + p_u * n_u
-        cz_n, cz_t = -n_z, n_u
         ca, sa = math.cos(alpha), math.sin(alpha)
-        h = ca * h_n[:, None] + sa * h_t[:, None] * self._cos_phi
-        c = ca * cz_n[:, None] + sa * cz_t[:, None] * self._cos_phi
-        worst = worst_case_vertical_force(h, c, tau_s)
-        margin = worst.total - model.object_weight
-        guaranteed = bool(np.all(worst.status == STATUS_BOUNDED) and margin > 0.0)
-        # CSM (module csm): closed-form play operator with the cached slip history
-        f_n = np.empty(n)
-        f_t = np.empty(n)
+        k_t = self._k_t
+        cos_phi = self._cos_phi_list
         cache = self._csm_cache(alpha)
-        for i in range(n):
+        inf = math.inf
+        d_theta_s, taus, statuses, f_ns, f_ts = [], [], [], [], []
+        worst_total = csm_total = 0.0
+        separated = False
+        for i, (theta_s, p_u, p_z, n_u, n_z, _) in enumerate(states):
+            d_s = theta_s - paths[i].theta_s0
+            tau = -k[i] * d_s  # tau_s = -K_theta delta_theta_s
+            # plane forms of J^T n_in, J^T t and the vertical components (module regions/docs)
+            h_n = p_z * n_u - p_u * n_z
+            h_t = p_z * n_z + p_u * n_u
+            cz_n, cz_t = -n_z, n_u
+            # span vectors v^k (eq. 7): the axial parts add no torque and no lift
+            hn_a, ht_a, cn_a, ct_a = ca * h_n, sa * h_t, ca * cz_n, sa * cz_t
+            value, status = worst_case_finger([hn_a + ht_a * x for x in cos_phi],
+                                              [cn_a + ct_a * x for x in cos_phi], tau)
+            worst_total += value
+            # CSM (module csm): closed-form play operator with the cached slip history
             entry = cache[i]
             if entry is None:
-                f_n[i], f_t[i] = self._csm_fallback(i, dp[i], k[i], alpha)
-                continue
-            grid, gamma, s_grid, sign = entry
-            cnt = bisect.bisect_left(grid, float(dp[i]))
-            prev = float(np.min(k[i] * gamma[:cnt] - s_grid[:cnt])) if cnt else math.inf
-            s_end = float(np.interp(dp[i], grid, s_grid))
-            denom = float(h_n[i] + sign * mu * h_t[i])
-            tau = float(tau_s[i])
-            cap = mu * tau / (k_t * denom) if denom > 0.0 else math.inf
-            delta = s_end + min(prev, cap - s_end)
-            if denom > 0.0 and delta >= cap * (1.0 - 1e-12):
-                f_n[i] = tau / denom
-                f_t[i] = sign * mu * f_n[i]
+                f_n, f_t = self._csm_fallback(i, dp[i], k[i], alpha)
             else:
-                f_t[i] = k_t * delta * sign
-                f_n[i] = (tau - h_t[i] * f_t[i]) / h_n[i]
-        sep = f_n < 0.0
-        fz = f_n * cz_n + f_t * cz_t
-        csm_margin = math.nan if np.any(sep) else float(fz.sum()) - model.object_weight
-        inward = np.array([g.inward_direction for g in model.fingers])
-        ez = np.array([0.0, 0.0, 1.0])
-        base = np.array([g.base_position for g in model.fingers])
-        points = base + p_u[:, None] * inward + p_z[:, None] * ez
-        normals = n_u[:, None] * inward + n_z[:, None] * ez
-        tangents = -n_z[:, None] * inward + n_u[:, None] * ez
-        forces = -f_n[:, None] * normals + f_t[:, None] * tangents
-        return LiftResult(
-            lift_guaranteed=guaranteed, worst_case_margin=float(margin),
-            sufficient_status=tuple(str(s) for s in worst.status),
-            csm_lift=bool(not np.any(sep) and csm_margin > 0.0), csm_margin=float(csm_margin),
-            csm_separation=sep, csm_forces=forces, delta_theta_s=delta_theta_s,
-            compliant_torque=tau_s, contact_points=points, normals=normals,
-            on_fingertip=tip, k_theta=k, delta_theta_p=dp, friction_angle=alpha)
+                grid, gamma, s_arr, s_grid, sign = entry
+                cnt = bisect.bisect_left(grid, dp[i])
+                prev = float((k[i] * gamma[:cnt] - s_arr[:cnt]).min()) if cnt else inf
+                s_end = _interp(dp[i], grid, s_grid)
+                denom = h_n + sign * mu * h_t
+                cap = mu * tau / (k_t * denom) if denom > 0.0 else inf
+                delta = s_end + min(prev, cap - s_end)
+                if denom > 0.0 and delta >= cap * (1.0 - 1e-12):
+                    f_n = tau / denom
+                    f_t = sign * mu * f_n
+                else:
+                    f_t = k_t * delta * sign
+                    f_n = (tau - h_t * f_t) / h_n
+            separated = separated or f_n < 0.0
+            csm_total += f_n * cz_n + f_t * cz_t
+            d_theta_s.append(d_s)
+            taus.append(tau)
+            statuses.append(status)
+            f_ns.append(f_n)
+            f_ts.append(f_t)
+        weight = self.model.object_weight
+        margin = worst_total - weight
+        guaranteed = margin > 0.0 and all(st == STATUS_BOUNDED for st in statuses)
+        csm_margin = math.nan if separated else csm_total - weight
+        return LiftResult._with_lazy_contacts(
+            (self._frames, states, f_ns, f_ts),
+            lift_guaranteed=guaranteed, worst_case_margin=margin,
+            sufficient_status=tuple(statuses),
+            csm_lift=not separated and csm_margin > 0.0, csm_margin=csm_margin,
+            delta_theta_s=np.array(d_theta_s), compliant_torque=np.array(taus),
+            k_theta=np.array(k), delta_theta_p=np.array(dp), friction_angle=alpha)
 
-    def _csm_cache(self, alpha: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                     float] | None]:
-        """Per finger: grid, gamma = mu tau_hat / (k_t (h_n + s mu h_t)), s * slip, s."""
+    def _validate_floats(self, k_theta: ArrayLike, delta_theta_p: ArrayLike,
+                         friction_angle: float) -> tuple[list[float], list[float], float]:
+        """:meth:`validate` as plain floats; plain numbers and lists skip numpy entirely."""
+        n = self.n_fingers
+        k = _plain_floats(k_theta)
+        dp = _plain_floats(delta_theta_p)
+        alpha = _plain_floats(friction_angle)
+        ok = k is not None and dp is not None and alpha is not None and len(alpha) == 1
+        if ok:
+            if len(k) == 1:
+                ratios = self._ratios
+                k = [k[0] * r / ratios[0] for r in ratios]
+            if len(dp) == 1:
+                dp = dp * n
+            ok = (len(k) == n and len(dp) == n and min(k) > 0.0 and min(dp) >= 0.0
+                  and max(dp) <= self._dp_limit and alpha[0] < 0.5 * math.pi)
+        if not ok:  # the numpy path, with its error messages
+            k_arr, dp_arr, a = self.validate(k_theta, delta_theta_p, friction_angle)
+            return k_arr.tolist(), dp_arr.tolist(), a
+        a = alpha[0]
+        return k, dp, (a if a >= 0.0 else self.model.friction_angle)
+
+    def _csm_cache(self, alpha: float) -> list[tuple[list[float], np.ndarray, np.ndarray,
+                                                     list[float], float] | None]:
+        """Per finger: grid, gamma = mu tau_hat / (k_t (h_n + s mu h_t)), s * slip (array and
+        list), s; None for a path with non-monotone slip (step-by-step fallback)."""
         hit = self._cache.get(alpha)
         if hit is not None:
             return hit
         mu = math.tan(alpha)
-        k_t = float(self.model.contact_stiffness[1])
-        out: list[tuple[np.ndarray, np.ndarray, np.ndarray, float] | None] = []
-        for i in range(self.n_fingers):
-            path = self.table.csm_path(i)
-            if not path.monotone:
+        k_t = self._k_t
+        out: list[tuple[list[float], np.ndarray, np.ndarray, list[float], float] | None] = []
+        for base in self._csm_base():
+            if base is None:
                 out.append(None)
                 continue
-            sign = path.slip_sign
-            valid = np.isfinite(path.tau_hat)
-            denom = path.h_n[valid] + sign * mu * path.h_t[valid]
+            grid, tau_hat, h_n, h_t, s_arr, s_list, sign = base
+            denom = h_n + sign * mu * h_t
             with np.errstate(divide='ignore', invalid='ignore'):
-                gamma = np.where(denom > 0.0, mu * path.tau_hat[valid] / (k_t * denom), np.inf)
-            out.append((path.delta_theta_p[valid], gamma, sign * path.slip[valid], sign))
+                gamma = np.where(denom > 0.0, mu * tau_hat / (k_t * denom), np.inf)
+            out.append((grid, gamma, s_arr, s_list, sign))
         if len(self._cache) > 64:
             self._cache.clear()
         self._cache[alpha] = out
         return out
+
+    def _csm_base(self) -> list[tuple | None]:
+        """Friction-independent CSM data of every finger on the valid grid (built once)."""
+        if self._csm_data is None:
+            data: list[tuple | None] = []
+            for i in range(self.n_fingers):
+                path = self.table.csm_path(i)
+                if not path.monotone:
+                    data.append(None)
+                    continue
+                sign = path.slip_sign
+                valid = np.isfinite(path.tau_hat)
+                s_arr = sign * path.slip[valid]
+                data.append((path.delta_theta_p[valid].tolist(), path.tau_hat[valid],
+                             path.h_n[valid], path.h_t[valid], s_arr, s_arr.tolist(), sign))
+            self._csm_data = data
+        return self._csm_data
 
     def _csm_fallback(self, i: int, dp: float, k_i: float, alpha: float) -> tuple[float, float]:
         contact = self.table.paths[i].solve(dp)

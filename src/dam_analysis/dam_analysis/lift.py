@@ -204,6 +204,61 @@ def worst_case_vertical_force(h: np.ndarray, c: np.ndarray, tau_s: np.ndarray) -
     return WorstCase(value=value, status=status)
 
 
+def worst_case_finger(h: list[float], c: list[float], tau: float) -> tuple[float, str]:
+    """Worst case of one finger in pure float math (the scalar twin of the numpy functions).
+
+    Same closed form of the one-constraint LP (eqs. 14-18) as :func:`recession_unbounded`,
+    :func:`worst_case_coefficients` and :func:`worst_case_vertical_force`, with the same
+    tolerances and the same floating-point operations, for the few span vectors of one
+    contact (lists are faster than numpy at L = 8).
+
+    Parameters
+    ----------
+    h : L finite values ``J^T v^k`` [m].
+    c : L finite values ``c_z^T v^k`` [-].
+    tau : compliant joint torque tau_s [N m].
+
+    Returns
+    -------
+    value : minimum of ``c_z^T f_c`` [N]; -inf unbounded, +inf infeasible.
+    status : ``'bounded'``, ``'unbounded'`` or ``'infeasible'``.
+    """
+    scale = max(map(abs, h))
+    if not scale > 0.0:
+        scale = 1.0
+    tol = TORQUE_ZERO_TOL * scale
+    inf = math.inf
+    a_plus, a_minus = inf, -inf  # min c/h over h > tol, max c/h over h < -tol
+    r_pos = r_neg = inf  # min c/|hn| over the positive and the negative hn = h / scale
+    zero_ray = False
+    for hk, ck in zip(h, c, strict=True):
+        hn = hk / scale
+        if hn > TORQUE_ZERO_TOL:
+            if ck / hn < r_pos:
+                r_pos = ck / hn
+        elif hn < -TORQUE_ZERO_TOL:
+            if ck / -hn < r_neg:
+                r_neg = ck / -hn
+        elif ck < 0.0:
+            zero_ray = True
+        if hk > tol:
+            if ck / hk < a_plus:
+                a_plus = ck / hk
+        elif hk < -tol and ck / hk > a_minus:
+            a_minus = ck / hk
+    if tau > 0.0:
+        value = a_plus * tau
+    elif tau < 0.0:
+        value = a_minus * tau
+    else:
+        value = 0.0
+    if value == inf or value != value:
+        return inf, STATUS_INFEASIBLE
+    if zero_ray or r_pos + r_neg < 0.0:
+        return -inf, STATUS_UNBOUNDED
+    return value, STATUS_BOUNDED
+
+
 def enumerate_worst_case(jacobians: np.ndarray, span: list[np.ndarray], tau_s: np.ndarray
                          ) -> tuple[float, int]:
     """The literal procedure of eqs. (10)-(17): enumerate one span vector per finger.

@@ -216,6 +216,18 @@ class SpcmPath:
             self.theta_s[j] = sol
             self.valid_until = float(self.delta_theta_p[j])
         self.step = float(self.delta_theta_p[1] - self.delta_theta_p[0])
+        # plain-float copies for the scalar solver (plane_state)
+        g = self.geometry
+        l1, l2, l3 = (float(v) for v in g.link_lengths)
+        self._grid: list[float] = self.delta_theta_p.tolist()
+        self._nodes: list[float] = self.theta_s.tolist()
+        self._consts = (l1, l2, l3, float(g.object_center[0]), float(g.object_center[1]),
+                        float(g.object_radius), float(g.object_radius + g.link_radius),
+                        float(model.theta_l0), float(model.theta_p0))
+        self._limits = (float(model.limits_s[0]), float(model.limits_s[1]),
+                        float(model.limits_p[0]), float(model.limits_p[1]),
+                        float(g.base_height), float(g.link_radius),
+                        float(g.object_radius + g.link_radius))
 
     def solve(self, delta_theta_p: float) -> FingerContact:
         """SPCM state at one ``delta_theta_p`` [rad] (see :meth:`solve_theta_s`)."""
@@ -231,32 +243,122 @@ class SpcmPath:
         NoSolutionError
             Beyond the valid part of the branch or at an invalid posture.
         """
-        name = f'finger {self.index + 1}'
+        return self.plane_state(delta_theta_p)[0]
+
+    def plane_state(self, delta_theta_p: float
+                    ) -> tuple[float, float, float, float, float, bool]:
+        """SPCM state at one ``delta_theta_p`` [rad] in plane coordinates (pure float math).
+
+        Newton's method on ``gap(theta_s, theta_p) = 0`` (eqs. 2-4) starts from the linear
+        interpolation of the cached branch (second-order accurate, so one or two steps reach
+        ``|gap| < 1e-13 m``); the posture is then checked as :func:`posture_problem` does and
+        the contact is evaluated as :func:`plane_contact` does, on the same trigonometry.
+        Every expression is the scalar twin of :func:`~dam_analysis.model.distal_gap`,
+        :func:`newton_theta_s`, :func:`posture_problem` and :func:`plane_contact`, in the same
+        floating-point order, so the result equals theirs to the last bit.
+
+        Returns
+        -------
+        (theta_s, p_u, p_z, n_u, n_z, on_fingertip): compliant angle [rad], contact point
+        relative to the base [m] and the object's outward unit normal n_CB in the finger plane.
+
+        Raises
+        ------
+        NoSolutionError
+            Beyond the valid part of the branch, Newton failed, or an invalid posture (the
+            message is the one of :func:`posture_problem`).
+        """
         if delta_theta_p > self.valid_until + 1e-12:
             raise NoSolutionError(
-                f'{name}: no SPCM solution at delta_theta_p = {math.degrees(delta_theta_p):.4f} '
-                f'deg: {self.failure} (valid up to {math.degrees(self.valid_until):.4f} deg)')
-        j = min(int(delta_theta_p / self.step), len(self.delta_theta_p) - 2)
-        frac = (delta_theta_p - self.delta_theta_p[j]) / self.step
-        guess = float(self.theta_s[j] + frac * (self.theta_s[j + 1] - self.theta_s[j])) \
-            if frac > 0.0 else float(self.theta_s[j])
+                f'finger {self.index + 1}: no SPCM solution at delta_theta_p = '
+                f'{math.degrees(delta_theta_p):.4f} deg: {self.failure} (valid up to '
+                f'{math.degrees(self.valid_until):.4f} deg)')
+        grid, nodes, step = self._grid, self._nodes, self.step
+        j = min(int(delta_theta_p / step), len(grid) - 2)
+        frac = (delta_theta_p - grid[j]) / step
+        guess = nodes[j] + frac * (nodes[j + 1] - nodes[j]) if frac > 0.0 else nodes[j]
         if not math.isfinite(guess):
-            guess = float(self.theta_s[j])
-        theta_p = self.model.theta_p0 + delta_theta_p
-        sol = newton_theta_s(self.geometry, self.model.theta_l0, theta_p, guess)
-        if sol is None or abs(sol - guess) > 10.0 * self.step:
-            raise NoSolutionError(f'{name}: Newton failed at delta_theta_p = '
+            guess = nodes[j]
+        l1, l2, l3, cu, cz, radius, reach_gap, theta_l, theta_p0 = self._consts
+        theta_p = theta_p0 + delta_theta_p
+        sin, cos = math.sin, math.cos
+        # damped Newton, the scalar twin of newton_theta_s / distal_gap
+        theta = guess
+        sol: float | None = None
+        for it in range(_NEWTON_MAX_ITER + 1):
+            phi12 = theta + theta_l
+            phi3 = phi12 + theta_p
+            u1, z1 = l1 * sin(theta), -l1 * cos(theta)
+            qu, qz = u1 + l2 * sin(phi12), z1 - l2 * cos(phi12)
+            tu, tz = qu + l3 * sin(phi3), qz - l3 * cos(phi3)
+            abu, abz = tu - qu, tz - qz
+            t = ((cu - qu) * abu + (cz - qz) * abz) / (abu * abu + abz * abz)
+            t = min(1.0, max(0.0, t))
+            pu, pz = qu + t * abu, qz + t * abz
+            du, dz = pu - cu, pz - cz
+            dist = math.hypot(du, dz)
+            gap = dist - reach_gap
+            if it == _NEWTON_MAX_ITER:
+                sol = theta if abs(gap) < 1e-11 else None
+                break
+            if abs(gap) < _NEWTON_TOL_M:
+                sol = theta
+                break
+            deriv = (du * (-pz) + dz * pu) / dist
+            if abs(deriv) < 1e-9:
+                break
+            newton = gap / deriv
+            if abs(newton) > 0.2:
+                newton = math.copysign(0.2, newton)
+            theta -= newton
+        if sol is None or abs(sol - guess) > 10.0 * step:
+            raise NoSolutionError(f'finger {self.index + 1}: Newton failed at delta_theta_p = '
                                   f'{math.degrees(delta_theta_p):.4f} deg')
-        if delta_theta_p == 0.0:
-            sol = self.theta_s0
+        theta_s0 = self.theta_s0
+        sol = theta_s0 if delta_theta_p == 0.0 else min(sol, theta_s0)
+        if sol == theta:  # the last Newton evaluation is the posture: reuse its kinematics
+            state = None
+            if self._posture_ok(sol, theta_p, u1, z1, qu, qz, tz):
+                n_u, n_z = du / dist, dz / dist
+                state = (cu + radius * n_u, cz + radius * n_z, n_u, n_z, t >= 1.0 - 1e-12)
         else:
-            sol = min(sol, self.theta_s0)  # round-off near the rest angle
-        problem = posture_problem(self.geometry, sol, self.model.theta_l0, theta_p,
-                                  self.theta_s0, self.model.limits_s, self.model.limits_p)
-        if problem is not None:
-            raise NoSolutionError(f'{name} at delta_theta_p = {math.degrees(delta_theta_p):.4f} '
-                                  f'deg: {problem}')
-        return sol
+            state = self._checked_contact(sol, theta_p)
+        if state is None:
+            problem = posture_problem(self.geometry, sol, theta_l, theta_p, theta_s0,
+                                      self.model.limits_s, self.model.limits_p)
+            if problem is None:  # unreachable: the fast check is posture_problem's twin
+                problem = 'invalid posture'
+            raise NoSolutionError(f'finger {self.index + 1} at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.4f} deg: {problem}')
+        return (sol, *state)
+
+    def _posture_ok(self, theta_s: float, theta_p: float, u1: float, z1: float, u2: float,
+                    z2: float, z3: float) -> bool:
+        """:func:`posture_problem` is None, given the plane joint positions (pure float math)."""
+        lim_s0, lim_s1, lim_p0, lim_p1, base_height, link_radius, reach = self._limits
+        if theta_s > self.theta_s0 + 1e-12 or not lim_s0 <= theta_s <= lim_s1 \
+                or not lim_p0 <= theta_p <= lim_p1 + 1e-12:
+            return False
+        if base_height + min(0.0, z1, z2, z3) - link_radius < 0.0:
+            return False
+        cu, cz = self._consts[3], self._consts[4]
+        d1 = _segment_distance(0.0, 0.0, u1, z1, cu, cz)[0]
+        d2 = _segment_distance(u1, z1, u2, z2, cu, cz)[0]
+        return not min(d1, d2) - reach < -1e-9
+
+    def _checked_contact(self, theta_s: float, theta_p: float
+                         ) -> tuple[float, float, float, float, bool] | None:
+        """:func:`plane_contact` of a posture, None where :func:`posture_problem` objects."""
+        u1, z1, u2, z2, u3, z3 = plane_joints(self.geometry, theta_s, self._consts[7], theta_p)
+        if not self._posture_ok(theta_s, theta_p, u1, z1, u2, z2, z3):
+            return None
+        cu, cz, radius = self._consts[3], self._consts[4], self._consts[5]
+        abu, abz = u3 - u2, z3 - z2
+        t = min(1.0, max(0.0, ((cu - u2) * abu + (cz - z2) * abz) / (abu * abu + abz * abz)))
+        qu, qz = u2 + t * abu, z2 + t * abz
+        dist = math.hypot(qu - cu, qz - cz)
+        n_u, n_z = (qu - cu) / dist, (qz - cz) / dist
+        return cu + radius * n_u, cz + radius * n_z, n_u, n_z, t >= 1.0 - 1e-12
 
 
 def build_paths(model: HandModel, step: float = PATH_STEP_RAD) -> tuple[SpcmPath, ...]:
