@@ -290,7 +290,8 @@ def test_input_types_give_the_same_answer_as_validated_lists(analyzer, k_in, dp_
     k, dp, alpha = analyzer.validate(k_in, dp_in, alpha_in)
     a = analyzer.check_lift(k_in, dp_in, alpha_in)
     b = analyzer.check_lift(k.tolist(), dp.tolist(), alpha)
-    assert a.worst_case_margin == b.worst_case_margin and a.sufficient_status == b.sufficient_status
+    assert a.worst_case_margin == b.worst_case_margin
+    assert a.sufficient_status == b.sufficient_status
     assert _close(a.csm_margin, b.csm_margin)
     np.testing.assert_array_equal(a.k_theta, k)
     np.testing.assert_array_equal(a.delta_theta_p, dp)
