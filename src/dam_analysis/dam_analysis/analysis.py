@@ -25,7 +25,7 @@ import numpy as np
 
 from dam_analysis.config import DamConfig, load_config
 from dam_analysis.errors import InputError
-from dam_analysis.lift import STATUS_BOUNDED, worst_case_finger
+from dam_analysis.lift import STATUS_BOUNDED, worst_case_cone
 from dam_analysis.model import HandModel, build_hand_model
 from dam_analysis.regions import (
     Boundaries,
@@ -268,7 +268,7 @@ class LiftAnalyzer:
         self._k_t = float(self.model.contact_stiffness[1])
         self._frames = [(g.base_position.tolist(), g.inward_direction.tolist())
                         for g in self.model.fingers]
-        self._csm_data: list[tuple | None] | None = None
+        self._csm_data: tuple | None = None
 
     @property
     def n_fingers(self) -> int:
@@ -293,7 +293,7 @@ class LiftAnalyzer:
 
         Scalar fast path: plain floats per finger (n = 3, L = 8 is far too small for numpy to
         pay off), the SPCM from :meth:`SpcmPath.plane_state`, the worst case from
-        :func:`~dam_analysis.lift.worst_case_finger` and the CSM play operator in closed form
+        :func:`~dam_analysis.lift.worst_case_cone` and the CSM play operator in closed form
         with the slip history cached per friction angle. The vectorised map functions of
         :mod:`dam_analysis.regions` compute the same quantities (tests compare both).
 
@@ -329,9 +329,8 @@ class LiftAnalyzer:
             h_t = p_z * n_z + p_u * n_u
             cz_n, cz_t = -n_z, n_u
             # span vectors v^k (eq. 7): the axial parts add no torque and no lift
-            hn_a, ht_a, cn_a, ct_a = ca * h_n, sa * h_t, ca * cz_n, sa * cz_t
-            value, status = worst_case_finger([hn_a + ht_a * x for x in cos_phi],
-                                              [cn_a + ct_a * x for x in cos_phi], tau)
+            value, status = worst_case_cone(ca * h_n, sa * h_t, ca * cz_n, sa * cz_t, cos_phi,
+                                            tau)
             worst_total += value
             # CSM (module csm): closed-form play operator with the cached slip history
             entry = cache[i]
@@ -395,42 +394,58 @@ class LiftAnalyzer:
     def _csm_cache(self, alpha: float) -> list[tuple[list[float], np.ndarray, np.ndarray,
                                                      list[float], float] | None]:
         """Per finger: grid, gamma = mu tau_hat / (k_t (h_n + s mu h_t)), s * slip (array and
-        list), s; None for a path with non-monotone slip (step-by-step fallback)."""
+        list), s; None for a path with non-monotone slip (step-by-step fallback).
+
+        One friction angle costs a handful of numpy operations on the (fingers, nodes)
+        arrays of :meth:`_csm_base`; the last 64 angles are kept.
+        """
         hit = self._cache.get(alpha)
         if hit is not None:
             return hit
         mu = math.tan(alpha)
-        k_t = self._k_t
-        out: list[tuple[list[float], np.ndarray, np.ndarray, list[float], float] | None] = []
-        for base in self._csm_base():
-            if base is None:
-                out.append(None)
-                continue
-            grid, tau_hat, h_n, h_t, s_arr, s_list, sign = base
-            denom = h_n + sign * mu * h_t
-            with np.errstate(divide='ignore', invalid='ignore'):
-                gamma = np.where(denom > 0.0, mu * tau_hat / (k_t * denom), np.inf)
-            out.append((grid, gamma, s_arr, s_list, sign))
+        rows, tau_hat, h_n, h_t, sign = self._csm_base()
+        denom = h_n + sign * mu * h_t
+        gamma = np.full(denom.shape, np.inf)  # inf where sliding cannot balance the torque
+        np.divide(mu * tau_hat, self._k_t * denom, out=gamma, where=denom > 0.0)
+        out: list[tuple[list[float], np.ndarray, np.ndarray, list[float], float] | None] = [
+            None if row is None else (row[0], gamma[row[4]], row[1], row[2], row[3])
+            for row in rows]
         if len(self._cache) > 64:
             self._cache.clear()
         self._cache[alpha] = out
         return out
 
-    def _csm_base(self) -> list[tuple | None]:
-        """Friction-independent CSM data of every finger on the valid grid (built once)."""
+    def _csm_base(self) -> tuple[list[tuple | None], np.ndarray, np.ndarray, np.ndarray,
+                                 np.ndarray]:
+        """Friction-independent CSM data on the valid grid nodes (built once).
+
+        Returns
+        -------
+        rows : per finger (grid list [rad], s * slip (m_i,) [m], its list, s, row index), None
+            for a non-monotone slip; tau_hat, h_n, h_t : (r, m) [rad], [m], [m], zero-padded
+            beyond a finger's valid nodes; sign : (r, 1) slip sign s.
+        """
         if self._csm_data is None:
-            data: list[tuple | None] = []
+            rows: list[tuple | None] = []
+            parts = []
             for i in range(self.n_fingers):
                 path = self.table.csm_path(i)
                 if not path.monotone:
-                    data.append(None)
+                    rows.append(None)
                     continue
                 sign = path.slip_sign
                 valid = np.isfinite(path.tau_hat)
                 s_arr = sign * path.slip[valid]
-                data.append((path.delta_theta_p[valid].tolist(), path.tau_hat[valid],
-                             path.h_n[valid], path.h_t[valid], s_arr, s_arr.tolist(), sign))
-            self._csm_data = data
+                rows.append((path.delta_theta_p[valid].tolist(), s_arr, s_arr.tolist(), sign,
+                             len(parts)))
+                parts.append((path.tau_hat[valid], path.h_n[valid], path.h_t[valid], sign))
+            width = max((p[0].size for p in parts), default=0)
+            stacked = [np.zeros((len(parts), width)) for _ in range(3)]
+            for r, part in enumerate(parts):
+                for arr, values in zip(stacked, part[:3], strict=True):
+                    arr[r, :values.size] = values
+            sign_col = np.array([[p[3]] for p in parts], dtype=np.float64).reshape(-1, 1)
+            self._csm_data = (rows, *stacked, sign_col)
         return self._csm_data
 
     def _csm_fallback(self, i: int, dp: float, k_i: float, alpha: float) -> tuple[float, float]:

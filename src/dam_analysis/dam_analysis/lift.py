@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -204,18 +205,24 @@ def worst_case_vertical_force(h: np.ndarray, c: np.ndarray, tau_s: np.ndarray) -
     return WorstCase(value=value, status=status)
 
 
-def worst_case_finger(h: list[float], c: list[float], tau: float) -> tuple[float, str]:
+def worst_case_cone(h_0: float, h_1: float, c_0: float, c_1: float,
+                    cos_phi: Sequence[float], tau: float) -> tuple[float, str]:
     """Worst case of one finger in pure float math (the scalar twin of the numpy functions).
 
+    For a contact in the finger plane the span vectors of eq. (7) give
+    ``h_k = J^T v^k = h_0 + h_1 cos(phi_k)`` and ``c_k = c_z^T v^k = c_0 + c_1 cos(phi_k)``
+    (with ``h_0 = cos(alpha) J^T n_in``, ``h_1 = sin(alpha) J^T t``, ``c_0 = cos(alpha)
+    c_z^T n_in``, ``c_1 = sin(alpha) c_z^T t``; the axial parts add no torque and no lift).
     Same closed form of the one-constraint LP (eqs. 14-18) as :func:`recession_unbounded`,
-    :func:`worst_case_coefficients` and :func:`worst_case_vertical_force`, with the same
-    tolerances and the same floating-point operations, for the few span vectors of one
-    contact (lists are faster than numpy at L = 8).
+    :func:`worst_case_coefficients` and :func:`worst_case_vertical_force` applied to
+    ``h_0 + h_1 * cos_phi``, with the same tolerances and floating-point operations (scalar
+    loops beat numpy at L = 8). ``max |h_k|`` is taken at the extreme ``cos(phi_k)``: rounding
+    is monotone, so the computed ``h_k`` are monotone in ``cos(phi_k)`` as the exact ones are.
 
     Parameters
     ----------
-    h : L finite values ``J^T v^k`` [m].
-    c : L finite values ``c_z^T v^k`` [-].
+    h_0, h_1 : [m]; c_0, c_1 : [-]; finite.
+    cos_phi : L values ``cos(2 pi k / L)``.
     tau : compliant joint torque tau_s [N m].
 
     Returns
@@ -223,7 +230,7 @@ def worst_case_finger(h: list[float], c: list[float], tau: float) -> tuple[float
     value : minimum of ``c_z^T f_c`` [N]; -inf unbounded, +inf infeasible.
     status : ``'bounded'``, ``'unbounded'`` or ``'infeasible'``.
     """
-    scale = max(map(abs, h))
+    scale = max(abs(h_0 + h_1 * max(cos_phi)), abs(h_0 + h_1 * min(cos_phi)))
     if not scale > 0.0:
         scale = 1.0
     tol = TORQUE_ZERO_TOL * scale
@@ -231,7 +238,9 @@ def worst_case_finger(h: list[float], c: list[float], tau: float) -> tuple[float
     a_plus, a_minus = inf, -inf  # min c/h over h > tol, max c/h over h < -tol
     r_pos = r_neg = inf  # min c/|hn| over the positive and the negative hn = h / scale
     zero_ray = False
-    for hk, ck in zip(h, c, strict=True):
+    for x in cos_phi:
+        hk = h_0 + h_1 * x
+        ck = c_0 + c_1 * x
         hn = hk / scale
         if hn > TORQUE_ZERO_TOL:
             if ck / hn < r_pos:
@@ -254,7 +263,7 @@ def worst_case_finger(h: list[float], c: list[float], tau: float) -> tuple[float
         value = 0.0
     if value == inf or value != value:
         return inf, STATUS_INFEASIBLE
-    if zero_ray or r_pos + r_neg < 0.0:
+    if zero_ray or r_pos + r_neg < 0.0:  # a torque-free internal force pulls down
         return -inf, STATUS_UNBOUNDED
     return value, STATUS_BOUNDED
 
