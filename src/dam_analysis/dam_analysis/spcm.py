@@ -293,7 +293,8 @@ class SpcmPath:
             tu, tz = qu + l3 * sin(phi3), qz - l3 * cos(phi3)
             abu, abz = tu - qu, tz - qz
             t = ((cu - qu) * abu + (cz - qz) * abz) / (abu * abu + abz * abz)
-            t = min(1.0, max(0.0, t))
+            t = t if t > 0.0 else 0.0  # min(1.0, max(0.0, t))
+            t = t if t < 1.0 else 1.0
             pu, pz = qu + t * abu, qz + t * abz
             du, dz = pu - cu, pz - cz
             dist = math.hypot(du, dz)
@@ -342,8 +343,18 @@ class SpcmPath:
         if base_height + min(0.0, z1, z2, z3) - link_radius < 0.0:
             return False
         cu, cz = self._consts[3], self._consts[4]
-        d1 = _segment_distance(0.0, 0.0, u1, z1, cu, cz)[0]
-        d2 = _segment_distance(u1, z1, u2, z2, cu, cz)[0]
+        # _segment_distance to links 1 (base -> u1, z1) and 2 (u1, z1 -> u2, z2), inlined
+        den = u1 * u1 + z1 * z1
+        t = 0.0 if den == 0.0 else ((cu - 0.0) * u1 + (cz - 0.0) * z1) / den
+        t = t if t > 0.0 else 0.0  # min(1.0, max(0.0, t)), NaN included
+        t = t if t < 1.0 else 1.0
+        d1 = math.hypot(0.0 + t * u1 - cu, 0.0 + t * z1 - cz)
+        abu, abz = u2 - u1, z2 - z1
+        den = abu * abu + abz * abz
+        t = 0.0 if den == 0.0 else ((cu - u1) * abu + (cz - z1) * abz) / den
+        t = t if t > 0.0 else 0.0  # min(1.0, max(0.0, t)), NaN included
+        t = t if t < 1.0 else 1.0
+        d2 = math.hypot(u1 + t * abu - cu, z1 + t * abz - cz)
         return not min(d1, d2) - reach < -1e-9
 
     def _checked_contact(self, theta_s: float, theta_p: float
