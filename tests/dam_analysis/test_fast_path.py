@@ -145,6 +145,10 @@ def test_worst_case_cone_equals_vectorised_version():
             h_n = h_t = 0.0
         elif trial % 50 == 1:
             h_t = 0.0
+        elif trial % 5 == 2 and alpha > 0.0:  # one face's torque tiny but not zero
+            x_k = float(cos_phi[rng.integers(n_faces)])
+            tiny = float(rng.choice([1e-14, 1e-11, 1e-9, 1e-7])) * abs(sa * h_t)
+            h_n = (tiny - sa * h_t * x_k) / ca
         tau = float(rng.normal(0.0, 0.2)) if trial % 7 else 0.0
         h = ca * h_n + sa * h_t * cos_phi  # as the numpy version of check_lift built them
         c = ca * cz_n + sa * cz_t * cos_phi
@@ -202,9 +206,12 @@ def test_check_lift_equals_numpy_reference_on_random_requests(analyzer):
     dp_max = model.delta_theta_p_max
     end = min(p.valid_until for p in analyzer.table.paths)
     fixed_alphas = np.radians([1.0, 5.0, 30.0]).tolist() + [-1.0]
-    counts = {'ok': 0, 'no_solution': 0, 'unbounded': 0, 'csm_sep': 0, 'guaranteed': 0}
+    counts = {'ok': 0, 'no_solution': 0, 'unbounded': 0, 'csm_sep': 0, 'guaranteed': 0,
+              'stick': 0}
     for trial in range(500):
         k_in = float(rng.uniform(0.02, 20.0)) if trial % 2 else rng.uniform(0.02, 20.0, n).tolist()
+        if trial % 5 == 4:  # stiff enough for the CSM contact to stick (slide cap > slip)
+            k_in = (np.asarray(k_in) * 10.0 ** rng.uniform(2.0, 5.0)).tolist()
         if trial % 3 == 0:  # one in six beyond the end of the SPCM branch
             dp_in = float(rng.uniform(0.0, dp_max) if trial % 2 else rng.uniform(end, dp_max))
         elif trial % 3 == 1:
@@ -245,12 +252,17 @@ def test_check_lift_equals_numpy_reference_on_random_requests(analyzer):
         if not r.csm_separation.any():  # the CSM forces add up to the CSM margin
             assert r.csm_forces[:, 2].sum() - model.object_weight == pytest.approx(
                 r.csm_margin, rel=1e-9, abs=1e-12)
+        # sticking contacts: |f_t| below the friction limit mu f_n
+        f_n = -np.einsum('ij,ij->i', r.csm_forces, r.normals)
+        f_t = np.linalg.norm(r.csm_forces + f_n[:, None] * r.normals, axis=1)
+        counts['stick'] += bool(np.any(f_t < math.tan(alpha) * f_n * (1.0 - 1e-9)))
         counts['ok'] += 1
         counts['unbounded'] += 'unbounded' in r.sufficient_status
         counts['csm_sep'] += bool(r.csm_separation.any())
         counts['guaranteed'] += r.lift_guaranteed
     assert counts['ok'] > 300 and counts['no_solution'] > 20, counts
     assert counts['unbounded'] > 10 and counts['guaranteed'] > 10, counts
+    assert counts['stick'] > 10 and counts['stick'] < counts['ok'] - 100, counts
 
 
 def test_lift_result_keeps_its_fields_and_builds_contact_arrays_on_demand(analyzer):
