@@ -189,13 +189,15 @@ class LiftResult:
         ``normals`` and ``on_fingertip`` unset and keeps their plane data; Python calls this
         method only for attributes that are missing, so an ordinary instance never gets here.
         """
-        lazy = self.__dict__.get('_lazy_contacts')
-        if lazy is None or name not in _LAZY_FIELDS:
-            raise AttributeError(f'{type(self).__name__!r} object has no attribute {name!r}')
-        arrays = _contact_arrays(*lazy)
-        self.__dict__.update(arrays)
-        del self.__dict__['_lazy_contacts']
-        return arrays[name]
+        state = self.__dict__
+        if name in _LAZY_FIELDS:
+            lazy = state.get('_lazy_contacts')
+            if lazy is not None:
+                state.update(_contact_arrays(*lazy))
+                state.pop('_lazy_contacts', None)
+            if name in state:  # also when another thread has just built them
+                return state[name]
+        raise AttributeError(f'{type(self).__name__!r} object has no attribute {name!r}')
 
     @classmethod
     def _with_lazy_contacts(cls, lazy: tuple, **values: object) -> LiftResult:
