@@ -60,14 +60,17 @@ def _as_vector(field: str, value: ArrayLike) -> np.ndarray:
 def _plain_floats(value: ArrayLike) -> list[float] | None:
     """A number or a flat non-empty list/tuple of numbers as finite floats; None otherwise
     (then the numpy path of the ``check_*`` functions decides, with its messages)."""
-    if type(value) is float:
-        items = [value]
-    elif isinstance(value, (list, tuple)) and value \
-            and all(type(v) is float or type(v) is int for v in value):
-        items = [float(v) for v in value]
-    elif isinstance(value, (float, int)):
-        items = [float(value)]
-    else:
+    try:
+        if type(value) is float:
+            items = [value]
+        elif isinstance(value, (list, tuple)) and value \
+                and all(type(v) is float or type(v) is int for v in value):
+            items = [float(v) for v in value]
+        elif isinstance(value, (float, int)):
+            items = [float(value)]
+        else:
+            return None
+    except OverflowError:  # an int beyond the float range
         return None
     # a non-finite sum (inf, NaN or an overflow) sends the request down the numpy path
     return items if math.isfinite(sum(items)) else None
@@ -164,6 +167,9 @@ class LiftResult:
     contact_points : (n, 3) [m]; normals : (n, 3) outward object normals n_CB.
     on_fingertip : (n,) bool.
     k_theta : (n,) [N m/rad]; delta_theta_p : (n,) [rad]; friction_angle [rad].
+
+    In an answer of ``check_lift`` the per-contact arrays (``csm_separation``, ``csm_forces``,
+    ``contact_points``, ``normals``, ``on_fingertip``) are built on first access.
     """
 
     lift_guaranteed: bool
