@@ -18,8 +18,10 @@ pytestmark = pytest.mark.integration
 
 REPO = Path(__file__).resolve().parents[2]
 CONTROLLER = installed_executable('dam_spcm_controller', 'spcm_controller')
-# Short motions keep a full grasp at a few seconds on the synthetic plant.
-FAST = ['-p', 'trajectory_duration:=1.0', '-p', 'approach_speed:=0.5']
+# Short motions keep a full grasp at a few seconds on the synthetic plant. The plant is massless
+# with viscous friction b = 0.1 N*m*s/rad: a controller damping above b makes it alternate from
+# step to step (the configured 0.2 is for the simulated hand's drive inertia).
+FAST = ['-p', 'trajectory_duration:=1.0', '-p', 'approach_speed:=0.5', '-p', 'damping:=0.02']
 INSIDE = (7.0, math.radians(10.0))  # k_theta [N*m/rad], delta_theta_p [rad]: lift guaranteed
 OUTSIDE = (0.5, math.radians(40.0))  # outside the sufficient region at alpha = 5 deg
 
