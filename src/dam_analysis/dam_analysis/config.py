@@ -131,6 +131,7 @@ class ControllerConfig:
     trajectory_duration_s: float
     envelope_torque_nm: float
     contact_torque_threshold_nm: float
+    contact_confirm_time_s: float
     approach_speed_rad_per_s: float
     phase_timeout_s: float
     state_timeout_s: float
@@ -161,6 +162,8 @@ class SimConfig:
     initial_compliant_angle_rad: float
     servo_force_limit_nm: float
     object_faces: int
+    compliant_rotor_inertia_kg_m2: float
+    palm_thickness_m: float
 
 
 @dataclass(frozen=True)
@@ -412,7 +415,7 @@ def _task(node: _Node, hand: HandConfig) -> TaskConfig:
 
 def _controller(node: _Node) -> ControllerConfig:
     node.only_keys({'damping_nms_per_rad', 'torque_limit_nm', 'trajectory_duration_s',
-                    'envelope_torque_nm', 'contact_torque_threshold_nm',
+                    'envelope_torque_nm', 'contact_torque_threshold_nm', 'contact_confirm_time_s',
                     'approach_speed_deg_per_s', 'phase_timeout_s', 'state_timeout_s',
                     'torque_ramp_time_s', 'lost_contact_time_s', 'lost_contact_torque_ratio',
                     'envelope_settle_speed_deg_per_s', 'envelope_settle_time_s',
@@ -433,6 +436,7 @@ def _controller(node: _Node) -> ControllerConfig:
         envelope_torque_nm=envelope_nm,
         contact_torque_threshold_nm=node.child('contact_torque_threshold_nm').number(
             positive=True),
+        contact_confirm_time_s=node.child('contact_confirm_time_s').number(nonnegative=True),
         approach_speed_rad_per_s=math.radians(
             node.child('approach_speed_deg_per_s').number(positive=True)),
         phase_timeout_s=node.child('phase_timeout_s').number(positive=True),
@@ -460,7 +464,8 @@ def _classification(node: _Node) -> ClassificationConfig:
 
 def _sim(node: _Node, hand: HandConfig) -> SimConfig:
     node.only_keys({'time_step_s', 'solver_iterations', 'initial_compliant_angle_deg',
-                    'servo_force_limit_nm', 'object_faces'})
+                    'servo_force_limit_nm', 'object_faces', 'compliant_rotor_inertia_kg_m2',
+                    'palm_thickness_m'})
     step = node.child('time_step_s')
     step_s = step.number(positive=True)
     if step_s > 0.01:
@@ -474,6 +479,9 @@ def _sim(node: _Node, hand: HandConfig) -> SimConfig:
         initial_compliant_angle_rad=angle_rad,
         servo_force_limit_nm=node.child('servo_force_limit_nm').number(positive=True),
         object_faces=node.child('object_faces').integer(minimum=8, maximum=512),
+        compliant_rotor_inertia_kg_m2=node.child('compliant_rotor_inertia_kg_m2').number(
+            nonnegative=True),
+        palm_thickness_m=node.child('palm_thickness_m').number(nonnegative=True),
     )
 
 

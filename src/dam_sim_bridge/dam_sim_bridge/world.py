@@ -177,6 +177,8 @@ class WorldOptions:
             'torque_limit_nm': float(config.device.torque_limit_nm),
             'solver_iterations': int(sim.solver_iterations),
             'object_faces': int(sim.object_faces),
+            'compliant_rotor_inertia_kg_m2': float(sim.compliant_rotor_inertia_kg_m2),
+            'palm_thickness_m': float(sim.palm_thickness_m),
         }
         names = {f.name for f in fields(cls)}
         for key, value in overrides.items():

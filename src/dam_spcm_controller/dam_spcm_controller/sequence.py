@@ -189,6 +189,7 @@ class SequenceParams:
                      trajectory_duration=c.trajectory_duration_s,
                      envelope_torque=c.envelope_torque_nm,
                      contact_torque_threshold=c.contact_torque_threshold_nm,
+                     contact_confirm_time=c.contact_confirm_time_s,
                      approach_speed=c.approach_speed_rad_per_s,
                      phase_timeout=c.phase_timeout_s,
                      delta_theta_p_max=config.task.delta_theta_p_max_rad,
