@@ -137,6 +137,7 @@ class SpcmControllerNode(Node):
         self._publishing = False  # commands follow each joint state
         self._hold_sent = False
         self._last_state_time: float | None = None
+        self._silence_suspected = False
         self._last_pos = np.zeros(self._layout.n_joints)
         self._last_eff = np.zeros(self._layout.n_joints)
         self._last_cmd: JointCommand | None = None
@@ -272,6 +273,12 @@ class SpcmControllerNode(Node):
             last = self._last_state_time
             silent = math.inf if last is None else time.monotonic() - last
             if silent <= timeout:
+                self._silence_suspected = False
+                return
+            if not self._silence_suspected:
+                # After a stall of this process the timer runs before the joint states that
+                # queued meanwhile: confirm the silence on the next tick, once they are taken.
+                self._silence_suspected = True
                 return
             reason = (f'/joint_states silent for {silent:.3f} s (state_timeout '
                       f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}')
