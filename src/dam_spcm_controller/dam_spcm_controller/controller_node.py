@@ -99,6 +99,10 @@ def _phase_name(phase: Phase) -> str:
     return phase.name
 
 
+#: How long a new goal waits for a fresh joint state before it is refused [s].
+_START_STATE_WAIT_S = 1.0
+
+
 class SpcmControllerNode(Node):
     """Runs DAM grasps requested on ``/dam_grasp`` against ``/joint_states``."""
 
@@ -432,6 +436,28 @@ class SpcmControllerNode(Node):
         finally:
             self.destroy_timer(timer)
 
+    async def _fresh_state(self, wait_s: float) -> bool:
+        """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``."""
+        fresh: Future = Future()
+        deadline = time.monotonic() + wait_s
+
+        def poll() -> None:
+            if fresh.done():
+                return
+            last = self._last_state_time
+            now = time.monotonic()
+            if last is not None and now - last <= self._values['state_timeout']:
+                fresh.set_result(True)
+            elif now >= deadline:
+                fresh.set_result(False)
+
+        timer = self.create_timer(0.01, poll)
+        try:
+            poll()
+            return bool(await fresh)
+        finally:
+            self.destroy_timer(timer)
+
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
                 t0: float) -> DamGrasp.Result:
         result = DamGrasp.Result()
@@ -507,11 +533,11 @@ class SpcmControllerNode(Node):
                     f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
                     f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
                     f'(worst-case margin {answer.worst_case_margin:.4g} N)', t0)
+        if not await self._fresh_state(_START_STATE_WAIT_S):
+            return self._finish(goal_handle, 'abort', aborted,
+                                f'no /joint_states within {_START_STATE_WAIT_S:g} s: '
+                                'cannot start the grasp', t0)
         with self._lock:
-            last = self._last_state_time
-            if last is None or time.monotonic() - last > self._values['state_timeout']:
-                return self._finish(goal_handle, 'abort', aborted,
-                                    'no recent /joint_states: cannot start the grasp', t0)
             self._seq = DamSequence(self._params)
             self._last_phase = self._seq.phase
             self._state_timed_out = False
