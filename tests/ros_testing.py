@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -90,6 +91,18 @@ def node_process(command: Sequence[str | os.PathLike[str]],
         raise
     finally:
         proc.cleanup()
+
+
+def free_udp_ports(n: int) -> list[int]:
+    """``n`` distinct UDP ports on 127.0.0.1 that were free a moment ago (for device links)."""
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
+    try:
+        for sock in socks:
+            sock.bind(('127.0.0.1', 0))
+        return [sock.getsockname()[1] for sock in socks]
+    finally:
+        for sock in socks:
+            sock.close()
 
 
 def fixture_command(script: str, *args: str) -> list[str]:

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-import socket
 import subprocess
 import time
 import warnings
@@ -29,24 +28,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ros_testing import RosClient, installed_executable, node_process
+from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
 
 pytestmark = pytest.mark.integration
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DELTA_THETA_P = math.radians(10.0)
 LIFT_M = 0.005
-
-
-def _free_udp_ports(n: int) -> list[int]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(('127.0.0.1', 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 class _Grasper:
@@ -110,7 +98,7 @@ class _Grasper:
 @pytest.fixture(scope='module')
 def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    data['device']['state_port'], data['device']['command_port'] = _free_udp_ports(2)
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
     path = tmp_path_factory.mktemp('dam_grasp') / 'dam.yaml'
     path.write_text(yaml.safe_dump(data), encoding='utf-8')
     return path

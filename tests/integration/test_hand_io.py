@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 import os
 import signal
-import socket
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,23 +17,12 @@ import numpy as np
 import pytest
 import yaml
 
-from ros_testing import RosClient, installed_executable, node_process
+from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
 
 pytestmark = pytest.mark.integration
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 FINGER = 'finger1'
-
-
-def _free_udp_ports(n: int) -> list[int]:
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
-    try:
-        for s in socks:
-            s.bind(('127.0.0.1', 0))
-        return [s.getsockname()[1] for s in socks]
-    finally:
-        for s in socks:
-            s.close()
 
 
 class _Observer:
@@ -79,7 +67,7 @@ class _Observer:
 @pytest.fixture(scope='module')
 def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    state_port, command_port = _free_udp_ports(2)
+    state_port, command_port = free_udp_ports(2)
     data['device']['state_port'] = state_port
     data['device']['command_port'] = command_port
     path = tmp_path_factory.mktemp('hand_io') / 'dam.yaml'
@@ -244,7 +232,7 @@ def test_sim_bridge_services_and_driver_recovery(tmp_path: Path, cfg) -> None:
     from dam_interfaces.srv import SetFrictionAngle
 
     data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    data['device']['state_port'], data['device']['command_port'] = _free_udp_ports(2)
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
     config_file = tmp_path / 'dam.yaml'
     config_file.write_text(yaml.safe_dump(data), encoding='utf-8')
     env = {'DAM_CONFIG': str(config_file)}
