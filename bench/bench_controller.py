@@ -6,7 +6,7 @@
    /hand/command in) while the installed ``spcm_controller`` runs a grasp; each command carries
    the stamp of the joint state it answers, so the latency is receive time minus send time.
 
-Target: step p99 below 10 % of the 2 ms control period (200 us) and latency p99 below 5 ms.
+Target (issue): step under 0.2 ms and /joint_states -> /hand/command latency p99 under 2 ms.
 """
 
 from __future__ import annotations
@@ -32,8 +32,9 @@ def _compute(n: int) -> dict:
     from dam_analysis.config import load_config
     from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 
+    # The synthetic plant is massless: it needs a damping below its friction (as in the tests).
     params = SequenceParams.from_config(load_config(), trajectory_duration=60.0,
-                                        phase_timeout=120.0)
+                                        phase_timeout=120.0, damping=0.02)
     seq = DamSequence(params)
     hand = SyntheticHand(params.layout)
     t, dt = 0.0, 1e-3
@@ -154,7 +155,7 @@ def _latency(seconds: float) -> dict:
 def run(args) -> dict:
     report = _compute(2000 if args.quick else 20000)
     report.update(_latency(3.0 if args.quick else 10.0))
-    report['target'] = 'step p99 < 200 us and joint_states->hand/command latency p99 < 5 ms'
+    report['target'] = 'step p99 < 200 us and joint_states->hand/command latency p99 < 2 ms'
     report['target_met'] = bool(report['step_p99_us'] < 200.0
-                                and report['latency_p99_ms'] < 5.0)
+                                and report['latency_p99_ms'] < 2.0)
     return report

@@ -1,11 +1,11 @@
 """Hand I/O timing: /joint_states periods, device-link round trip, lockstep world speed.
 
 1. ``hand_driver`` (backend sim: it starts the stand-in) runs as its own process; this process
-   subscribes to /joint_states and records arrival times. Target: rate >= 95 % of
-   ``device.rate_hz`` and p99 period <= 2.5 nominal periods.
+   subscribes to /joint_states and records arrival times. Target: at least 99 % of periods
+   within 20 % of nominal over 60 s at ``device.rate_hz`` (also reported at 1 kHz).
 2. This process plays the device for a ``hand_driver`` process (backend hardware): it sends
    state frames and times each until the command frame that references it comes back.
-   Target: p99 round trip < 2 ms (one device period at 500 Hz).
+   Target: p99 round trip < 1 ms.
 3. :class:`SimDevice` in lockstep (UDP state frames included): simulated time over wall time.
    Target: >= 10x real time.
 
@@ -22,23 +22,32 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ros_testing import RosClient, installed_executable, node_process
+from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
-def _config_copy(directory: Path) -> Path:
+def _config_copy(directory: Path, rate_hz: float | None = None) -> Path:
+    """The configuration with free device ports (and another device rate, if given)."""
     data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
-    for s in socks:
-        s.bind(('127.0.0.1', 0))
-    data['device']['state_port'], data['device']['command_port'] = (
-        s.getsockname()[1] for s in socks)
-    for s in socks:
-        s.close()
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
+    if rate_hz is not None:
+        data['device']['rate_hz'] = float(rate_hz)
     path = directory / 'dam.yaml'
     path.write_text(yaml.safe_dump(data), encoding='utf-8')
     return path
+
+
+def _period_stats(periods: np.ndarray, rate_hz: float) -> dict:
+    nominal = 1.0 / rate_hz
+    within = float(np.mean(np.abs(periods - nominal) <= 0.2 * nominal))
+    p50, p99 = np.percentile(periods, [50, 99])
+    return {'samples': int(periods.size),
+            'rate_hz': round(1.0 / float(np.mean(periods)), 1),
+            'period_p50_ms': round(float(p50) * 1e3, 3),
+            'period_p99_ms': round(float(p99) * 1e3, 3),
+            'period_max_ms': round(float(periods.max()) * 1e3, 3),
+            'fraction_within_20pct': round(within, 4)}
 
 
 def _joint_state_periods(config_file: Path, seconds: float) -> np.ndarray:
@@ -132,32 +141,31 @@ def run(args) -> dict:
     from dam_analysis.config import load_config
 
     rate_hz = float(load_config().device.rate_hz)
-    seconds = 3.0 if args.quick else 15.0
+    seconds = 5.0 if args.quick else 60.0
     with tempfile.TemporaryDirectory(prefix='dam-bench-') as tmp:
-        periods = _joint_state_periods(_config_copy(Path(tmp)), seconds)
+        nominal_stats = _period_stats(
+            _joint_state_periods(_config_copy(Path(tmp)), seconds), rate_hz)
+    with tempfile.TemporaryDirectory(prefix='dam-bench-') as tmp:
+        khz_stats = _period_stats(
+            _joint_state_periods(_config_copy(Path(tmp), 1000.0), seconds / 4), 1000.0)
     with tempfile.TemporaryDirectory(prefix='dam-bench-') as tmp:
         rtt = _round_trips(_config_copy(Path(tmp)), 500 if args.quick else 5000, rate_hz)
     speed = _lockstep_speed(1000 if args.quick else 5000)
-    nominal = 1.0 / rate_hz
-    rate = 1.0 / float(np.mean(periods))
-    p50, p99, pmax = (np.percentile(periods, [50, 99]).tolist() + [float(periods.max())])
     r50, r99 = np.percentile(rtt, [50, 99]) * 1e3
-    rate_ok = rate >= 0.95 * rate_hz and p99 <= 2.5 * nominal
-    rtt_ok = r99 < 2.0
+    # Issue target: >= 99 % of periods within 20 % of nominal, measured over 60 s.
+    rate_ok = nominal_stats['fraction_within_20pct'] >= 0.99
+    rtt_ok = r99 < 1.0
     speed_ok = speed >= 10.0
-    return {
-        'joint_states_samples': int(periods.size),
-        'joint_states_rate_hz': round(rate, 1),
-        'joint_states_rate_ratio': round(rate / rate_hz, 3),
-        'joint_states_period_p50_ms': round(p50 * 1e3, 3),
-        'joint_states_period_p99_ms': round(p99 * 1e3, 3),
-        'joint_states_period_max_ms': round(pmax * 1e3, 3),
-        'joint_states_p99_over_nominal': round(p99 / nominal, 2),
+    report = {f'joint_states_{int(rate_hz)}hz_{k}': v for k, v in nominal_stats.items()}
+    report.update({f'joint_states_1000hz_{k}': v for k, v in khz_stats.items()})
+    report.update({
+        'measured_seconds': seconds,
         'link_round_trips': int(rtt.size),
         'link_round_trip_p50_ms': round(float(r50), 4),
         'link_round_trip_p99_ms': round(float(r99), 4),
         'lockstep_speed_factor': round(speed, 1),
-        'target': ('rate >= 0.95 rate_hz and p99 period <= 2.5 periods; link p99 < 2 ms; '
-                   'lockstep >= 10x real time'),
+        'target': ('>= 99 % of /joint_states periods within 20 % of nominal; link round trip '
+                   'p99 < 1 ms; lockstep >= 10x real time'),
         'target_met': bool(rate_ok and rtt_ok and speed_ok),
-    }
+    })
+    return report
