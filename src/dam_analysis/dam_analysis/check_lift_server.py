@@ -27,6 +27,7 @@ from rclpy.parameter import Parameter
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
+from dam_analysis.ros_params import declare_config_file
 from dam_interfaces.srv import CheckLift
 
 _MAX_FRICTION_ANGLE = math.pi / 2
@@ -37,11 +38,7 @@ class CheckLiftServer(Node):
 
     def __init__(self) -> None:
         super().__init__('check_lift_server')
-        config_file = self.declare_parameter(
-            'config_file', '',
-            ParameterDescriptor(
-                description='DAM configuration file (YAML); empty: the installed config/dam.yaml',
-                read_only=True)).value
+        config_file = declare_config_file(self)
         self._config = load_config(config_file or None)
         self._analyzer = LiftAnalyzer(self._config)
         self._default_friction_angle = self._config.contact.friction_angle_rad

@@ -67,6 +67,7 @@ from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
+from dam_analysis.ros_params import declare_config_file
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
@@ -158,10 +159,7 @@ class HandDriverNode(Node):
 
     def __init__(self) -> None:
         super().__init__('hand_driver')
-        config_file = self.declare_parameter(
-            'config_file', '', ParameterDescriptor(
-                description='DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
-                            'config/dam.yaml', read_only=True)).value
+        config_file = declare_config_file(self)
         self.backend = str(self.declare_parameter(
             'backend', 'auto', ParameterDescriptor(
                 description='auto: probe the device, else start the simulator; hardware: '

@@ -51,6 +51,7 @@ from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
+from dam_analysis.ros_params import declare_config_file
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -82,11 +83,7 @@ class SimBridgeNode(Node):
 
     def __init__(self, gui_flag: bool = False) -> None:
         super().__init__('sim_bridge')
-        config_file = self.declare_parameter(
-            'config_file', '',
-            ParameterDescriptor(
-                description='DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
-                            'config/dam.yaml', read_only=True)).value
+        config_file = declare_config_file(self)
         gui = bool(self.declare_parameter(
             'gui', False, ParameterDescriptor(
                 description='open the PyBullet window (needs a display)',

@@ -46,6 +46,7 @@ from sensor_msgs.msg import JointState
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
+from dam_analysis.ros_params import declare_config_file
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
@@ -108,11 +109,7 @@ class SpcmControllerNode(Node):
 
     def __init__(self) -> None:
         super().__init__('spcm_controller')
-        config_file = self.declare_parameter(
-            'config_file', '',
-            ParameterDescriptor(
-                description='DAM configuration file (YAML); empty: the installed config/dam.yaml',
-                read_only=True)).value
+        config_file = declare_config_file(self)
         self._config = load_config(config_file or None)
         self._base_params = SequenceParams.from_config(self._config)
         self._layout = self._base_params.layout
