@@ -179,10 +179,27 @@ def plot_map(path: Path, friction_angles_deg: Sequence[float],
     plt.close(fig)
 
 
+def strip_ros_args(argv: Sequence[str]) -> list[str]:
+    """Drop ROS arguments (``--ros-args ... [--]``) that ``ros2 run`` may pass along.
+
+    Done by hand so that the tool needs no rclpy.
+    """
+    out: list[str] = []
+    in_ros = False
+    for arg in argv:
+        if arg == '--ros-args':
+            in_ros = True
+        elif in_ros and arg == '--':
+            in_ros = False
+        elif not in_ros:
+            out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; ``argv`` without the program name (``sys.argv[1:]`` if None)."""
     parser = build_parser()
-    options = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
     check_options(parser, options)
     try:
         config = load_config(options.config)
