@@ -2,10 +2,10 @@
 
 import sys
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_srvs.srv import Trigger
+
+from dam_analysis.ros_node import run_node
 
 
 class TriggerServer(Node):
@@ -20,15 +20,8 @@ class TriggerServer(Node):
 
 
 def main() -> None:
-    rclpy.init()
-    node = TriggerServer(sys.argv[1] if len(sys.argv) > 1 else '/bench/trigger')
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    service = sys.argv[1] if len(sys.argv) > 1 else '/bench/trigger'
+    run_node(lambda: TriggerServer(service), 'bench_trigger_server')
 
 
 if __name__ == '__main__':

@@ -18,16 +18,14 @@ from __future__ import annotations
 
 import math
 
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_params import declare_config_file
+from dam_analysis.ros_node import declare_config_file, run_node
 from dam_interfaces.srv import CheckLift
 
 _MAX_FRICTION_ANGLE = math.pi / 2
@@ -102,17 +100,7 @@ class CheckLiftServer(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = CheckLiftServer()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(CheckLiftServer, 'check_lift_server', args)
 
 
 if __name__ == '__main__':

@@ -50,24 +50,21 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections import deque
 from pathlib import Path
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_params import declare_config_file
+from dam_analysis.ros_node import declare_config_file, run_node
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
@@ -465,20 +462,5 @@ class HandDriverNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = HandDriverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (HandDriverError, DamAnalysisError, OSError) as exc:
-        sys.stderr.write(f'hand_driver: cannot start: {exc}\n')
-        code = 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        sys.exit(code)
+    run_node(HandDriverNode, 'hand_driver', args,
+             startup_errors=(HandDriverError, DamAnalysisError, OSError))

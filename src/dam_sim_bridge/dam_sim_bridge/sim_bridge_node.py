@@ -38,11 +38,9 @@ import math
 import sys
 import threading
 
-import rclpy
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.utilities import remove_ros_args
@@ -51,7 +49,7 @@ from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_params import declare_config_file
+from dam_analysis.ros_node import declare_config_file, run_node
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -206,20 +204,5 @@ class SimBridgeNode(Node):
 def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
     gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
-    rclpy.init(args=args)
-    node = None
-    code = 0
-    try:
-        node = SimBridgeNode(gui_flag=gui_flag)
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SimBridgeError, DamAnalysisError, OSError) as exc:
-        sys.stderr.write(f'sim_bridge: cannot start: {exc}\n')
-        code = 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    if code:
-        sys.exit(code)
+    run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
+             startup_errors=(SimBridgeError, DamAnalysisError, OSError))

@@ -32,12 +32,10 @@ import time
 from dataclasses import replace
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -46,7 +44,7 @@ from sensor_msgs.msg import JointState
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_params import declare_config_file
+from dam_analysis.ros_node import declare_config_file, run_node
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
@@ -577,20 +575,9 @@ class SpcmControllerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SpcmControllerNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ParameterException, InputError) as exc:  # bad start-up parameter: clear message
-        rclpy.logging.get_logger('spcm_controller').fatal(f'cannot start: {exc}')
-        raise SystemExit(2) from None
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    # A bad start-up parameter: one clear fatal line and exit status 2.
+    run_node(SpcmControllerNode, 'spcm_controller', args,
+             startup_errors=(ParameterException, InputError), startup_exit_code=2)
 
 
 if __name__ == '__main__':

@@ -1,0 +1,49 @@
+"""What every DAM node shares in its ROS layer: the config_file parameter and main()."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+CONFIG_FILE_DESCRIPTION = ('DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
+                           'config/dam.yaml')
+
+
+def declare_config_file(node: Node) -> str:
+    """Declare the read-only ``config_file`` parameter on ``node`` and return its value.
+
+    Pass the value, or ``None`` when it is empty, to :func:`dam_analysis.config.load_config`.
+    """
+    return str(node.declare_parameter(
+        'config_file', '',
+        ParameterDescriptor(description=CONFIG_FILE_DESCRIPTION, read_only=True)).value)
+
+
+def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None,
+             startup_errors: tuple[type[BaseException], ...] = (),
+             startup_exit_code: int = 1) -> None:
+    """Initialise rclpy, build the node with ``make_node``, spin it, and shut down cleanly.
+
+    SIGINT and an external shutdown end it with exit status 0. An exception of one of
+    ``startup_errors`` (a bad configuration or parameter) is logged as one fatal line
+    ``cannot start: ...`` under the logger ``name`` and ends the process with
+    ``startup_exit_code``; anything else propagates with its traceback.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except startup_errors as exc:
+        rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
+        raise SystemExit(startup_exit_code) from None
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
