@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gc
+import sys
 from collections.abc import Callable
 
 import rclpy
@@ -25,8 +27,15 @@ def declare_config_file(node: Node) -> str:
 
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None,
              startup_errors: tuple[type[BaseException], ...] = (),
-             startup_exit_code: int = 1) -> None:
+             startup_exit_code: int = 1, switch_interval_s: float | None = None) -> None:
     """Initialise rclpy, build the node with ``make_node``, spin it, and shut down cleanly.
+
+    Once the node is built, every object that exists is moved out of the garbage collector's
+    sight (``gc.freeze``), so later collections scan only what the running node allocates:
+    no pause of several milliseconds in the middle of a control cycle. A node with a timed
+    thread of its own (the driver's device link, the stand-in's device) passes
+    ``switch_interval_s`` [s], the longest time another thread may keep that thread from the
+    interpreter (``sys.setswitchinterval``; Python's default is 5 ms).
 
     SIGINT and an external shutdown end it with exit status 0. An exception of one of
     ``startup_errors`` (a bad configuration or parameter) is logged as one fatal line
@@ -37,6 +46,10 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     node = None
     try:
         node = make_node()
+        if switch_interval_s is not None:
+            sys.setswitchinterval(switch_interval_s)
+        gc.collect()
+        gc.freeze()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

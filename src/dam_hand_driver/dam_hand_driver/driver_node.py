@@ -45,11 +45,14 @@ through ``~/reset``.
 
 from __future__ import annotations
 
+import array
+import ctypes
 import enum
 import math
 import os
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections import deque
@@ -79,6 +82,21 @@ MSG_TO_WIRE_MODE: dict[int, JointMode] = {
 }
 _STANDIN_START_TIMEOUT_S = 20.0
 _LOG_THROTTLE_S = 1.0
+_PR_SET_PDEATHSIG = 1
+#: The device-link thread waits at most this long for the interpreter [s].
+_SWITCH_INTERVAL_S = 2.0e-4
+
+
+def _die_with_parent() -> None:
+    """In the stand-in child, before exec: have the kernel send it SIGTERM when the driver
+    dies, however it dies (Linux; elsewhere the driver's normal exit still stops it)."""
+    if not sys.platform.startswith('linux'):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+    except (OSError, AttributeError):
+        pass
 
 
 class DriverState(enum.Enum):
@@ -198,6 +216,8 @@ class HandDriverNode(Node):
         self._running = True
 
         self._js_pub = self.create_publisher(JointState, '/joint_states', 10)
+        self._js_msg = JointState()
+        self._js_msg.name = list(self.joint_names)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._cmd_sub = self.create_subscription(HandCommand, '/hand/command',
                                                  self._on_command, 10)
@@ -243,7 +263,8 @@ class HandDriverNode(Node):
         cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
-        self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL)
+        self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
+                                       preexec_fn=_die_with_parent)
         self.get_logger().warning(
             f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
             f'(PID {self._child.pid})')
@@ -342,12 +363,12 @@ class HandDriverNode(Node):
 
     def _publish_joint_states(self, frame: StateFrame) -> None:
         q, dq, tau = self.calibration.state_si(frame)
-        msg = JointState()
+        msg = self._js_msg  # one message, refilled: publish() serialises it at once
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.name = self.joint_names
-        msg.position = q.tolist()
-        msg.velocity = dq.tolist()
-        msg.effort = tau.tolist()
+        # array.array('d') is taken as is by the generated setters (no per-element checks).
+        msg.position = array.array('d', q.tobytes())
+        msg.velocity = array.array('d', dq.tobytes())
+        msg.effort = array.array('d', tau.tobytes())
         self._js_pub.publish(msg)
         self._published += 1
 
@@ -463,4 +484,5 @@ class HandDriverNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     run_node(HandDriverNode, 'hand_driver', args,
-             startup_errors=(HandDriverError, DamAnalysisError, OSError))
+             startup_errors=(HandDriverError, DamAnalysisError, OSError),
+             switch_interval_s=_SWITCH_INTERVAL_S)

@@ -205,4 +205,5 @@ def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
     gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
-             startup_errors=(SimBridgeError, DamAnalysisError, OSError))
+             startup_errors=(SimBridgeError, DamAnalysisError, OSError),
+             switch_interval_s=2.0e-4)

@@ -40,12 +40,16 @@ from dam_hand_driver.protocol import (
     encode_state,
 )
 from dam_sim_bridge.errors import WorldConfigError
+from dam_sim_bridge.pacing import reduce_timer_slack, sleep_until
 from dam_sim_bridge.world import HandWorld
 
 if TYPE_CHECKING:
     from dam_analysis.config import DamConfig
 
 _MAX_DATAGRAM = 2048
+#: In real time, the physics of the next cycle starts this fraction of a period after a state
+#: frame is sent (see :meth:`SimDevice.run`).
+STEP_OFFSET_FRACTION = 0.3
 
 
 @dataclass
@@ -162,8 +166,18 @@ class SimDevice:
         bytes | None
             The state frame sent, or ``None`` if the state could not be encoded.
         """
+        frame = self._compute_cycle(None)
+        if frame is not None:
+            self._send_state(frame)
+        return frame
+
+    def _compute_cycle(self, stamp_s: float | None, drain: bool = True) -> bytes | None:
+        """Commands in (if ``drain``), world stepped one period; the encoded state frame (not
+        sent yet), stamped ``stamp_s`` [s] on the device clock (``None``: now, after the
+        step)."""
         with self.lock:
-            self._drain_commands()
+            if drain:
+                self._drain_commands()
             modes, setpoints, tripped = self.watchdog.output()
             self.tripped = tripped
             key = (modes.tobytes(), setpoints.tobytes())
@@ -185,18 +199,21 @@ class SimDevice:
             self.stats.cycles += 1
             try:
                 pos, vel, tor = self.calibration.state_raw(q, dq, tau)
-                frame = encode_state(self._seq, int(self.now() * 1e9), pos, vel, tor,
+                stamp = self.now() if stamp_s is None else stamp_s
+                frame = encode_state(self._seq, int(stamp * 1e9), pos, vel, tor,
                                      self.world.joint_modes(), faults, status)
             except ValueError:
                 self.stats.encode_errors += 1
                 return None
             self._seq = (self._seq + 1) % 2**32
+        return frame
+
+    def _send_state(self, frame: bytes) -> None:
         try:
             self.sock.sendto(frame, self._state_addr)
             self.stats.states_sent += 1
         except OSError:
             self.stats.send_errors += 1
-        return frame
 
     def reset_world(self) -> None:
         """Reset the world to its initial state (all joints HOLD, object at rest)."""
@@ -206,20 +223,38 @@ class SimDevice:
 
     def run(self, stop: threading.Event | None = None) -> None:
         """Run cycles until :meth:`stop` (or ``stop`` is set): paced in real time, or as fast
-        as possible in lockstep mode."""
+        as possible in lockstep mode.
+
+        In real time the world is stepped from t to t + period ahead of time and its state is
+        sent at the deadline t + period, the moment it describes, as a device with a hardware
+        clock would: the period between two state frames does not depend on how long the
+        physics took. Right after a state frame goes out the commands received so far are
+        taken (those computed from older states: one period of latency, as on a real hand);
+        the physics waits :data:`STEP_OFFSET_FRACTION` of a period, so that the driver and
+        its subscribers have the CPU in the moment the frame arrives.
+        """
         stop_event = stop if stop is not None else self._stop
-        next_deadline = self._rt_clock()
+        if self.lockstep:
+            while not (stop_event.is_set() or self._stop.is_set()):
+                self.cycle()
+            return
+        reduce_timer_slack()
+        next_deadline = self._rt_clock() + self.period_s
+        frame = self._compute_cycle(next_deadline)
         while not (stop_event.is_set() or self._stop.is_set()):
-            self.cycle()
-            if self.lockstep:
-                continue
-            next_deadline += self.period_s
-            delay = next_deadline - self._rt_clock()
-            if delay > 0.0:
-                time.sleep(delay)
-            elif delay < -self.period_s:
+            late = self._rt_clock() - next_deadline
+            if late > self.period_s:
                 self.stats.missed_deadlines += 1
                 next_deadline = self._rt_clock()  # do not try to catch up a backlog
+            else:
+                sleep_until(next_deadline, self._rt_clock)
+            if frame is not None:
+                self._send_state(frame)
+            with self.lock:
+                self._drain_commands()
+            time.sleep(STEP_OFFSET_FRACTION * self.period_s)
+            next_deadline += self.period_s
+            frame = self._compute_cycle(next_deadline, drain=False)
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the current cycle."""
