@@ -291,3 +291,45 @@ def test_sim_bridge_services_and_driver_recovery(tmp_path: Path, cfg) -> None:
                 assert driver.alive()
     finally:
         client.close()
+
+
+def _process_gone(pid: int) -> bool:
+    """The process has exited (no such process, or a zombie nobody reaped yet)."""
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii') as stat:
+            return stat.read().rsplit(')', 1)[1].split()[0] in ('Z', 'X')
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
+def test_a_killed_driver_takes_its_standin_with_it(tmp_path: Path) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
+    config_file = tmp_path / 'dam.yaml'
+    config_file.write_text(yaml.safe_dump(data), encoding='utf-8')
+    client = RosClient()
+    diags: list[DiagnosticArray] = []
+    client.node.create_subscription(DiagnosticArray, '/kill/diagnostics', diags.append, 10)
+    try:
+        with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                           '--ros-args', '-r', '__node:=kill_driver', '-p', 'backend:=sim',
+                           '-r', '/diagnostics:=/kill/diagnostics', '-r',
+                           '/joint_states:=/kill/joint_states'],
+                          env={'DAM_CONFIG': str(config_file)}) as driver:
+            assert client.spin_until(lambda: bool(diags), 30.0), driver.output()
+            values = {kv.key: kv.value for kv in diags[-1].status[0].values}
+            standin = int(values['standin_pid'])
+            assert not _process_gone(standin)
+            os.kill(driver.pid, signal.SIGKILL)  # no chance to stop its child itself
+            deadline = time.monotonic() + 10.0
+            while time.monotonic() < deadline and not _process_gone(standin):
+                time.sleep(0.05)
+            gone = _process_gone(standin)
+            if not gone:
+                os.kill(standin, signal.SIGKILL)  # do not leave it behind
+            assert gone, 'the stand-in outlived its driver'
+    finally:
+        client.close()
