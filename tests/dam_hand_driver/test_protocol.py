@@ -36,6 +36,7 @@ from dam_hand_driver.protocol import (
 
 N = 9
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+IMP = int(JointMode.IMPEDANCE)
 
 
 def _state(seq: int, n: int = N, rng: np.random.Generator | None = None) -> bytes:
@@ -48,7 +49,10 @@ def _state(seq: int, n: int = N, rng: np.random.Generator | None = None) -> byte
 
 
 def _command(seq: int, ref: int = 0, n: int = N) -> bytes:
-    return encode_command(seq, ref, [T, T, H, P, P, P, T, H, P][:n], list(range(-4, n - 4)))
+    modes = [IMP, T, H, P, IMP, P, T, H, IMP][:n]
+    stiffness = [100_000 + seq % 1000 if m == IMP else 0 for m in modes]
+    damping = [(seq * 7) % 300_000 if m == IMP else 0 for m in modes]
+    return encode_command(seq, ref, modes, list(range(-4, n - 4)), stiffness, damping)
 
 
 def _with_crc(body: bytes) -> bytes:
@@ -67,7 +71,7 @@ def test_crc_is_the_standard_crc32_check_value() -> None:
 
 def test_frame_sizes_match_the_documented_layout() -> None:
     assert state_frame_size(N) == 12 + 12 + 16 * N + 4 == len(_state(1))
-    assert command_frame_size(N) == 12 + 6 + 6 * N + 4 == len(_command(1))
+    assert command_frame_size(N) == 12 + 6 + 14 * N + 4 == len(_command(1))
 
 
 def test_state_round_trip_with_extreme_values() -> None:
@@ -105,6 +109,107 @@ def test_command_round_trip() -> None:
     assert isinstance(frame, CommandFrame)
     assert (frame.seq, frame.ref_state_seq) == (77, 76)
     assert frame.modes.tolist() == modes and frame.setpoints.tolist() == setpoints
+    assert frame.stiffness.tolist() == [0] * N and frame.damping.tolist() == [0] * N
+
+
+def test_command_round_trip_with_impedance_gains() -> None:
+    modes = [IMP, T, H, IMP, P, H, IMP, P, IMP]
+    setpoints = [2618, 5, 0, -(2**31), 7, 0, 2**31 - 1, 1, 0]
+    stiffness = [1, 0, 0, 2**31 - 1, 0, 0, 100_000, 0, 5]
+    damping = [0, 0, 0, 2**31 - 1, 0, 0, 200_000, 0, 0]
+    data = encode_command(3, 2, modes, setpoints, stiffness, damping)
+    assert len(data) == command_frame_size(N)
+    # joint 0 record right after the 18 bytes of header and body: mode, setpoint, k, d
+    assert struct.unpack_from('<Hiii', data, 18) == (IMP, 2618, 1, 0)
+    frame = FrameDecoder(FrameKind.COMMAND, N).decode(data)
+    assert isinstance(frame, CommandFrame)
+    assert frame.modes.tolist() == modes and frame.setpoints.tolist() == setpoints
+    assert frame.stiffness.tolist() == stiffness and frame.damping.tolist() == damping
+
+
+@pytest.mark.parametrize('stiffness, damping, word', [
+    ([0] + [0] * 8, None, r'stiffness\[0\] = 0'),
+    ([-5] + [0] * 8, None, r'stiffness\[0\] = -5'),
+    ([10] + [0] * 8, [-1] + [0] * 8, r'damping\[0\] = -1'),
+    ([10, 3] + [0] * 7, None, r'joint 1 in mode 1: stiffness 3'),
+    ([10] + [0] * 8, [0, 0, 4] + [0] * 6, r'joint 2 in mode 3'),
+    ([2**31] + [0] * 8, None, r'stiffness\[0\]'),
+])
+def test_encode_rejects_bad_gains(stiffness, damping, word) -> None:
+    modes = [IMP, T, H] + [P] * 6
+    with pytest.raises(EncodeError, match=word):
+        encode_command(1, 0, modes, [0] * N, stiffness, damping)
+
+
+def _command_with_raw_gains(seq: int, modes, stiffness, damping) -> bytes:
+    """A correctly sealed command frame whose gains bypass the encoder's checks."""
+    body = struct.pack('<4sBBHI', MAGIC, PROTOCOL_VERSION, FrameKind.COMMAND,
+                       command_frame_size(len(modes)), seq)
+    body += struct.pack('<IH', 0, len(modes))
+    for m, k, d in zip(modes, stiffness, damping, strict=True):
+        body += struct.pack('<Hiii', m, 0, k, d)
+    return _with_crc(body)
+
+
+def test_decoder_rejects_garbage_gains_as_bad_value() -> None:
+    """Negative or zero stiffness, negative damping on an IMPEDANCE joint, or any gain on
+    another joint: the whole frame is dropped and counted as bad_value (never clamped)."""
+    dec = FrameDecoder(FrameKind.COMMAND, 3)
+    seq = 1
+    bad_cases = [
+        ([IMP, T, H], [-1, 0, 0], [0, 0, 0]),
+        ([IMP, T, H], [0, 0, 0], [0, 0, 0]),
+        ([IMP, T, H], [-(2**31), 0, 0], [0, 0, 0]),
+        ([IMP, T, H], [5, 0, 0], [-3, 0, 0]),
+        ([IMP, T, H], [5, 1, 0], [0, 0, 0]),
+        ([IMP, T, P], [5, 0, 0], [0, 0, 9]),
+    ]
+    for modes, k, d in bad_cases:
+        assert dec.decode(_command_with_raw_gains(seq, modes, k, d)) is None, (modes, k, d)
+        assert dec.last_reject == 'bad_value'
+        seq += 1
+    assert dec.counters.bad_value == len(bad_cases)
+    good = dec.decode(_command_with_raw_gains(seq, [IMP, T, H], [5, 0, 0], [0, 0, 0]))
+    assert good is not None and good.stiffness.tolist() == [5, 0, 0]
+
+
+def test_fuzz_random_gains_accepted_exactly_when_valid() -> None:
+    """2 * 10**4 sealed frames with random modes and int32 gains: accepted if and only if
+    IMPEDANCE joints have k > 0 and d >= 0 and every other joint has k = d = 0."""
+    rng = np.random.default_rng(5)
+    dec = FrameDecoder(FrameKind.COMMAND, N)
+    accepted = 0
+    for seq in range(1, 20_001):
+        modes = rng.integers(1, 5, N)
+        # mostly plausible values, sometimes garbage anywhere in the int32 range
+        k = np.where(rng.random(N) < 0.9, np.where(modes == IMP, rng.integers(1, 10**6, N), 0),
+                     rng.integers(-(2**31), 2**31, N))
+        d = np.where(rng.random(N) < 0.9, np.where(modes == IMP, rng.integers(0, 10**6, N), 0),
+                     rng.integers(-(2**31), 2**31, N))
+        valid = all((k[j] > 0 and d[j] >= 0) if modes[j] == IMP else (k[j] == 0 and d[j] == 0)
+                    for j in range(N))
+        frame = dec.decode(_command_with_raw_gains(seq, modes.tolist(), k.tolist(),
+                                                   d.tolist()))
+        assert (frame is not None) == valid, (seq, modes, k, d, dec.last_reject)
+        if frame is not None:
+            accepted += 1
+            assert frame.stiffness.tolist() == k.tolist()
+            assert frame.damping.tolist() == d.tolist()
+    assert 0 < accepted < 20_000
+    assert dec.counters.bad_value == 20_000 - accepted
+
+
+def test_version_1_frames_are_rejected_as_bad_version() -> None:
+    """A protocol-1 command frame (6-byte joint records, version byte 1) is counted under
+    bad_version, whatever else it holds."""
+    n = 3
+    body = struct.pack('<4sBBHI', MAGIC, 1, FrameKind.COMMAND, 22 + 6 * n, 1)
+    body += struct.pack('<IH', 0, n) + struct.pack('<HiHiHi', T, 10, P, 20, H, 0)
+    old = _with_crc(body)
+    dec = FrameDecoder(FrameKind.COMMAND, n)
+    assert dec.decode(old) is None
+    assert dec.counters.bad_version == 1 and dec.counters.rejected == 1
+    assert PROTOCOL_VERSION == 2
 
 
 @pytest.mark.parametrize('kwargs, word', [
@@ -132,6 +237,8 @@ def _doc_example(marker: str) -> bytes:
 
 def test_documented_examples_match_the_codec() -> None:
     assert _doc_example('example-command') == encode_command(1, 0, [T], [1000])
+    assert _doc_example('example-impedance') == encode_command(2, 1, [IMP], [2618], [100_000],
+                                                               [200_000])
     assert _doc_example('example-state') == encode_state(7, 1_000_000, [2618], [-25], [150],
                                                          [H], [0], status=2)
 
@@ -321,6 +428,42 @@ def test_setpoints_per_mode() -> None:
     assert raw.tolist() == [10000, round(math.radians(15.0) / 1e-4), 0]
     si = cal.setpoints_si([T, P, H], raw)
     assert si[0] == pytest.approx(0.1) and math.isnan(si[2])
+    # IMPEDANCE: the setpoint is the equilibrium angle theta_0, in counts like POSITION
+    raw = cal.setpoints_raw([IMP, T, H], [0.2618, 0.0, 0.0])
+    assert raw.tolist() == [2618, 0, 0]
+    assert cal.setpoints_si([IMP, T, H], raw)[0] == pytest.approx(0.2618)
+
+
+def test_impedance_gains_in_fixed_point() -> None:
+    cal = Calibration([1e-4] * 3, [0] * 3, [1e-5] * 3, [0] * 3, [1e-4, 1e-3, 1e-4],
+                      [1e-6, 1e-6, 1e-5])
+    k_raw, d_raw = cal.gains_raw([IMP, IMP, T], [10.0, 0.5, float('nan')],
+                                 [0.2, 0.0, float('nan')])
+    assert k_raw.tolist() == [100_000, 500, 0]  # 10 / 1e-4, 0.5 / 1e-3; not IMPEDANCE: 0
+    assert d_raw.tolist() == [200_000, 0, 0]  # 0.2 / 1e-6
+    k, d = cal.gains_si(k_raw, d_raw)
+    assert k.tolist() == pytest.approx([10.0, 0.5, 0.0])
+    assert d.tolist() == pytest.approx([0.2, 0.0, 0.0])
+    with pytest.raises(ParameterError, match='at least one raw unit'):
+        cal.gains_raw([IMP, T, T], [-1.0, 0, 0], [0.0, 0, 0])
+    with pytest.raises(ParameterError, match='at least one raw unit'):
+        cal.gains_raw([IMP, T, T], [1e-6, 0, 0], [0.0, 0, 0])
+    with pytest.raises(ParameterError, match='>= 0'):
+        cal.gains_raw([IMP, T, T], [1.0, 0, 0], [-0.1, 0, 0])
+    with pytest.raises(ParameterError, match='finite'):
+        cal.gains_raw([IMP, T, T], [float('inf'), 0, 0], [0.0, 0, 0])
+    with pytest.raises(ParameterError, match='int32'):
+        cal.gains_raw([IMP, T, T], [1e6, 0, 0], [0.0, 0, 0])
+    with pytest.raises(ParameterError, match='positive'):
+        Calibration([1e-4], [0], [1e-5], [0], [-1e-4], [1e-6])
+
+
+def test_gain_calibration_comes_from_the_config() -> None:
+    cfg = load_config()
+    cal = Calibration.from_config(cfg)
+    c = cfg.device.calibration['compliant']
+    assert cal.stiffness_scale[0] == c.stiffness_scale_nm_per_rad_per_raw
+    assert cal.damping_scale[0] == c.damping_scale_nms_per_rad_per_raw
 
 
 def test_state_si_and_raw_round_trip_through_a_frame() -> None:
@@ -389,6 +532,26 @@ def test_watchdog_zeroes_torque_holds_positions_until_fresh_command() -> None:
     assert not tripped and modes.tolist() == [T, T, P] and setpoints.tolist() == [-7, 8, 9]
     clock.now += 0.05
     assert wd.output()[2] and wd.trips == 2
+
+
+def test_watchdog_passes_gains_and_zeroes_impedance_torque_on_timeout() -> None:
+    clock = FakeClock()
+    wd = DeviceWatchdog(3, 0.04, clock=clock)
+    wd.feed([IMP, P, T], [2618, 100, 5], [100_000, 0, 0], [200_000, 0, 0])
+    out = wd.output_full()
+    assert not out.tripped and out.modes.tolist() == [IMP, P, T]
+    assert out.setpoints.tolist() == [2618, 100, 5]
+    assert out.stiffness.tolist() == [100_000, 0, 0] and out.damping.tolist() == [200_000, 0, 0]
+    clock.now += 0.05
+    out = wd.output_full()
+    assert out.tripped
+    assert out.modes.tolist() == [T, H, T]  # IMPEDANCE joint: torque-controlled, zero torque
+    assert out.setpoints.tolist() == [0, 0, 0]
+    assert out.stiffness.tolist() == [0, 0, 0] and out.damping.tolist() == [0, 0, 0]
+    with pytest.raises(ParameterError, match='gains'):
+        wd.feed([IMP, P, T], [0, 0, 0], [0, 0, 0], [0, 0, 0])
+    with pytest.raises(ParameterError, match='gains'):
+        wd.feed([T, P, T], [0, 0, 0], [4, 0, 0], [0, 0, 0])
 
 
 def test_watchdog_timeout_is_bounded_and_never_off() -> None:

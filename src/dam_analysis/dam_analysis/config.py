@@ -141,6 +141,7 @@ class ControllerConfig:
     envelope_settle_speed_rad_per_s: float
     envelope_settle_time_s: float
     limit_margin_rad: float
+    impedance_on_device: bool
 
 
 @dataclass(frozen=True)
@@ -174,6 +175,8 @@ class Calibration:
     position_offset_counts: float
     torque_scale_nm_per_raw: float
     torque_offset_raw: float
+    stiffness_scale_nm_per_rad_per_raw: float  # k [N*m/rad] = raw * scale, raw > 0
+    damping_scale_nms_per_rad_per_raw: float  # d [N*m*s/rad] = raw * scale, raw >= 0
 
 
 @dataclass(frozen=True)
@@ -187,6 +190,8 @@ class DeviceConfig:
     state_timeout_s: float
     torque_rate_limit_nm_per_s: float
     torque_limit_nm: float
+    max_stiffness_nm_per_rad: float  # largest IMPEDANCE stiffness the driver accepts
+    max_damping_nms_per_rad: float  # largest IMPEDANCE damping the driver accepts
     calibration: Mapping[str, Calibration]  # joint role -> calibration
 
 
@@ -419,7 +424,7 @@ def _controller(node: _Node) -> ControllerConfig:
                     'approach_speed_deg_per_s', 'phase_timeout_s', 'state_timeout_s',
                     'torque_ramp_time_s', 'lost_contact_time_s', 'lost_contact_torque_ratio',
                     'envelope_settle_speed_deg_per_s', 'envelope_settle_time_s',
-                    'limit_margin_deg'})
+                    'limit_margin_deg', 'impedance_on_device'})
     ratio = node.child('lost_contact_torque_ratio')
     ratio_value = ratio.number(positive=True)
     if ratio_value >= 1.0:
@@ -448,6 +453,7 @@ def _controller(node: _Node) -> ControllerConfig:
             node.child('envelope_settle_speed_deg_per_s').number(positive=True)),
         envelope_settle_time_s=node.child('envelope_settle_time_s').number(positive=True),
         limit_margin_rad=math.radians(node.child('limit_margin_deg').number(nonnegative=True)),
+        impedance_on_device=node.child('impedance_on_device').boolean(),
     )
 
 
@@ -488,7 +494,8 @@ def _sim(node: _Node, hand: HandConfig) -> SimConfig:
 def _device(node: _Node) -> DeviceConfig:
     node.only_keys({'host', 'state_port', 'command_port', 'rate_hz', 'watchdog_s',
                     'probe_timeout_s', 'state_timeout_s', 'torque_rate_limit_nm_per_s',
-                    'torque_limit_nm', 'calibration'})
+                    'torque_limit_nm', 'max_stiffness_nm_per_rad', 'max_damping_nms_per_rad',
+                    'calibration'})
     watchdog = node.child('watchdog_s')
     watchdog_s = watchdog.number(positive=True)
     if watchdog_s > 0.2:
@@ -504,12 +511,18 @@ def _device(node: _Node) -> DeviceConfig:
     for role in JOINT_ROLES:
         rnode = cal_node.child(role)
         rnode.only_keys({'position_scale_rad_per_count', 'position_offset_counts',
-                         'torque_scale_nm_per_raw', 'torque_offset_raw'})
+                         'torque_scale_nm_per_raw', 'torque_offset_raw',
+                         'stiffness_scale_nm_per_rad_per_raw',
+                         'damping_scale_nms_per_rad_per_raw'})
         calibration[role] = Calibration(
             position_scale_rad_per_count=_nonzero(rnode.child('position_scale_rad_per_count')),
             position_offset_counts=rnode.child('position_offset_counts').number(),
             torque_scale_nm_per_raw=_nonzero(rnode.child('torque_scale_nm_per_raw')),
             torque_offset_raw=rnode.child('torque_offset_raw').number(),
+            stiffness_scale_nm_per_rad_per_raw=rnode.child(
+                'stiffness_scale_nm_per_rad_per_raw').number(positive=True),
+            damping_scale_nms_per_rad_per_raw=rnode.child(
+                'damping_scale_nms_per_rad_per_raw').number(positive=True),
         )
     return DeviceConfig(
         host=node.child('host').string(),
@@ -522,6 +535,8 @@ def _device(node: _Node) -> DeviceConfig:
         torque_rate_limit_nm_per_s=node.child('torque_rate_limit_nm_per_s').number(
             positive=True),
         torque_limit_nm=node.child('torque_limit_nm').number(positive=True),
+        max_stiffness_nm_per_rad=node.child('max_stiffness_nm_per_rad').number(positive=True),
+        max_damping_nms_per_rad=node.child('max_damping_nms_per_rad').number(nonnegative=True),
         calibration=calibration,
     )
 
@@ -610,6 +625,11 @@ class _Node:
         items = self.sequence(length)
         return np.array([self.item(i).number(positive=positive) for i in range(len(items))],
                         dtype=np.float64)
+
+    def boolean(self) -> bool:
+        if not isinstance(self.raw, bool):
+            raise self.error(f'expected true or false, got {self.raw!r}')
+        return self.raw
 
     def string(self) -> str:
         if not isinstance(self.raw, str) or not self.raw:

@@ -8,8 +8,14 @@ CRC-32. ``docs/device_protocol.md`` is the normative description; this module im
 Everything here is pure Python (numpy, ``struct``, ``zlib``): no rclpy, no sockets.
 
 Units on the wire are raw device units (encoder counts, counts per second, raw torque-sensor
-units). :class:`Calibration` converts them to SI with ``si = (raw - offset) * scale`` per joint
-role, from ``device.calibration`` of ``config/dam.yaml``.
+units, fixed-point impedance gains). :class:`Calibration` converts them to SI with
+``si = (raw - offset) * scale`` per joint role (gains: ``si = raw * scale``), from
+``device.calibration`` of ``config/dam.yaml``.
+
+Protocol version 2 added the joint mode IMPEDANCE: the device itself runs the compliant-joint
+law ``tau = clip(k (theta_0 - theta) - d theta_dot, +-torque limit)`` at its physics rate, and
+command frames carry a stiffness ``k`` and a damping ``d`` per joint besides the setpoint
+(``theta_0`` for IMPEDANCE).
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -36,11 +42,15 @@ if TYPE_CHECKING:
 #: First four bytes of every frame.
 MAGIC: bytes = b'DAMH'
 #: Protocol version this module speaks.
-PROTOCOL_VERSION: int = 1
+PROTOCOL_VERSION: int = 2
 #: Longest watchdog timeout the device accepts [s]; the watchdog can never be switched off.
 WATCHDOG_MAX_S: float = 0.2
 #: Default watchdog timeout [s].
 WATCHDOG_DEFAULT_S: float = 0.040
+#: Stiffness of one raw unit when a :class:`Calibration` is built without one [N*m/rad].
+STIFFNESS_SCALE_DEFAULT: float = 1.0e-4
+#: Damping of one raw unit when a :class:`Calibration` is built without one [N*m*s/rad].
+DAMPING_SCALE_DEFAULT: float = 1.0e-6
 
 _INT32_MIN = -(2**31)
 _INT32_MAX = 2**31 - 1
@@ -63,6 +73,10 @@ class JointMode(enum.IntEnum):
     TORQUE = 1  #: setpoint is a joint torque [raw torque units]
     POSITION = 2  #: setpoint is a joint position [encoder counts]; the device servoes
     HOLD = 3  #: the device servoes the position it had when it entered HOLD; setpoint ignored
+    #: setpoint is the equilibrium theta_0 [encoder counts]; the device applies
+    #: ``clip(k (theta_0 - theta) - d theta_dot, +-torque limit)`` every physics step with the
+    #: frame's stiffness k and damping d
+    IMPEDANCE = 4
 
 
 class JointFault(enum.IntFlag):
@@ -90,13 +104,13 @@ _HEADER = struct.Struct('<4sBBHI')  # magic, version, kind, length, seq
 _STATE_BODY = struct.Struct('<QHH')  # timestamp_ns, n_joints, status
 _STATE_JOINT = '<iiiHH'  # position, velocity, torque, mode, faults (per joint)
 _COMMAND_BODY = struct.Struct('<IH')  # ref_state_seq, n_joints
-_COMMAND_JOINT = '<Hi'  # mode, setpoint (per joint)
+_COMMAND_JOINT = '<Hiii'  # mode, setpoint, stiffness, damping (per joint)
 _CRC = struct.Struct('<I')
 
 HEADER_SIZE: int = _HEADER.size  # 12 bytes
 CRC_SIZE: int = _CRC.size  # 4 bytes
 STATE_JOINT_SIZE: int = struct.calcsize(_STATE_JOINT)  # 16 bytes
-COMMAND_JOINT_SIZE: int = struct.calcsize(_COMMAND_JOINT)  # 6 bytes
+COMMAND_JOINT_SIZE: int = struct.calcsize(_COMMAND_JOINT)  # 14 bytes
 MAX_JOINTS: int = 64
 
 
@@ -106,7 +120,7 @@ def state_frame_size(n_joints: int) -> int:
 
 
 def command_frame_size(n_joints: int) -> int:
-    """Length in bytes of a command frame with ``n_joints`` joints (``22 + 6 n``)."""
+    """Length in bytes of a command frame with ``n_joints`` joints (``22 + 14 n``)."""
     return HEADER_SIZE + _COMMAND_BODY.size + COMMAND_JOINT_SIZE * n_joints + CRC_SIZE
 
 
@@ -189,14 +203,25 @@ class CommandFrame:
     modes
         (n,) int64: requested :class:`JointMode` per joint.
     setpoints
-        (n,) int64: torque [raw units] for TORQUE, position [counts] for POSITION, ignored (0)
-        for HOLD.
+        (n,) int64: torque [raw units] for TORQUE, position [counts] for POSITION, the
+        equilibrium theta_0 [counts] for IMPEDANCE, ignored (0) for HOLD.
+    stiffness, damping
+        (n,) int64: impedance stiffness and damping [raw gain units], positive and
+        non-negative for IMPEDANCE joints, 0 for every other joint. ``None`` (the default
+        when constructed by hand) means zeros.
     """
 
     seq: int
     ref_state_seq: int
     modes: np.ndarray
     setpoints: np.ndarray
+    stiffness: np.ndarray | None = None
+    damping: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ('stiffness', 'damping'):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(np.shape(self.modes), dtype=np.int64))
 
     @property
     def n_joints(self) -> int:
@@ -235,6 +260,19 @@ def _check_modes(modes: list[int]) -> None:
         if m not in _VALID_MODES:
             raise EncodeError(f'modes[{i}] = {m} is not a JointMode '
                               f'({sorted(_VALID_MODES)})')
+
+
+def _check_gains(modes: list[int], stiffness: list[int], damping: list[int]) -> None:
+    """IMPEDANCE joints: stiffness > 0, damping >= 0; every other joint: both 0."""
+    for i, (m, k, d) in enumerate(zip(modes, stiffness, damping, strict=True)):
+        if m == JointMode.IMPEDANCE:
+            if k <= 0:
+                raise EncodeError(f'stiffness[{i}] = {k} of an IMPEDANCE joint must be positive')
+            if d < 0:
+                raise EncodeError(f'damping[{i}] = {d} of an IMPEDANCE joint must be >= 0')
+        elif k != 0 or d != 0:
+            raise EncodeError(f'joint {i} in mode {m}: stiffness {k} and damping {d} must be 0 '
+                              f'outside IMPEDANCE')
 
 
 def encode_state(seq: int, timestamp_ns: int,
@@ -296,7 +334,9 @@ def encode_state(seq: int, timestamp_ns: int,
 
 
 def encode_command(seq: int, ref_state_seq: int, modes: Sequence[int] | np.ndarray,
-                   setpoints: Sequence[int] | np.ndarray) -> bytes:
+                   setpoints: Sequence[int] | np.ndarray,
+                   stiffness: Sequence[int] | np.ndarray | None = None,
+                   damping: Sequence[int] | np.ndarray | None = None) -> bytes:
     """Encode a command frame.
 
     Parameters
@@ -309,7 +349,10 @@ def encode_command(seq: int, ref_state_seq: int, modes: Sequence[int] | np.ndarr
         (n,) :class:`JointMode` values.
     setpoints
         (n,) integers in the int32 range: raw torque units (TORQUE), encoder counts
-        (POSITION), 0 (HOLD; ignored by the device).
+        (POSITION; the equilibrium theta_0 for IMPEDANCE), 0 (HOLD; ignored by the device).
+    stiffness, damping
+        (n,) raw impedance gains in the int32 range: stiffness positive and damping
+        non-negative for IMPEDANCE joints, 0 for every other joint; ``None``: all zero.
 
     Returns
     -------
@@ -319,7 +362,8 @@ def encode_command(seq: int, ref_state_seq: int, modes: Sequence[int] | np.ndarr
     Raises
     ------
     EncodeError
-        A value is out of its field's range or the arrays differ in length.
+        A value is out of its field's range, the arrays differ in length, or the gains break
+        the rule above (the device's decoder would drop the frame as ``bad_value``).
     """
     if np.ndim(modes) != 1:
         raise EncodeError(f'modes must be a 1-D array, got {modes!r}')
@@ -330,11 +374,16 @@ def encode_command(seq: int, ref_state_seq: int, modes: Sequence[int] | np.ndarr
     mod = _int_array('modes', modes, n, 0, 0xFFFF)
     _check_modes(mod)
     spt = _int_array('setpoints', setpoints, n, _INT32_MIN, _INT32_MAX)
+    stf = [0] * n if stiffness is None else _int_array('stiffness', stiffness, n, _INT32_MIN,
+                                                        _INT32_MAX)
+    dmp = [0] * n if damping is None else _int_array('damping', damping, n, _INT32_MIN,
+                                                      _INT32_MAX)
+    _check_gains(mod, stf, dmp)
     length = command_frame_size(n)
     buf = bytearray(length)
     _HEADER.pack_into(buf, 0, MAGIC, PROTOCOL_VERSION, FrameKind.COMMAND, length, int(seq))
     _COMMAND_BODY.pack_into(buf, HEADER_SIZE, int(ref_state_seq), n)
-    joints = [v for j in range(n) for v in (mod[j], spt[j])]
+    joints = [v for j in range(n) for v in (mod[j], spt[j], stf[j], dmp[j])]
     struct.pack_into('<' + _COMMAND_JOINT[1:] * n, buf, HEADER_SIZE + _COMMAND_BODY.size,
                      *joints)
     _CRC.pack_into(buf, length - CRC_SIZE, crc32(memoryview(buf)[:length - CRC_SIZE]))
@@ -361,7 +410,7 @@ class RejectCounters:
     bad_length: int = 0  #: the length field differs from the datagram's size
     bad_crc: int = 0  #: checksum mismatch
     bad_joint_count: int = 0  #: joint count differs from the expected one, or from the length
-    bad_value: int = 0  #: a mode that is not a JointMode
+    bad_value: int = 0  #: a mode that is not a JointMode, or impedance gains against the rules
     replayed: int = 0  #: sequence number equal to the newest accepted one
     stale: int = 0  #: sequence number older than the newest accepted one
     internal_error: int = 0  #: an unexpected exception inside the decoder (a bug; never raised)
@@ -475,10 +524,15 @@ class FrameDecoder:
             table = values.reshape(self.n_joints, 5)
             modes = table[:, 3]
         else:
-            table = values.reshape(self.n_joints, 2)
+            table = values.reshape(self.n_joints, 4)
             modes = table[:, 0]
         if not np.all((modes >= min(_VALID_MODES)) & (modes <= max(_VALID_MODES))):
             return 'bad_value', None
+        if self.kind is FrameKind.COMMAND:
+            impedance = modes == int(JointMode.IMPEDANCE)
+            k, d = table[:, 2], table[:, 3]
+            if np.any(np.where(impedance, (k <= 0) | (d < 0), (k != 0) | (d != 0))):
+                return 'bad_value', None
         if self._newest_seq is not None:
             if seq == self._newest_seq:
                 return 'replayed', None
@@ -491,7 +545,8 @@ class FrameDecoder:
                 modes=modes.copy(), faults=table[:, 4].copy(), status=body[2])
         else:
             frame = CommandFrame(seq=seq, ref_state_seq=body[0], modes=modes.copy(),
-                                 setpoints=table[:, 1].copy())
+                                 setpoints=table[:, 1].copy(), stiffness=table[:, 2].copy(),
+                                 damping=table[:, 3].copy())
         return 'accepted', frame
 
 
@@ -504,24 +559,39 @@ class Calibration:
 
     ``si = (raw - offset) * scale`` with the per-role scale and offset of
     ``device.calibration``; velocities use the position scale without offset
-    (``rad/s = counts/s * scale``).
+    (``rad/s = counts/s * scale``). The impedance gains of a command frame are unsigned
+    fixed-point numbers without offset: ``k [N*m/rad] = stiffness_raw * stiffness_scale``,
+    ``d [N*m*s/rad] = damping_raw * damping_scale``.
 
     Parameters
     ----------
     position_scale_rad_per_count, position_offset_counts, torque_scale_nm_per_raw, \
 torque_offset_raw
         (n,) per joint.
+    stiffness_scale_nm_per_rad_per_raw, damping_scale_nms_per_rad_per_raw
+        (n,) per joint, positive; ``None``: :data:`STIFFNESS_SCALE_DEFAULT` and
+        :data:`DAMPING_SCALE_DEFAULT` for every joint.
     """
 
     def __init__(self, position_scale_rad_per_count: Sequence[float] | np.ndarray,
                  position_offset_counts: Sequence[float] | np.ndarray,
                  torque_scale_nm_per_raw: Sequence[float] | np.ndarray,
-                 torque_offset_raw: Sequence[float] | np.ndarray) -> None:
+                 torque_offset_raw: Sequence[float] | np.ndarray,
+                 stiffness_scale_nm_per_rad_per_raw: Sequence[float] | np.ndarray | None = None,
+                 damping_scale_nms_per_rad_per_raw: Sequence[float] | np.ndarray | None = None
+                 ) -> None:
+        n_in = int(np.size(position_scale_rad_per_count))
         arrays = {
             'position_scale_rad_per_count': position_scale_rad_per_count,
             'position_offset_counts': position_offset_counts,
             'torque_scale_nm_per_raw': torque_scale_nm_per_raw,
             'torque_offset_raw': torque_offset_raw,
+            'stiffness_scale_nm_per_rad_per_raw': (
+                [STIFFNESS_SCALE_DEFAULT] * n_in if stiffness_scale_nm_per_rad_per_raw is None
+                else stiffness_scale_nm_per_rad_per_raw),
+            'damping_scale_nms_per_rad_per_raw': (
+                [DAMPING_SCALE_DEFAULT] * n_in if damping_scale_nms_per_rad_per_raw is None
+                else damping_scale_nms_per_rad_per_raw),
         }
         checked: dict[str, np.ndarray] = {}
         n = None
@@ -536,11 +606,15 @@ torque_offset_raw
                 raise ParameterError(f'{name} has a non-finite value: {arr.tolist()!r}')
             if name.endswith(('_per_count', '_per_raw')) and np.any(arr == 0.0):
                 raise ParameterError(f'{name} has a zero scale: {arr.tolist()!r}')
+            if name.startswith(('stiffness', 'damping')) and np.any(arr <= 0.0):
+                raise ParameterError(f'{name} must be positive: {arr.tolist()!r}')
             checked[name] = arr
         self.position_scale = checked['position_scale_rad_per_count']
         self.position_offset = checked['position_offset_counts']
         self.torque_scale = checked['torque_scale_nm_per_raw']
         self.torque_offset = checked['torque_offset_raw']
+        self.stiffness_scale = checked['stiffness_scale_nm_per_rad_per_raw']
+        self.damping_scale = checked['damping_scale_nms_per_rad_per_raw']
 
     @classmethod
     def from_config(cls, config: DamConfig) -> Calibration:
@@ -551,7 +625,9 @@ torque_offset_raw
         return cls([cal[r].position_scale_rad_per_count for r in roles],
                    [cal[r].position_offset_counts for r in roles],
                    [cal[r].torque_scale_nm_per_raw for r in roles],
-                   [cal[r].torque_offset_raw for r in roles])
+                   [cal[r].torque_offset_raw for r in roles],
+                   [cal[r].stiffness_scale_nm_per_rad_per_raw for r in roles],
+                   [cal[r].damping_scale_nms_per_rad_per_raw for r in roles])
 
     @property
     def n_joints(self) -> int:
@@ -598,8 +674,8 @@ torque_offset_raw
                       setpoints_si: np.ndarray | Sequence[float]) -> np.ndarray:
         """SI setpoints -> raw setpoints of a command frame, per joint mode.
 
-        TORQUE: N*m -> raw torque units; POSITION: rad -> counts; HOLD: 0 (the value is
-        ignored and may be NaN).
+        TORQUE: N*m -> raw torque units; POSITION and IMPEDANCE (theta_0): rad -> counts;
+        HOLD: 0 (the value is ignored and may be NaN).
         """
         m = np.asarray(modes, dtype=np.int64)
         sp = np.asarray(setpoints_si, dtype=np.float64)
@@ -608,7 +684,7 @@ torque_offset_raw
                                  f'shape ({self.n_joints},)')
         out = np.zeros(self.n_joints, dtype=np.int64)
         torque = m == JointMode.TORQUE
-        position = m == JointMode.POSITION
+        position = (m == JointMode.POSITION) | (m == JointMode.IMPEDANCE)
         bad = ~(torque | position | (m == JointMode.HOLD))
         if np.any(bad):
             raise ParameterError(f'modes {m.tolist()!r} contain a value that is not a JointMode')
@@ -620,11 +696,69 @@ torque_offset_raw
 
     def setpoints_si(self, modes: np.ndarray | Sequence[int],
                      setpoints_raw: np.ndarray | Sequence[int]) -> np.ndarray:
-        """Raw setpoints of a command frame -> SI (N*m or rad; NaN for HOLD)."""
+        """Raw setpoints of a command frame -> SI (N*m; rad for POSITION and IMPEDANCE; NaN
+        for HOLD)."""
         m = np.asarray(modes, dtype=np.int64)
         sp = np.asarray(setpoints_raw, dtype=np.float64)
+        angle = (m == JointMode.POSITION) | (m == JointMode.IMPEDANCE)
         return np.where(m == JointMode.TORQUE, self.torque_si(sp),
-                        np.where(m == JointMode.POSITION, self.position_si(sp), np.nan))
+                        np.where(angle, self.position_si(sp), np.nan))
+
+    def gains_raw(self, modes: np.ndarray | Sequence[int],
+                  stiffness_nm_per_rad: np.ndarray | Sequence[float],
+                  damping_nms_per_rad: np.ndarray | Sequence[float]
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """SI impedance gains -> raw gains of a command frame (int64, rounded).
+
+        Joints not in IMPEDANCE get 0 whatever their value (NaN allowed there).
+
+        Parameters
+        ----------
+        modes
+            (n,) :class:`JointMode` per joint.
+        stiffness_nm_per_rad, damping_nms_per_rad
+            (n,) stiffness k [N*m/rad] and damping d [N*m*s/rad].
+
+        Raises
+        ------
+        ParameterError
+            Wrong shape, or an IMPEDANCE joint whose stiffness is not finite or rounds to
+            less than one raw unit, whose damping is negative or not finite, or whose gain
+            does not fit the int32 field.
+        """
+        m = np.asarray(modes, dtype=np.int64)
+        k = np.asarray(stiffness_nm_per_rad, dtype=np.float64)
+        d = np.asarray(damping_nms_per_rad, dtype=np.float64)
+        if m.shape != (self.n_joints,) or k.shape != m.shape or d.shape != m.shape:
+            raise ParameterError(f'modes {m.shape}, stiffness {k.shape} and damping {d.shape} '
+                                 f'must all have shape ({self.n_joints},)')
+        imp = m == JointMode.IMPEDANCE
+        k_raw = np.zeros(self.n_joints, dtype=np.int64)
+        d_raw = np.zeros(self.n_joints, dtype=np.int64)
+        if not np.any(imp):
+            return k_raw, d_raw
+        if not (np.all(np.isfinite(k[imp])) and np.all(np.isfinite(d[imp]))):
+            raise ParameterError(f'impedance gains must be finite: stiffness {k.tolist()!r}, '
+                                 f'damping {d.tolist()!r}')
+        kr = np.rint(np.where(imp, k, 0.0) / self.stiffness_scale)
+        dr = np.rint(np.where(imp, d, 0.0) / self.damping_scale)
+        if np.any(kr[imp] < 1):
+            raise ParameterError(f'stiffness {k.tolist()!r} N*m/rad: an IMPEDANCE joint needs '
+                                 f'at least one raw unit ({self.stiffness_scale.tolist()!r})')
+        if np.any(dr[imp] < 0):
+            raise ParameterError(f'damping {d.tolist()!r} N*m*s/rad must be >= 0')
+        if np.any(kr > _INT32_MAX) or np.any(dr > _INT32_MAX):
+            raise ParameterError(f'stiffness {k.tolist()!r} or damping {d.tolist()!r} does '
+                                 f'not fit the int32 raw field')
+        k_raw[imp] = kr[imp].astype(np.int64)
+        d_raw[imp] = dr[imp].astype(np.int64)
+        return k_raw, d_raw
+
+    def gains_si(self, stiffness_raw: np.ndarray | Sequence[int],
+                 damping_raw: np.ndarray | Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Raw gains of a command frame -> stiffness [N*m/rad] and damping [N*m*s/rad]."""
+        return (np.asarray(stiffness_raw, dtype=np.float64) * self.stiffness_scale,
+                np.asarray(damping_raw, dtype=np.float64) * self.damping_scale)
 
     def _to_raw(self, what: str, si: np.ndarray | Sequence[float], scale: np.ndarray,
                 offset: np.ndarray | float) -> np.ndarray:
@@ -658,14 +792,24 @@ def check_watchdog_timeout(timeout_s: float) -> float:
     return t
 
 
+class DeviceOutput(NamedTuple):
+    """What the device applies now (:meth:`DeviceWatchdog.output_full`), raw units."""
+
+    modes: np.ndarray  #: (n,) int64 :class:`JointMode` values
+    setpoints: np.ndarray  #: (n,) int64 raw setpoints (0 for HOLD)
+    stiffness: np.ndarray  #: (n,) int64 raw stiffness (0 outside IMPEDANCE)
+    damping: np.ndarray  #: (n,) int64 raw damping (0 outside IMPEDANCE)
+    tripped: bool  #: the watchdog is tripped (safe state)
+
+
 class DeviceWatchdog:
     """What the device does with the commands it receives (pure logic, injected clock).
 
     While valid commands keep arriving, :meth:`output` is the newest command. When no valid
     command has arrived for ``timeout_s`` (or none ever did), the watchdog is *tripped* and
-    :meth:`output` is the safe state: joints whose last command was TORQUE get zero torque
-    (still in TORQUE mode), every other joint HOLDs its position. It stays tripped until the
-    next command is fed.
+    :meth:`output` is the safe state: joints whose last command was TORQUE or IMPEDANCE get
+    zero torque (in TORQUE mode: a device-side impedance is a torque-controlled joint), every
+    other joint HOLDs its position. It stays tripped until the next command is fed.
 
     Parameters
     ----------
@@ -687,34 +831,58 @@ class DeviceWatchdog:
         self._last_feed_s: float | None = None
         self._modes = np.full(self.n_joints, int(JointMode.HOLD), dtype=np.int64)
         self._setpoints = np.zeros(self.n_joints, dtype=np.int64)
+        self._stiffness = np.zeros(self.n_joints, dtype=np.int64)
+        self._damping = np.zeros(self.n_joints, dtype=np.int64)
         self._was_tripped = True
         #: Number of times the watchdog went from running to tripped.
         self.trips = 0
 
-    def feed(self, modes: np.ndarray | Sequence[int], setpoints: np.ndarray | Sequence[int]
-             ) -> None:
+    def feed(self, modes: np.ndarray | Sequence[int], setpoints: np.ndarray | Sequence[int],
+             stiffness: np.ndarray | Sequence[int] | None = None,
+             damping: np.ndarray | Sequence[int] | None = None) -> None:
         """A valid, fresh command arrived (already accepted by the device's decoder).
+
+        Parameters
+        ----------
+        modes, setpoints
+            (n,) :class:`JointMode` values and raw setpoints.
+        stiffness, damping
+            (n,) raw impedance gains (``None``: zeros): positive stiffness and non-negative
+            damping for IMPEDANCE joints, zero for the others.
 
         Raises
         ------
         ParameterError
-            Wrong array length or a mode that is not a :class:`JointMode`.
+            Wrong array length, a mode that is not a :class:`JointMode`, or gains against
+            the rule above.
         """
         m = np.asarray(modes, dtype=np.int64)
         s = np.asarray(setpoints, dtype=np.int64)
-        if m.shape != (self.n_joints,) or s.shape != (self.n_joints,):
-            raise ParameterError(f'modes {m.shape} and setpoints {s.shape} must both have '
-                                 f'shape ({self.n_joints},)')
+        n = self.n_joints
+        k = np.zeros(n, dtype=np.int64) if stiffness is None else np.asarray(stiffness,
+                                                                             dtype=np.int64)
+        d = np.zeros(n, dtype=np.int64) if damping is None else np.asarray(damping,
+                                                                           dtype=np.int64)
+        if any(a.shape != (n,) for a in (m, s, k, d)):
+            raise ParameterError(f'modes {m.shape}, setpoints {s.shape}, stiffness {k.shape} '
+                                 f'and damping {d.shape} must all have shape ({n},)')
         if not all(int(v) in _VALID_MODES for v in m):
             raise ParameterError(f'modes {m.tolist()!r} contain a value that is not a JointMode')
+        imp = m == int(JointMode.IMPEDANCE)
+        if np.any(np.where(imp, (k <= 0) | (d < 0), (k != 0) | (d != 0))):
+            raise ParameterError(f'impedance gains against the rules (IMPEDANCE: stiffness > 0, '
+                                 f'damping >= 0; others 0): modes {m.tolist()!r}, stiffness '
+                                 f'{k.tolist()!r}, damping {d.tolist()!r}')
         self._modes = m.copy()
         self._setpoints = s.copy()
+        self._stiffness = k.copy()
+        self._damping = d.copy()
         self._last_feed_s = self._clock()
         self._was_tripped = False
 
     def feed_frame(self, frame: CommandFrame) -> None:
         """:meth:`feed` with a decoded command frame."""
-        self.feed(frame.modes, frame.setpoints)
+        self.feed(frame.modes, frame.setpoints, frame.stiffness, frame.damping)
 
     @property
     def tripped(self) -> bool:
@@ -730,14 +898,21 @@ class DeviceWatchdog:
         -------
         modes, setpoints, tripped
             (n,) int64 :class:`JointMode` values and raw setpoints (0 for HOLD), and whether
-            the watchdog is tripped.
+            the watchdog is tripped. See :meth:`output_full` for the impedance gains.
         """
+        out = self.output_full()
+        return out.modes, out.setpoints, out.tripped
+
+    def output_full(self) -> DeviceOutput:
+        """Modes, raw setpoints, raw impedance gains and the tripped flag applied now."""
         tripped = self.tripped
         if tripped and not self._was_tripped:
             self.trips += 1
         self._was_tripped = tripped
         if not tripped:
-            return self._modes.copy(), self._setpoints.copy(), False
-        torque = self._modes == JointMode.TORQUE
+            return DeviceOutput(self._modes.copy(), self._setpoints.copy(),
+                                self._stiffness.copy(), self._damping.copy(), False)
+        torque = (self._modes == JointMode.TORQUE) | (self._modes == JointMode.IMPEDANCE)
         modes = np.where(torque, int(JointMode.TORQUE), int(JointMode.HOLD)).astype(np.int64)
-        return modes, np.zeros(self.n_joints, dtype=np.int64), True
+        zeros = np.zeros(self.n_joints, dtype=np.int64)
+        return DeviceOutput(modes, zeros, zeros.copy(), zeros.copy(), True)
