@@ -23,6 +23,7 @@ from dam_sim_bridge.sim_device import SimDevice
 from dam_sim_bridge.world import WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+IMP = int(JointMode.IMPEDANCE)
 
 
 @pytest.fixture(scope='module')
@@ -47,9 +48,11 @@ class _Driver:
         assert isinstance(frame, StateFrame)
         return frame
 
-    def send(self, device: SimDevice, modes: list[int], setpoints: np.ndarray) -> None:
+    def send(self, device: SimDevice, modes: list[int], setpoints: np.ndarray,
+             stiffness: np.ndarray | None = None, damping: np.ndarray | None = None) -> None:
         self.seq += 1
-        self.sock.sendto(encode_command(self.seq, 0, modes, setpoints), device.command_address)
+        self.sock.sendto(encode_command(self.seq, 0, modes, setpoints, stiffness, damping),
+                         device.command_address)
 
 
 @pytest.fixture
@@ -159,3 +162,39 @@ def test_command_is_applied_again_after_a_world_reset(link) -> None:
     assert np.all(frame.modes == T)
     assert device.calibration.torque_si(frame.torque_raw) == pytest.approx(np.full(n, 0.01),
                                                                           abs=1e-4)
+
+
+def test_impedance_command_runs_the_law_on_the_device_and_the_watchdog_zeroes_it(link) -> None:
+    """Finger 2's compliant joint in IMPEDANCE over the link, theta_0 = 10 deg above its angle:
+    the joint moves towards theta_0, the state frame reports IMPEDANCE, and the torque-sensor
+    reading is k (theta_0 - theta) - d theta_dot of the simulated joint (up to one physics
+    step and the raw quantisation); without commands it drops to zero torque."""
+    device, driver = link
+    cal = device.calibration
+    n = device.world.n_joints
+    j = device.world.joint_names.index('finger2_compliant_joint')
+    q0 = device.world.joint_states().positions[j]
+    modes = [H] * n
+    modes[j] = IMP
+    theta_0 = np.zeros(n)
+    theta_0[j] = q0 + np.radians(10.0)
+    k, d = 1.0, 0.05
+    k_raw, d_raw = cal.gains_raw(modes, np.full(n, k), np.full(n, d))
+    assert k_raw[j] == round(k / cal.stiffness_scale[j]) and k_raw[0] == 0
+    raw = cal.setpoints_raw(modes, theta_0)
+    for _ in range(100):  # 0.2 s
+        driver.send(device, modes, raw, k_raw, d_raw)
+        device.cycle()
+        frame = driver.state()
+    assert frame.modes[j] == IMP and not frame.status & DeviceStatus.WATCHDOG_TRIPPED
+    q, qd, tau = cal.state_si(frame)
+    assert q[j] > q0 + np.radians(5.0)
+    expected = k * (theta_0[j] - q[j]) - d * qd[j]
+    assert tau[j] == pytest.approx(expected, abs=0.02 * k * np.radians(10.0))
+    assert abs(tau[j]) > 1e-3
+    for _ in range(int(0.080 * device.config.device.rate_hz)):
+        device.cycle()
+        frame = driver.state()
+    assert frame.status & DeviceStatus.WATCHDOG_TRIPPED
+    assert frame.modes[j] == T
+    assert cal.torque_si(frame.torque_raw)[j] == 0.0

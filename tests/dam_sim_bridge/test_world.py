@@ -15,6 +15,7 @@ from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigErro
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+IMP = int(JointMode.IMPEDANCE)
 
 
 @pytest.fixture(scope='module')
@@ -487,6 +488,137 @@ def test_object_on_horizontal_fingers_sticks_below_and_slides_above_alpha(
 
 # --------------------------------------------------------------------------------------------
 # The device watchdog driving the world
+
+
+# --------------------------------------------------------------------------------------------
+# Device-side joint impedance (IMPEDANCE mode)
+
+
+def _impedance_on_finger1(world: HandWorld, theta_0: float, k: float, d: float) -> None:
+    """Finger 1: compliant joint in IMPEDANCE, locked and position joints servoed at 0 (a
+    straight finger); the other fingers hold."""
+    n = world.n_joints
+    modes = [H] * n
+    modes[0:3] = [IMP, P, P]
+    setpoints = [math.nan] * n
+    setpoints[0:3] = [theta_0, 0.0, 0.0]
+    stiffness = [math.nan] * n
+    damping = [math.nan] * n
+    stiffness[0], damping[0] = k, d
+    world.set_joint_commands(modes, setpoints, stiffness, damping)
+
+
+@pytest.mark.parametrize('theta_0_deg, k', [(30.0, 0.2), (20.0, 0.4), (-20.0, 0.1)])
+def test_impedance_settles_where_stiffness_balances_gravity(
+        world: HandWorld, cfg: DamConfig, theta_0_deg: float, k: float) -> None:
+    """Static equilibrium k (theta_0 - theta) = g sin(theta) sum_i m_i r_i of a straight finger
+    (r_i: distance of link i's centre from the compliant joint), solved here by bisection."""
+    world.reset(object_position=[0.3, 0.0, 0.010], joint_positions=np.zeros(world.n_joints))
+    theta_0 = math.radians(theta_0_deg)
+    _impedance_on_finger1(world, theta_0, k, 0.02)
+    world.step(1500)
+    lengths = np.asarray(cfg.hand.link_lengths_m)
+    masses = np.asarray(world.link_masses_kg)
+    r = np.cumsum(lengths) - 0.5 * lengths
+    moment = cfg.task.gravity_m_per_s2 * float(masses @ r)  # [N m] at 90 deg
+
+    def residual(theta: float) -> float:
+        return k * (theta_0 - theta) - moment * math.sin(theta)
+
+    lo, hi = -math.pi / 2, math.pi / 2
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if residual(mid) > 0 else (lo, mid)
+    expected = 0.5 * (lo + hi)
+    js = world.joint_states()
+    assert js.positions[0] == pytest.approx(expected, abs=math.radians(0.2))
+    # sagged towards the vertical, by a visible amount
+    assert abs(js.positions[0]) < abs(theta_0) - math.radians(0.5)
+    assert abs(js.velocities[0]) < 1e-3
+    # the torque sensor reads what the device applied, which is the gravity torque now
+    assert js.torques[0] == pytest.approx(moment * math.sin(expected), rel=0.02, abs=1e-4)
+    assert js.torques[0] == pytest.approx(k * (theta_0 - js.positions[0]), rel=0.02, abs=1e-4)
+    assert world.joint_modes()[0] == IMP
+
+
+def test_impedance_step_response_of_a_free_joint_is_the_damped_oscillator(
+        world: HandWorld, cfg: DamConfig) -> None:
+    """Without gravity, theta'' I + d theta' + k theta = k theta_0 with the finger's inertia I
+    (parallel axes, computed here): the closed-form underdamped step response, sampled every
+    physics step; the law must run at every step (once per 2 ms device cycle would not give
+    this curve at this resolution)."""
+    world.set_gravity((0.0, 0.0, 0.0))
+    q0 = world.joint_states().positions.copy()
+    inertia = _finger_inertia(cfg, world, q0[0:3])
+    k, d = 0.05, 0.001
+    step = 0.1
+    n = world.n_joints
+    modes = [H] * n
+    modes[0] = IMP
+    setpoints = [math.nan] * n
+    setpoints[0] = q0[0] + step
+    world.set_joint_commands(modes, setpoints, [k] + [0.0] * (n - 1), [d] + [0.0] * (n - 1))
+    omega_n = math.sqrt(k / inertia)
+    zeta = d / (2.0 * math.sqrt(k * inertia))
+    assert 0.1 < zeta < 0.4
+    omega_d = omega_n * math.sqrt(1.0 - zeta**2)
+    dt = world.time_step_s
+    errors = []
+    peak = -math.inf
+    for i in range(1, 401):
+        world.step(1)
+        t = i * dt
+        expected = step * (1.0 - math.exp(-zeta * omega_n * t) * (
+            math.cos(omega_d * t) + zeta / math.sqrt(1.0 - zeta**2) * math.sin(omega_d * t)))
+        got = world.joint_states().positions[0] - q0[0]
+        errors.append(got - expected)
+        peak = max(peak, got)
+    assert max(abs(e) for e in errors) < 0.03 * step
+    overshoot = math.exp(-math.pi * zeta / math.sqrt(1.0 - zeta**2))
+    assert peak - step == pytest.approx(overshoot * step, rel=0.05)
+
+
+def test_impedance_torque_is_clipped_and_flagged(world: HandWorld) -> None:
+    world.set_gravity((0.0, 0.0, 0.0))
+    q0 = world.joint_states().positions[0]
+    limit = world.options.torque_limit_nm
+    _impedance_on_finger1(world, q0 + 0.5, 100.0, 0.0)  # 50 N*m demanded
+    world.step(1)
+    js = world.joint_states()
+    assert js.torques[0] == pytest.approx(limit)
+    assert world.joint_faults()[0] & JointFault.SATURATED
+
+
+@pytest.mark.parametrize('stiffness, damping, word', [
+    (None, None, 'need a stiffness'),
+    ([0.0] * 9, [0.0] * 9, 'stiffness > 0'),
+    ([1.0] * 9, [-0.1] * 9, 'damping >= 0'),
+    ([math.inf] * 9, [0.0] * 9, 'finite'),
+    ([1.0] * 8, [0.0] * 9, 'shape'),
+])
+def test_bad_impedance_gains_are_refused(world: HandWorld, stiffness, damping, word) -> None:
+    with pytest.raises(CommandError, match=word):
+        world.set_joint_commands([IMP] * 9, [0.0] * 9, stiffness, damping)
+
+
+def test_watchdog_safe_state_zeroes_impedance_torque(world: HandWorld, cfg: DamConfig) -> None:
+    now = [0.0]
+    watchdog = DeviceWatchdog(world.n_joints, cfg.device.watchdog_s, clock=lambda: now[0])
+    cal = Calibration.from_config(cfg)
+    modes = np.array([IMP, H, H] * 3)
+    theta_0 = world.joint_states().positions + 0.2
+    k_raw, d_raw = cal.gains_raw(modes, np.full(9, 0.5), np.full(9, 0.02))
+    watchdog.feed(modes, cal.setpoints_raw(modes, np.where(modes == IMP, theta_0, 0.0)),
+                  k_raw, d_raw)
+    for _ in range(int(cfg.device.watchdog_s / world.time_step_s) + 50):
+        out = watchdog.output_full()
+        k, d = cal.gains_si(out.stiffness, out.damping)
+        world.set_joint_commands(out.modes, cal.setpoints_si(out.modes, out.setpoints), k, d)
+        world.step(1)
+        now[0] += world.time_step_s
+    assert out.tripped
+    assert world.joint_modes().tolist() == [T, H, H] * 3
+    assert world.joint_states().torques[0::3].tolist() == [0.0] * 3
 
 
 def test_watchdog_safe_state_zeroes_torque_and_holds_servoed_joints(

@@ -7,7 +7,10 @@ period (``1 / device.rate_hz``) it
    :class:`~dam_hand_driver.protocol.FrameDecoder` (command kind) and feeds the accepted ones to
    a :class:`~dam_hand_driver.protocol.DeviceWatchdog`;
 2. applies the watchdog's output (the newest command, or the safe state) to the world, raw
-   setpoints converted to SI with :class:`~dam_hand_driver.protocol.Calibration`;
+   setpoints and impedance gains converted to SI with
+   :class:`~dam_hand_driver.protocol.Calibration`; IMPEDANCE joints then run their law
+   ``clip(k (theta_0 - theta) - d theta_dot)`` inside the world at every physics step (1 kHz),
+   not once per device cycle;
 3. steps the world by one period (``round(period / sim.time_step_s)`` physics steps);
 4. encodes the joint state in raw units, with fault and status bits, and sends it to the
    driver's ``device.state_port``.
@@ -130,7 +133,7 @@ class SimDevice:
             raise
         self.sock.setblocking(False)
         self._stop = threading.Event()
-        self._applied: tuple[bytes, bytes] | None = None
+        self._applied: tuple[bytes, bytes, bytes, bytes] | None = None
         self.tripped = True
 
     # ---------------------------------------------------------------------------------------
@@ -178,13 +181,17 @@ class SimDevice:
         with self.lock:
             if drain:
                 self._drain_commands()
-            modes, setpoints, tripped = self.watchdog.output()
+            out = self.watchdog.output_full()
+            modes, setpoints, tripped = out.modes, out.setpoints, out.tripped
             self.tripped = tripped
-            key = (modes.tobytes(), setpoints.tobytes())
+            key = (modes.tobytes(), setpoints.tobytes(), out.stiffness.tobytes(),
+                   out.damping.tobytes())
             if key != self._applied:  # the world keeps a command until the next call
                 try:
+                    stiffness, damping = self.calibration.gains_si(out.stiffness, out.damping)
                     self.world.set_joint_commands(
-                        modes, self.calibration.setpoints_si(modes, setpoints))
+                        modes, self.calibration.setpoints_si(modes, setpoints), stiffness,
+                        damping)
                     self._applied = key
                 except ValueError:
                     self.stats.command_errors += 1

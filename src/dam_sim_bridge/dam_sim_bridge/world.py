@@ -46,6 +46,12 @@ Each joint is in one :class:`~dam_hand_driver.protocol.JointMode`:
 * ``POSITION``: Bullet's position servo (``POSITION_CONTROL``) tracks the setpoint (clipped to
   the joint limits) with at most :attr:`WorldOptions.servo_force_limit_nm`.
 * ``HOLD``: the same servo holds the angle the joint had when it entered ``HOLD``.
+* ``IMPEDANCE``: a torque-controlled joint (velocity motor disabled, like ``TORQUE``) whose
+  torque the device computes before **every physics step** from the simulated joint state:
+  ``tau = clip(k (theta_0 - theta) - d theta_dot, +-torque_limit_nm)`` with the commanded
+  equilibrium ``theta_0`` [rad], stiffness ``k`` [N*m/rad] and damping ``d`` [N*m*s/rad].
+  This is the device-side joint impedance of torque-controlled arms: the loop runs at the
+  physics rate (1 kHz), whatever the latency of the commands.
 
 Torque sensor
 -------------
@@ -53,7 +59,8 @@ Torque sensor
 link of a frictionless joint, the actuator torque transmitted to the link [N*m] (positive in
 the positive joint direction): for servoed joints (POSITION, HOLD) Bullet's
 ``appliedJointMotorTorque`` of the last step (the servo's constraint torque, which carries the
-load); for TORQUE joints the torque Bullet applied during the last step after clipping. Bullet
+load); for TORQUE and IMPEDANCE joints the torque Bullet applied during the last step after
+clipping (for IMPEDANCE computed from the simulated angle and velocity of that step). Bullet
 does not report the latter itself: ``appliedJointMotorTorque`` keeps the last servo value, and
 the joint reaction excludes generalised forces. Before the first step every reading is zero.
 """
@@ -79,6 +86,7 @@ if TYPE_CHECKING:
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
+_IMPEDANCE = int(JointMode.IMPEDANCE)
 
 
 @dataclass(frozen=True)
@@ -598,6 +606,9 @@ class HandWorld:
         self._torque_cmd = np.zeros(self.n_joints)
         self._applied_torque = np.zeros(self.n_joints)
         self._saturated = np.zeros(self.n_joints, dtype=bool)
+        self._theta_0 = np.zeros(self.n_joints)
+        self._stiffness = np.zeros(self.n_joints)
+        self._damping = np.zeros(self.n_joints)
         self._sent_servo: tuple[bytes, bytes] | None = None
         self._steps = 0
         self._stepped = False
@@ -611,7 +622,9 @@ class HandWorld:
         return self._modes.copy()
 
     def set_joint_commands(self, modes: Sequence[int] | np.ndarray,
-                           setpoints: Sequence[float] | np.ndarray) -> None:
+                           setpoints: Sequence[float] | np.ndarray,
+                           stiffness: Sequence[float] | np.ndarray | None = None,
+                           damping: Sequence[float] | np.ndarray | None = None) -> None:
         """Set the mode and setpoint of every joint (held until the next call).
 
         Parameters
@@ -620,13 +633,18 @@ class HandWorld:
             (n,) :class:`JointMode` per joint, ``joint_names`` order.
         setpoints
             (n,) torque [N*m] (TORQUE, clipped to ``torque_limit_nm``), angle [rad] (POSITION,
-            clipped to the joint limits), ignored (HOLD: the angle at the switch to HOLD is
-            held; NaN allowed).
+            clipped to the joint limits; IMPEDANCE: the equilibrium ``theta_0``), ignored
+            (HOLD: the angle at the switch to HOLD is held; NaN allowed).
+        stiffness, damping
+            (n,) impedance stiffness ``k`` [N*m/rad], positive, and damping ``d``
+            [N*m*s/rad], non-negative, of the IMPEDANCE joints (ignored, NaN allowed, for
+            the others); ``None`` only when no joint is in IMPEDANCE.
 
         Raises
         ------
         CommandError
-            Wrong length, an unknown mode, or a non-finite TORQUE/POSITION setpoint.
+            Wrong length, an unknown mode, a non-finite TORQUE/POSITION/IMPEDANCE setpoint,
+            or missing or bad gains of an IMPEDANCE joint.
         """
         m_in = np.asarray(modes)
         sp = np.asarray(setpoints, dtype=float)
@@ -635,18 +653,41 @@ class HandWorld:
                                f'shape ({self.n_joints},)')
         try:
             m = m_in.astype(np.int64)
-            valid = (m == m_in) & ((m == _TORQUE) | (m == _POSITION) | (m == _HOLD))
+            valid = (m == m_in) & ((m == _TORQUE) | (m == _POSITION) | (m == _HOLD)
+                                   | (m == _IMPEDANCE))
         except (ValueError, TypeError) as exc:
             raise CommandError(f'modes {m_in.tolist()!r} are not integers: {exc}') from exc
         if not np.all(valid):
             raise CommandError(f'modes {m_in.tolist()!r}: {m_in[~valid].tolist()!r} is not a '
-                               f'JointMode ({_TORQUE}, {_POSITION}, {_HOLD})')
+                               f'JointMode ({_TORQUE}, {_POSITION}, {_HOLD}, {_IMPEDANCE})')
         torque_now = m == _TORQUE
         position_now = m == _POSITION
-        active = torque_now | position_now
+        impedance_now = m == _IMPEDANCE
+        active = torque_now | position_now | impedance_now
         if not np.all(np.isfinite(sp[active])):
             bad = [self.joint_names[i] for i in np.flatnonzero(active & ~np.isfinite(sp))]
             raise CommandError(f'non-finite setpoint for {bad}: {sp.tolist()!r}')
+        k = np.zeros(self.n_joints)
+        d = np.zeros(self.n_joints)
+        if np.any(impedance_now):
+            if stiffness is None or damping is None:
+                raise CommandError('IMPEDANCE joints need a stiffness and a damping')
+            k_in = np.asarray(stiffness, dtype=float)
+            d_in = np.asarray(damping, dtype=float)
+            if k_in.shape != (self.n_joints,) or d_in.shape != (self.n_joints,):
+                raise CommandError(f'stiffness {k_in.shape} and damping {d_in.shape} must '
+                                   f'both have shape ({self.n_joints},)')
+            ki, di = k_in[impedance_now], d_in[impedance_now]
+            if not (np.all(np.isfinite(ki)) and np.all(np.isfinite(di)) and np.all(ki > 0.0)
+                    and np.all(di >= 0.0)):
+                raise CommandError(f'IMPEDANCE gains must be finite with stiffness > 0 and '
+                                   f'damping >= 0: stiffness {k_in.tolist()!r}, damping '
+                                   f'{d_in.tolist()!r}')
+            k[impedance_now] = ki
+            d[impedance_now] = di
+        self._theta_0 = np.where(impedance_now, sp, 0.0)
+        self._stiffness = k
+        self._damping = d
         entering_hold = (m == _HOLD) & (self._modes != _HOLD)
         if np.any(entering_hold):
             self._targets[entering_hold] = self._read_positions()[entering_hold]
@@ -658,7 +699,8 @@ class HandWorld:
         tau = np.where(torque_now, sp, 0.0)  # NaN setpoints of other modes are dropped here
         self._torque_cmd = np.clip(tau, -limit, limit)
         self._saturated = np.abs(tau) > limit
-        newly_torque = torque_now & (self._modes != _TORQUE)
+        was_torque = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
+        newly_torque = (torque_now | impedance_now) & ~was_torque
         self._modes = m
         if np.any(newly_torque):
             idx = [self._joints.indices[i] for i in np.flatnonzero(newly_torque)]
@@ -667,7 +709,7 @@ class HandWorld:
         self._send_servo_targets()
 
     def _send_servo_targets(self, force: bool = False) -> None:
-        servo = np.flatnonzero(self._modes != _TORQUE)
+        servo = np.flatnonzero((self._modes != _TORQUE) & (self._modes != _IMPEDANCE))
         key = (servo.tobytes(), self._targets[servo].tobytes())
         if servo.size == 0 or (key == self._sent_servo and not force):
             return
@@ -686,7 +728,8 @@ class HandWorld:
     def step(self, n: int = 1) -> None:
         """Advance the physics by ``n`` steps of ``time_step_s`` (lockstep, no pacing).
 
-        Torque-mode joints receive their torque before every step.
+        Torque-mode joints receive their torque before every step; IMPEDANCE joints the
+        torque of their impedance law, computed from the joint state before that step.
         """
         steps = int(n)
         if steps < 0:
@@ -695,18 +738,37 @@ class HandWorld:
             raise SimulationError('the world is closed')
         pb = self._pb
         torque_idx = np.flatnonzero(self._modes == _TORQUE)
-        joints = [self._joints.indices[i] for i in torque_idx]
-        forces = self._torque_cmd[torque_idx].tolist()
+        imp_idx = np.flatnonzero(self._modes == _IMPEDANCE)
+        both = np.concatenate([torque_idx, imp_idx])
+        joints = [self._joints.indices[i] for i in both]
+        imp_joints = [self._joints.indices[i] for i in imp_idx]
+        forces = np.concatenate([self._torque_cmd[torque_idx], np.zeros(imp_idx.size)])
+        n_t = torque_idx.size
+        limit = float(self.options.torque_limit_nm)
+        k = self._stiffness[imp_idx]
+        d = self._damping[imp_idx]
+        theta_0 = self._theta_0[imp_idx]
+        tau_imp = np.zeros(imp_idx.size)
+        raw_imp = np.zeros(imp_idx.size)
         for _ in range(steps):
+            if imp_joints:
+                states = pb.getJointStates(self.hand_id, imp_joints)
+                theta = np.fromiter((s[0] for s in states), float, imp_idx.size)
+                theta_dot = np.fromiter((s[1] for s in states), float, imp_idx.size)
+                raw_imp = k * (theta_0 - theta) - d * theta_dot
+                tau_imp = np.clip(raw_imp, -limit, limit)
+                forces[n_t:] = tau_imp
             if joints:
                 pb.setJointMotorControlArray(self.hand_id, joints, pybullet.TORQUE_CONTROL,
-                                             forces=forces)
+                                             forces=forces.tolist())
             pb.stepSimulation()
         if steps:
             self._steps += steps
             self._stepped = True
-            self._applied_torque = np.where(self._modes == _TORQUE,
-                                            self._torque_cmd, 0.0)
+            applied = np.where(self._modes == _TORQUE, self._torque_cmd, 0.0)
+            applied[imp_idx] = tau_imp
+            self._applied_torque = applied
+            self._saturated[imp_idx] = np.abs(raw_imp) > limit
 
     def _read_positions(self) -> np.ndarray:
         states = self._pb.getJointStates(self.hand_id, self._joints.indices)
@@ -724,14 +786,16 @@ class HandWorld:
             torques = np.zeros(self.n_joints)
         else:
             motor = np.array([s[3] for s in states])
-            torques = np.where(self._modes == _TORQUE, self._applied_torque, motor)
+            torque_like = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
+            torques = np.where(torque_like, self._applied_torque, motor)
         return JointStates(positions, velocities, torques)
 
     def joint_faults(self, limit_tolerance_rad: float = 1e-3) -> np.ndarray:
         """(n,) :class:`~dam_hand_driver.protocol.JointFault` bits of every joint.
 
         ``LIMIT`` when the joint is within ``limit_tolerance_rad`` of a joint limit,
-        ``SATURATED`` when its TORQUE setpoint was clipped to ``torque_limit_nm``.
+        ``SATURATED`` when its TORQUE setpoint, or its IMPEDANCE law in the last physics step,
+        was clipped to ``torque_limit_nm``.
         """
         q = self._read_positions()
         at_limit = ((q <= self._joints.lower + limit_tolerance_rad)
