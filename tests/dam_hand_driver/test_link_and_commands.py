@@ -84,10 +84,11 @@ def test_bad_port_is_refused() -> None:
 driver_node = pytest.importorskip('dam_hand_driver.driver_node')
 
 
-def _msg(names, modes, setpoints):
+def _msg(names, modes, setpoints, stiffness=(), damping=()):
     from dam_interfaces.msg import HandCommand
 
-    return HandCommand(name=names, mode=modes, setpoint=setpoints)
+    return HandCommand(name=names, mode=modes, setpoint=setpoints, stiffness=list(stiffness),
+                       damping=list(damping))
 
 
 INDEX = {'a': 0, 'b': 1, 'c': 2}
@@ -95,8 +96,12 @@ LO = np.radians([-45.0, -10.0, 0.0])
 HI = np.radians([60.0, 10.0, 95.0])
 
 
-def _validate(names, modes, setpoints):
-    return driver_node.validate_command(_msg(names, modes, setpoints), INDEX, 1.0, LO, HI)
+MAX_K, MAX_D = 100.0, 2.0
+
+
+def _validate(names, modes, setpoints, stiffness=(), damping=()):
+    return driver_node.validate_command(_msg(names, modes, setpoints, stiffness, damping), INDEX,
+                                        1.0, LO, HI, MAX_K, MAX_D)
 
 
 def test_message_modes_map_to_wire_modes() -> None:
@@ -105,8 +110,14 @@ def test_message_modes_map_to_wire_modes() -> None:
     assert driver_node.MSG_TO_WIRE_MODE[HandCommand.MODE_TORQUE] is JointMode.TORQUE
     assert driver_node.MSG_TO_WIRE_MODE[HandCommand.MODE_POSITION] is JointMode.POSITION
     assert driver_node.MSG_TO_WIRE_MODE[HandCommand.MODE_HOLD] is JointMode.HOLD
+    assert driver_node.MSG_TO_WIRE_MODE[HandCommand.MODE_IMPEDANCE] is JointMode.IMPEDANCE
     out = _validate(['c', 'a'], [0, 1], [0.5, 0.2])
-    assert out == [(2, JointMode.TORQUE, 0.5), (0, JointMode.POSITION, 0.2)]
+    assert out == [(2, JointMode.TORQUE, 0.5, 0.0, 0.0), (0, JointMode.POSITION, 0.2, 0.0, 0.0)]
+    out = _validate(['a', 'c'], [3, 0], [0.3, 0.1], [10.0, math.nan], [0.2, math.nan])
+    assert out == [(0, JointMode.IMPEDANCE, 0.3, 10.0, 0.2), (2, JointMode.TORQUE, 0.1, 0.0, 0.0)]
+    # the limits themselves are accepted
+    assert _validate(['a'], [3], [HI[0]], [MAX_K], [MAX_D])[0].stiffness == MAX_K
+    assert _validate(['a'], [3], [LO[0]], [1e-3], [0.0])[0].damping == 0.0
 
 
 @pytest.mark.parametrize(('names', 'modes', 'setpoints', 'match'), [
@@ -122,6 +133,27 @@ def test_message_modes_map_to_wire_modes() -> None:
 def test_bad_commands_are_rejected_with_a_reason(names, modes, setpoints, match) -> None:
     with pytest.raises(driver_node.CommandRejected, match=match):
         _validate(names, modes, setpoints)
+
+
+@pytest.mark.parametrize(('setpoint', 'stiffness', 'damping', 'match'), [
+    (0.1, [], [], 'needs stiffness and damping'),
+    (0.1, [5.0], [], 'needs stiffness and damping'),
+    (0.1, [5.0, 5.0], [0.1, 0.1], 'stiffness has 2 entries for 1 names'),
+    (0.1, [0.0], [0.1], r'stiffness 0\.0 N\*m/rad is outside \(0, 100\.0\]'),
+    (0.1, [-3.0], [0.1], r'stiffness -3\.0'),
+    (0.1, [150.0], [0.1], r'stiffness 150\.0'),
+    (0.1, [math.nan], [0.1], 'stiffness nan'),
+    (0.1, [math.inf], [0.1], 'stiffness inf'),
+    (0.1, [5.0], [-0.01], r'damping -0\.01 N\*m\*s/rad is outside \[0, 2\.0\]'),
+    (0.1, [5.0], [2.5], r'damping 2\.5'),
+    (0.1, [5.0], [math.nan], 'damping nan'),
+    (math.radians(70.0), [5.0], [0.1], r'equilibrium theta_0 1\.22'),
+    (math.nan, [5.0], [0.1], 'setpoint nan'),
+])
+def test_bad_impedance_commands_are_rejected_naming_field_and_value(
+        setpoint, stiffness, damping, match) -> None:
+    with pytest.raises(driver_node.CommandRejected, match=match):
+        _validate(['a'], [3], [setpoint], stiffness, damping)
 
 
 def test_slew_limit_and_clamp() -> None:

@@ -55,10 +55,13 @@ class _Observer:
         status = self.diagnostics[-1].status[0]
         return {kv.key: kv.value for kv in status.values}
 
-    def command(self, names: list[str], modes: list[int], setpoints: list[float]) -> None:
+    def command(self, names: list[str], modes: list[int], setpoints: list[float],
+                stiffness: list[float] | None = None, damping: list[float] | None = None
+                ) -> None:
         from dam_interfaces.msg import HandCommand
 
-        msg = HandCommand(name=names, mode=modes, setpoint=setpoints)
+        msg = HandCommand(name=names, mode=modes, setpoint=setpoints,
+                          stiffness=stiffness or [], damping=damping or [])
         for _ in range(3):  # volatile QoS: repeat so that a late-matched publisher still lands
             self.command_pub.publish(msg)
             self.spin(0.05)
@@ -158,6 +161,78 @@ def test_torque_command_flexes_a_compliant_joint(system, cfg) -> None:
     assert q2 < q1 - math.radians(5.0), (q1, q2)
     assert tau2 == pytest.approx(-0.02, abs=1e-3)
     obs.command([joint], [HandCommand.MODE_HOLD], [0.0])
+
+
+def _straight_finger_equilibrium(cfg, theta_0: float, k: float) -> float:
+    """Angle [rad] of a straight finger (locked and position joints at 0) whose compliant
+    joint has the impedance k (theta_0 - theta): k (theta_0 - theta) = g sin(theta) sum m_i r_i,
+    r_i the distance of link i's centre from the compliant joint; solved by bisection."""
+    lengths = np.asarray(cfg.hand.link_lengths_m)
+    masses = np.asarray(cfg.hand.link_masses_kg)
+    moment = cfg.task.gravity_m_per_s2 * float(masses @ (np.cumsum(lengths) - lengths / 2))
+    lo, hi = -math.pi / 2, math.pi / 2
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if k * (theta_0 - mid) - moment * math.sin(mid) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def test_impedance_command_settles_where_stiffness_balances_gravity(system, cfg) -> None:
+    """Finger 2 straight and tilted outward (away from the object) to -15 deg, then its
+    compliant joint in MODE_IMPEDANCE with theta_0 = -20 deg and a soft k: the device's law
+    lets gravity pull the finger back to where k (theta_0 - theta) balances it."""
+    driver, obs = system
+    from dam_interfaces.msg import HandCommand
+
+    names = [f'finger2_{role}_joint' for role in cfg.hand.joint_roles]
+    start = math.radians(-15.0)
+    obs.command(names, [HandCommand.MODE_POSITION] * 3, [start, 0.0, 0.0])
+    obs.spin(1.0)
+    assert obs.latest()[names[0]][0] == pytest.approx(start, abs=math.radians(1.0))
+    theta_0, k, d = math.radians(-20.0), 0.1, 0.03
+    expected = _straight_finger_equilibrium(cfg, theta_0, k)
+    assert abs(expected - theta_0) > math.radians(2.0)  # gravity matters at this stiffness
+    obs.command(names, [HandCommand.MODE_IMPEDANCE, HandCommand.MODE_POSITION,
+                        HandCommand.MODE_POSITION], [theta_0, 0.0, 0.0], [k, 0.0, 0.0],
+                [d, 0.0, 0.0])
+    obs.spin(3.0)
+    q, qd, tau = obs.latest()[names[0]]
+    assert q == pytest.approx(expected, abs=math.radians(0.5)), (math.degrees(q),
+                                                                math.degrees(expected))
+    assert abs(qd) < 0.01
+    # the torque sensor shows the device's impedance torque, which now holds gravity
+    assert tau == pytest.approx(k * (theta_0 - q), abs=2e-3)
+    assert 'rejected' not in driver.output()
+
+    # Bad impedance commands: rejected with the field and value named; the joint stays put.
+    bad = [([], [], [theta_0]),  # MODE_IMPEDANCE without gains
+           ([-1.0], [0.1], [theta_0]),
+           ([cfg.device.max_stiffness_nm_per_rad * 2], [0.1], [theta_0]),
+           ([1.0], [-0.5], [theta_0]),
+           ([1.0], [float('nan')], [theta_0]),
+           ([1.0], [0.1], [math.radians(80.0)])]
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    rejected_before = int(obs.diag_values()['hand_commands_rejected'])
+    obs.command([names[0]], [HandCommand.MODE_IMPEDANCE], [theta_0])  # no gains at all
+    obs.spin(1.1)  # the driver's rejection log is throttled to one a second
+    for stiffness, damping, setpoint in bad[1:]:
+        obs.command([names[0]], [HandCommand.MODE_IMPEDANCE], setpoint, stiffness, damping)
+        obs.spin(1.1)  # the driver's rejection log is throttled to one a second
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    assert int(obs.diag_values()['hand_commands_rejected']) >= rejected_before + len(bad)
+    assert driver.alive()
+    out = driver.output()
+    assert 'stiffness -1.0 N*m/rad is outside' in out
+    assert 'damping -0.5 N*m*s/rad is outside' in out
+    assert 'equilibrium theta_0' in out
+    assert 'MODE_IMPEDANCE needs stiffness and damping' in out
+    assert obs.latest()[names[0]][0] == pytest.approx(expected, abs=math.radians(0.5))
+    obs.command(names, [HandCommand.MODE_HOLD] * 3, [0.0] * 3)
 
 
 def test_bad_commands_are_rejected_and_the_driver_stays_up(system, cfg) -> None:

@@ -93,9 +93,11 @@ def test_hand_command_and_grasp_action_are_generated() -> None:
 
     assert HandCommand.get_fields_and_field_types() == {
         'header': 'std_msgs/Header', 'name': 'sequence<string>', 'mode': 'sequence<uint8>',
-        'setpoint': 'sequence<double>'}
-    modes = {HandCommand.MODE_TORQUE, HandCommand.MODE_POSITION, HandCommand.MODE_HOLD}
-    assert len(modes) == 3
+        'setpoint': 'sequence<double>', 'stiffness': 'sequence<double>',
+        'damping': 'sequence<double>'}
+    modes = {HandCommand.MODE_TORQUE, HandCommand.MODE_POSITION, HandCommand.MODE_HOLD,
+             HandCommand.MODE_IMPEDANCE}
+    assert len(modes) == 4 and HandCommand.MODE_IMPEDANCE == 3
     assert DamGrasp.Goal.get_fields_and_field_types() == {
         'k_theta': 'sequence<double>', 'delta_theta_p': 'sequence<double>'}
     outcomes = {DamGrasp.Result.OUTCOME_UNKNOWN, DamGrasp.Result.OUTCOME_SUCCESS,

@@ -11,11 +11,15 @@ Topics
     Names from the configuration; positions [rad] and velocities [rad/s] from the encoders,
     efforts [N*m] from the joint torque sensors. Not published in ERROR.
 /hand/command : dam_interfaces/HandCommand (subscribed)
-    Mode and setpoint per named joint; joints not named keep their command. A malformed
-    message (unknown or duplicate name, length mismatch, unknown mode, NaN/inf, a torque beyond
-    ``device.torque_limit_nm``, an angle beyond the joint limits) is rejected as a whole with a
-    logged reason (throttled). Torques are clamped and slew-limited to
-    ``device.torque_rate_limit_nm_per_s``.
+    Mode and setpoint per named joint (and, for MODE_IMPEDANCE, stiffness and damping); joints
+    not named keep their command. A malformed message (unknown or duplicate name, length
+    mismatch, unknown mode, NaN/inf, a torque beyond ``device.torque_limit_nm``, an angle or
+    impedance equilibrium beyond the joint limits, a stiffness outside
+    (0, ``device.max_stiffness_nm_per_rad``], a damping outside
+    [0, ``device.max_damping_nms_per_rad``]) is rejected as a whole with a logged reason naming
+    the field and the value (throttled). Torques are clamped and slew-limited to
+    ``device.torque_rate_limit_nm_per_s``. MODE_IMPEDANCE joints go to the device in its
+    IMPEDANCE mode: the device runs the impedance law at its physics rate.
 /diagnostics : diagnostic_msgs/DiagnosticArray (published, 1 Hz)
     Driver state, backend, achieved rate, frame counts by rejection reason, loop latency,
     device watchdog state.
@@ -57,6 +61,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -79,6 +84,7 @@ MSG_TO_WIRE_MODE: dict[int, JointMode] = {
     HandCommand.MODE_TORQUE: JointMode.TORQUE,
     HandCommand.MODE_POSITION: JointMode.POSITION,
     HandCommand.MODE_HOLD: JointMode.HOLD,
+    HandCommand.MODE_IMPEDANCE: JointMode.IMPEDANCE,
 }
 _STANDIN_START_TIMEOUT_S = 20.0
 _LOG_THROTTLE_S = 1.0
@@ -109,24 +115,54 @@ class CommandRejected(HandDriverError, ValueError):
     """A HandCommand message is malformed; the message names the field and the value."""
 
 
+class CommandItem(NamedTuple):
+    """One validated joint command of a HandCommand message (SI units)."""
+
+    joint: int  #: index in the configured joint order
+    mode: JointMode  #: wire mode
+    setpoint: float  #: [N*m] TORQUE, [rad] POSITION and IMPEDANCE (theta_0), 0 HOLD
+    stiffness: float = 0.0  #: k [N*m/rad] (IMPEDANCE only, else 0)
+    damping: float = 0.0  #: d [N*m*s/rad] (IMPEDANCE only, else 0)
+
+
 def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: float,
-                     lower_rad: np.ndarray, upper_rad: np.ndarray
-                     ) -> list[tuple[int, JointMode, float]]:
-    """Check a HandCommand and turn it into (joint index, wire mode, SI setpoint) triples.
+                     lower_rad: np.ndarray, upper_rad: np.ndarray,
+                     max_stiffness_nm_per_rad: float, max_damping_nms_per_rad: float
+                     ) -> list[CommandItem]:
+    """Check a HandCommand and turn it into one :class:`CommandItem` per named joint.
+
+    Parameters
+    ----------
+    msg
+        The message.
+    index
+        Joint name -> index in the configured order.
+    torque_limit_nm
+        Largest accepted ``|torque|`` [N*m].
+    lower_rad, upper_rad
+        (n,) joint limits [rad] (POSITION setpoints and IMPEDANCE equilibria).
+    max_stiffness_nm_per_rad, max_damping_nms_per_rad
+        Largest accepted impedance stiffness [N*m/rad] and damping [N*m*s/rad].
 
     Raises
     ------
     CommandRejected
         Length mismatch, unknown or duplicate joint name, unknown mode, non-finite setpoint,
-        torque beyond ``torque_limit_nm`` [N*m], angle outside the joint limits [rad].
+        torque beyond ``torque_limit_nm``, angle or equilibrium outside the joint limits,
+        MODE_IMPEDANCE without gains, stiffness not in (0, max], damping not in [0, max].
     """
     names, modes, setpoints = list(msg.name), list(msg.mode), list(msg.setpoint)
+    stiffness, damping = list(msg.stiffness), list(msg.damping)
     if not (len(names) == len(modes) == len(setpoints)):
         raise CommandRejected(f'name, mode and setpoint differ in length: {len(names)}, '
                               f'{len(modes)}, {len(setpoints)}')
+    for field, values in (('stiffness', stiffness), ('damping', damping)):
+        if values and len(values) != len(names):
+            raise CommandRejected(f'{field} has {len(values)} entries for {len(names)} names '
+                                  f'(expected none or one per name)')
     seen: set[str] = set()
-    out: list[tuple[int, JointMode, float]] = []
-    for name, mode, value in zip(names, modes, setpoints, strict=True):
+    out: list[CommandItem] = []
+    for i, (name, mode, value) in enumerate(zip(names, modes, setpoints, strict=True)):
         if name not in index:
             raise CommandRejected(f'unknown joint name {name!r} (known: {sorted(index)})')
         if name in seen:
@@ -134,7 +170,7 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
         seen.add(name)
         if int(mode) not in MSG_TO_WIRE_MODE:
             raise CommandRejected(f'joint {name!r}: mode {int(mode)} is not MODE_TORQUE (0), '
-                                  f'MODE_POSITION (1) or MODE_HOLD (2)')
+                                  f'MODE_POSITION (1), MODE_HOLD (2) or MODE_IMPEDANCE (3)')
         wire = MSG_TO_WIRE_MODE[int(mode)]
         sp = float(value)
         if not math.isfinite(sp):
@@ -145,8 +181,25 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
                                   f'+-{torque_limit_nm!r} N*m')
         if wire is JointMode.POSITION and not lower_rad[j] <= sp <= upper_rad[j]:
             raise CommandRejected(f'joint {name!r}: angle {sp!r} rad is outside the joint '
-                                  f'limits [{lower_rad[j]!r}, {upper_rad[j]!r}] rad')
-        out.append((j, wire, sp))
+                                  f'limits [{float(lower_rad[j])!r}, {float(upper_rad[j])!r}] rad')
+        if wire is not JointMode.IMPEDANCE:
+            out.append(CommandItem(j, wire, sp))
+            continue
+        if not stiffness or not damping:
+            raise CommandRejected(f'joint {name!r}: MODE_IMPEDANCE needs stiffness and damping '
+                                  f'(got {len(stiffness)} and {len(damping)} entries)')
+        if not lower_rad[j] <= sp <= upper_rad[j]:
+            raise CommandRejected(f'joint {name!r}: impedance equilibrium theta_0 {sp!r} rad is '
+                                  f'outside the joint limits [{float(lower_rad[j])!r}, '
+                                  f'{float(upper_rad[j])!r}] rad')
+        k, d = float(stiffness[i]), float(damping[i])
+        if not (math.isfinite(k) and 0.0 < k <= max_stiffness_nm_per_rad):
+            raise CommandRejected(f'joint {name!r}: stiffness {k!r} N*m/rad is outside '
+                                  f'(0, {max_stiffness_nm_per_rad!r}] N*m/rad')
+        if not (math.isfinite(d) and 0.0 <= d <= max_damping_nms_per_rad):
+            raise CommandRejected(f'joint {name!r}: damping {d!r} N*m*s/rad is outside '
+                                  f'[0, {max_damping_nms_per_rad!r}] N*m*s/rad')
+        out.append(CommandItem(j, wire, sp, k, d))
     return out
 
 
@@ -197,11 +250,15 @@ class HandDriverNode(Node):
         self.state_timeout_s = float(dev.state_timeout_s)
         self.torque_limit_nm = float(dev.torque_limit_nm)
         self.torque_rate_nm_per_s = float(dev.torque_rate_limit_nm_per_s)
+        self.max_stiffness = float(dev.max_stiffness_nm_per_rad)
+        self.max_damping = float(dev.max_damping_nms_per_rad)
         self.link = DeviceLink(self.n, dev.host, dev.state_port, dev.command_port)
 
         self._lock = threading.Lock()
         self._modes = np.full(self.n, int(JointMode.HOLD), dtype=np.int64)
         self._setpoints = np.zeros(self.n)
+        self._stiffness = np.zeros(self.n)
+        self._damping = np.zeros(self.n)
         self._tau_out = np.zeros(self.n)
         self._last_send_t: float | None = None
         self.state = DriverState.WAITING
@@ -297,6 +354,8 @@ class HandDriverNode(Node):
         with self._lock:
             self._modes[:] = int(JointMode.HOLD)
             self._setpoints[:] = 0.0
+            self._stiffness[:] = 0.0
+            self._damping[:] = 0.0
             self._tau_out[:] = 0.0
             self._last_send_t = None
             self.state = DriverState.ACTIVE
@@ -358,8 +417,11 @@ class HandDriverNode(Node):
             self._tau_out = np.where(torque, tau, 0.0)  # leaving TORQUE restarts from zero
             self._last_send_t = now
             setpoints = np.where(torque, self._tau_out, target)
+            stiffness = self._stiffness.copy()
+            damping = self._damping.copy()
         raw = self.calibration.setpoints_raw(modes, setpoints)
-        self.link.send(modes, raw, frame.seq)
+        k_raw, d_raw = self.calibration.gains_raw(modes, stiffness, damping)
+        self.link.send(modes, raw, frame.seq, k_raw, d_raw)
 
     def _publish_joint_states(self, frame: StateFrame) -> None:
         q, dq, tau = self.calibration.state_si(frame)
@@ -378,7 +440,7 @@ class HandDriverNode(Node):
     def _on_command(self, msg: HandCommand) -> None:
         try:
             items = validate_command(msg, self._index, self.torque_limit_nm, self._lower,
-                                     self._upper)
+                                     self._upper, self.max_stiffness, self.max_damping)
         except CommandRejected as exc:
             self._rejected_commands += 1
             self._last_reject_reason = str(exc)
@@ -386,11 +448,13 @@ class HandDriverNode(Node):
                                       throttle_duration_sec=_LOG_THROTTLE_S)
             return
         with self._lock:
-            for j, mode, sp in items:
+            for j, mode, sp, k, d in items:
                 if mode is not JointMode.TORQUE and self._modes[j] == int(JointMode.TORQUE):
                     self._tau_out[j] = 0.0
                 self._modes[j] = int(mode)
                 self._setpoints[j] = sp if mode is not JointMode.HOLD else 0.0
+                self._stiffness[j] = k
+                self._damping[j] = d
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:

@@ -127,16 +127,21 @@ class DeviceLink:
         return newest
 
     def send(self, modes: Sequence[int] | np.ndarray, setpoints_raw: Sequence[int] | np.ndarray,
-             ref_state_seq: int) -> bool:
+             ref_state_seq: int, stiffness_raw: Sequence[int] | np.ndarray | None = None,
+             damping_raw: Sequence[int] | np.ndarray | None = None) -> bool:
         """Send one command frame (raw units); ``False`` if the socket refused it.
+
+        ``stiffness_raw`` and ``damping_raw`` are the raw impedance gains (``None``: zeros,
+        no joint in IMPEDANCE).
 
         Raises
         ------
         EncodeError
-            A mode or setpoint does not fit the frame (a bug of the caller).
+            A mode, setpoint or gain does not fit the frame (a bug of the caller).
         """
         self._seq = seq_next(self._seq)
-        frame = encode_command(self._seq, ref_state_seq, modes, setpoints_raw)
+        frame = encode_command(self._seq, ref_state_seq, modes, setpoints_raw, stiffness_raw,
+                               damping_raw)
         try:
             self.sock.sendto(frame, self._command_addr)
         except OSError:
