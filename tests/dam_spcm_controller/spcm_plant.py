@@ -2,7 +2,10 @@
 
 Every joint is a massless joint with viscous friction ``b``. In HOLD/POSITION mode a joint
 follows its setpoint through a first-order servo; in TORQUE mode it moves as
-``b theta_dot = tau - tau_contact``. The object is modelled per finger as a contact spring:
+``b theta_dot = tau - tau_contact``. In IMPEDANCE mode the plant plays the device as well: the
+law ``tau = k (theta_0 - theta) - d theta_dot`` acts inside the step (implicitly in theta_dot:
+``(b + d) theta_dot = k (theta_0 - theta) - tau_contact``). The object is modelled per finger
+as a contact spring:
 
 * compliant joint: touches the object at ``theta_c(theta_p) = theta_c0 - beta (theta_p -
   theta_p0)`` -- as the position joint curls, the object pushes the compliant joint outward,
@@ -10,8 +13,9 @@ follows its setpoint through a first-order servo; in TORQUE mode it moves as
 * position joint (ENVELOPE, torque mode): a wall at ``wall_p`` where the distal link wraps the
   object.
 
-The torque sensor reads the applied motor torque. Mechanical stops clamp every joint at its
-limits. Removing the object (``object_present = False``) removes both springs.
+The torque sensor reads the applied motor torque (TORQUE: the command; IMPEDANCE: the law).
+Mechanical stops clamp every joint at its limits. Removing the object
+(``object_present = False``) removes both springs.
 """
 
 from __future__ import annotations
@@ -59,18 +63,26 @@ class SyntheticHand:
         load[0::3] = tau_c
         load[2::3] = tau_p
         torque = cmd.modes == JointMode.TORQUE
+        impedance = cmd.modes == JointMode.IMPEDANCE
         new_q = self.q.copy()
         # torque-mode joints
         qd_t = (cmd.setpoints - load) / self.b
         new_q[torque] = self.q[torque] + dt * qd_t[torque]
+        # impedance joints: the device law, implicit in the velocity
+        k, d = cmd.stiffness, cmd.damping
+        qd_i = (k * (cmd.setpoints - self.q) - load) / (self.b + d)
+        new_q[impedance] = self.q[impedance] + dt * qd_i[impedance]
         # position-mode joints: first-order servo
         alpha = min(dt / self.servo_time, 1.0)
         servo = self.q + alpha * (cmd.setpoints - self.q)
-        new_q[~torque] = servo[~torque]
+        servoed = ~(torque | impedance)
+        new_q[servoed] = servo[servoed]
         new_q = np.clip(new_q, self.lay.lower, self.lay.upper)
         self.qd = (new_q - self.q) / dt
+        tau_i = k * (cmd.setpoints - self.q) - d * self.qd
         self.effort = np.where(torque, cmd.setpoints,
-                               self.k_servo * (cmd.setpoints - self.q) + load)
+                               np.where(impedance, tau_i,
+                                        self.k_servo * (cmd.setpoints - self.q) + load))
         self.q = new_q
 
 

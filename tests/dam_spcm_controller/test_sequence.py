@@ -29,6 +29,14 @@ PLANT_DAMPING = 0.005
 
 @pytest.fixture
 def params() -> SequenceParams:
+    """The impedance law computed by the controller (``impedance_on_device`` false): TORQUE
+    commands. The device-side impedance has its own tests below (``dev_params``)."""
+    return SequenceParams.from_config(CFG, damping=PLANT_DAMPING, impedance_on_device=False)
+
+
+@pytest.fixture
+def dev_params() -> SequenceParams:
+    """The default: compliant joints in IMPEDANCE, the law runs on the device (the plant)."""
     return SequenceParams.from_config(CFG, damping=PLANT_DAMPING)
 
 
@@ -202,7 +210,8 @@ def test_approach_without_object_fails_at_joint_limit(params):
 
 
 def test_phase_timeout_fails(params):
-    short = SequenceParams.from_config(CFG, phase_timeout=4.0, damping=PLANT_DAMPING)
+    short = SequenceParams.from_config(CFG, phase_timeout=4.0, damping=PLANT_DAMPING,
+                                       impedance_on_device=False)
     # a very far object: the equilibrium will not reach it before the timeout
     seq, hand = _started(short, theta_c0_deg=55.0)
     t, _ = _run_to(seq, hand, Phase.ROLLING_UP, 0.051, 15.0)
@@ -444,3 +453,150 @@ def test_failure_relaxes_like_abort(params):
     end = seq.step(t_fail + 0.001 + params.torque_ramp_time, q, hand.qd, hand.effort)
     assert np.all(end.setpoints[torque_joints] == 0.0)
     assert seq.relaxed
+
+
+# ---------------------------------------------------------------------------------------------
+# Phase right after start() (the action feedback showed IDLE for one status tick)
+
+
+@pytest.mark.parametrize('on_device', [False, True])
+def test_phase_is_approach_as_soon_as_the_grasp_is_started(on_device):
+    p = SequenceParams.from_config(CFG, damping=PLANT_DAMPING, impedance_on_device=on_device)
+    seq, hand = _new(p)
+    run(seq, hand, 0.0, 0.05)
+    assert seq.phase is Phase.IDLE
+    seq.start(K_THETA, DP)
+    assert seq.phase is Phase.APPROACH  # before the first step after start()
+    assert seq.phase.active
+    cmd = seq.step(0.051, hand.q, hand.qd, hand.effort)
+    assert seq.phase is Phase.APPROACH
+    assert not np.any(cmd.modes[0::3] == JointMode.HOLD)  # the approach has begun
+    # a cancel before the first step still aborts
+    seq2, hand2 = _new(p)
+    run(seq2, hand2, 0.0, 0.05)
+    seq2.start(K_THETA, DP)
+    assert seq2.cancel() and seq2.phase is Phase.ABORTED
+
+
+# ---------------------------------------------------------------------------------------------
+# Impedance on the device (the default)
+
+
+def test_device_mode_visits_every_phase_and_sends_only_gains_and_equilibria(dev_params):
+    assert dev_params.impedance_on_device  # the configured default
+    seq, hand = _started(dev_params)
+    _, log = run(seq, hand, 0.051, 15.0, until=lambda s: s.phase.terminal)
+    assert _phases(log) == [Phase.APPROACH, Phase.ROLLING_UP, Phase.ENVELOPE, Phase.DONE]
+    k_i = K_THETA * np.array([1.0, 0.5, 0.5])  # stiffness ratios of config/dam.yaml
+    rolling = 0
+    for _, phase, cmd, _, _ in log:
+        if phase.active:
+            assert np.all(cmd.modes[0::3] == JointMode.IMPEDANCE), phase
+            assert np.allclose(cmd.stiffness[0::3], k_i)
+            assert np.allclose(cmd.damping[0::3], dev_params.damping)
+            # gains only on the compliant joints; never a torque command
+            assert np.all(cmd.stiffness[1::3] == 0.0) and np.all(cmd.stiffness[2::3] == 0.0)
+            assert not np.any(cmd.modes == JointMode.TORQUE)
+        if phase is Phase.ROLLING_UP:
+            assert np.allclose(cmd.setpoints[0::3], seq.theta_0)  # the equilibrium theta_0
+            rolling += 1
+    assert rolling > 2500
+    # SPCM happened: the object pushed the compliant joints outward
+    assert seq.failure_reason is None and seq.progress == 1.0
+
+
+def test_device_mode_approach_moves_the_equilibrium_and_latches_theta_0(dev_params):
+    contact_deg = [18.0, 22.0, 25.0]
+    seq, hand = _new(dev_params, theta_c0_deg=contact_deg)
+    run(seq, hand, 0.0, 0.05)
+    seq.start(K_THETA, DP)
+    first = seq.step(0.051, hand.q, hand.qd, hand.effort)
+    # no jump: the equilibrium starts at the measured angle
+    assert np.allclose(first.setpoints[0::3], hand.q[0::3])
+    _, log = run(seq, hand, 0.052, 0.6)
+    eq = [(rec[0], rec[2].setpoints[0]) for rec in log]
+    (t_a, e_a), (t_b, e_b) = eq[100], eq[400]
+    assert (e_b - e_a) / (t_b - t_a) == pytest.approx(dev_params.approach_speed, rel=1e-6)
+    _run_to(seq, hand, Phase.ROLLING_UP, 0.601)
+    assert seq.phase is Phase.ROLLING_UP
+    pen = math.degrees(dev_params.contact_torque_threshold / 5.0)
+    assert np.all(np.degrees(seq.theta_0) >= np.array(contact_deg) - 1e-9)
+    assert np.all(np.degrees(seq.theta_0) <= np.array(contact_deg) + pen + 0.05)
+
+
+def test_device_mode_envelope_keeps_the_impedance_and_done_keeps_it(dev_params):
+    seq, hand = _started(dev_params)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    assert seq.phase is Phase.ENVELOPE
+    t, _ = _run_to(seq, hand, Phase.DONE, t + 0.001)
+    assert seq.phase is Phase.DONE
+    cmd = seq.step(t + 0.5, hand.q, hand.qd, hand.effort)
+    assert np.all(cmd.modes[0::3] == JointMode.IMPEDANCE)
+    assert np.allclose(cmd.setpoints[0::3], seq.theta_0)
+    assert np.all(cmd.modes[2::3] == JointMode.POSITION)
+    assert np.allclose(cmd.setpoints[2::3], dev_params.layout.initial_position_angle + DP)
+
+
+def test_device_mode_constant_torque_envelope_ramps_to_the_paper_torque(dev_params):
+    from dataclasses import replace
+
+    p = replace(dev_params, envelope_constant_torque=True)
+    seq, hand = _started(p)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    assert seq.phase is Phase.ENVELOPE
+    # the first envelope command starts at the static impedance torque of that moment
+    start = seq.step(t, hand.q, hand.qd, hand.effort)
+    k_i = K_THETA * np.array([1.0, 0.5, 0.5])
+    assert np.all(start.modes[0::3] == JointMode.TORQUE)
+    assert np.allclose(start.setpoints[0::3], np.maximum(k_i * (seq.theta_0 - hand.q[0::3]), 0),
+                       atol=1e-3)
+    t_end, _ = run(seq, hand, t + 0.001, t + p.torque_ramp_time + 0.05)
+    cmd = seq.step(t_end + 0.001, hand.q, hand.qd, hand.effort)
+    ratios = p.layout.stiffness_ratios
+    assert np.allclose(cmd.setpoints[0::3], p.envelope_torque * ratios / ratios.max())
+    assert np.all(cmd.stiffness == 0.0)
+
+
+def test_device_mode_envelope_without_object_returns_to_theta_0(dev_params):
+    seq, hand = _started(dev_params)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    hand.object_present[:] = False
+    run(seq, hand, t + 0.001, t + 5.0, until=lambda s: s.phase.terminal)
+    assert seq.phase is Phase.DONE
+    assert np.allclose(hand.q[0::3], seq.theta_0, atol=math.radians(0.5))
+    assert np.all(np.abs(hand.effort[0::3]) < dev_params.contact_torque_threshold)
+
+
+@pytest.mark.parametrize('phase', [Phase.APPROACH, Phase.ROLLING_UP, Phase.ENVELOPE])
+def test_device_mode_cancel_turns_impedance_into_a_torque_ramp_to_zero(dev_params, phase):
+    seq, hand = _started(dev_params)
+    t, _ = _run_to(seq, hand, phase, 0.051)
+    _, log = run(seq, hand, t + 0.001, t + 0.1)
+    t_cancel, _, last_cmd, _, _ = log[-1]
+    assert np.all(last_cmd.modes[0::3] == JointMode.IMPEDANCE)
+    theta = seq._last_theta_c  # the angle of the last step
+    static = np.clip(last_cmd.stiffness[0::3] * (last_cmd.setpoints[0::3] - theta),
+                     -dev_params.torque_limit, dev_params.torque_limit)
+    assert seq.cancel() and seq.phase is Phase.ABORTED
+    cmd = seq.step(t_cancel, hand.q, hand.qd, hand.effort)
+    assert np.all(cmd.modes[0::3] == JointMode.TORQUE)
+    assert np.all(cmd.stiffness == 0.0) and np.all(cmd.damping == 0.0)
+    assert np.allclose(cmd.setpoints[0::3], static)
+    mid = seq.step(t_cancel + dev_params.torque_ramp_time / 2, hand.q, hand.qd, hand.effort)
+    assert np.allclose(mid.setpoints[0::3], static / 2)
+    end = seq.step(t_cancel + dev_params.torque_ramp_time, hand.q, hand.qd, hand.effort)
+    assert np.all(end.setpoints[0::3] == 0.0) and seq.relaxed
+
+
+def test_device_mode_equilibrium_never_leaves_the_joint_limits(dev_params):
+    """Closing without an object: the equilibrium is clipped to the limits (the driver rejects
+    an equilibrium outside them) until the sequence fails at the limit."""
+    seq, hand = _started(dev_params)
+    hand.object_present[:] = False
+    _, log = run(seq, hand, 0.051, 15.0, until=lambda s: s.phase.terminal)
+    assert seq.phase is Phase.FAILED and 'compliant joint limit' in seq.failure_reason
+    lay = dev_params.layout
+    for _, _, cmd, _, _ in log:
+        imp = cmd.modes == JointMode.IMPEDANCE
+        assert np.all(cmd.setpoints[imp] <= lay.upper[imp])
+        assert np.all(cmd.setpoints[imp] >= lay.lower[imp])

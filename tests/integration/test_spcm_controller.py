@@ -134,6 +134,17 @@ def _torques(msg) -> list[float]:
     return [s for m, s in zip(msg.mode, msg.setpoint, strict=True) if m == HandCommand.MODE_TORQUE]
 
 
+def _compliant(msg) -> list[tuple[int, float, float, float]]:
+    """(mode, setpoint, stiffness, damping) of the compliant joints of a HandCommand."""
+    out = []
+    for i, name in enumerate(msg.name):
+        if name.endswith('_compliant_joint'):
+            k = msg.stiffness[i] if len(msg.stiffness) else 0.0
+            d = msg.damping[i] if len(msg.damping) else 0.0
+            out.append((msg.mode[i], msg.setpoint[i], k, d))
+    return out
+
+
 def test_full_grasp_second_goal_and_parameters(stack) -> None:
     from action_msgs.msg import GoalStatus
 
@@ -153,6 +164,8 @@ def test_full_grasp_second_goal_and_parameters(stack) -> None:
     phases = h.phases()
     for phase in ('APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'):
         assert phase in phases, phases
+    # no IDLE tick between CHECK_LIFT and APPROACH (nor anywhere else)
+    assert phases[:2] == ['CHECK_LIFT', 'APPROACH'] and 'IDLE' not in phases, phases
     assert phases.index('APPROACH') < phases.index('ROLLING_UP') < phases.index('ENVELOPE')
     checked = [f.feedback for f in h.feedback if f.feedback.lift_checked]
     assert checked and all(fb.lift_guaranteed for fb in checked)
@@ -179,6 +192,7 @@ BAD_GOALS = [
     ([1.0], [0.1, 0.2], 'expected 1 or 3'),
     ([1.0], [math.radians(80.0)], 'delta_theta_p_max'),
     ([1.0], [0.0], 'must be positive'),
+    ([150.0], [0.2], 'max_stiffness_nm_per_rad'),  # beyond what the device accepts
 ]
 
 
@@ -251,7 +265,16 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     handle = h.send([INSIDE[0]], [INSIDE[1]])
     assert handle.accepted
     h.wait_phase(handle, 'ROLLING_UP', 15.0)
-    assert any(abs(t) > 1e-3 for _, m in h.commands[-20:] for t in _torques(m))
+    from dam_interfaces.msg import HandCommand
+
+    # impedance on the device (the default): equilibrium and gains, no torque commands
+    rolling = _compliant(h.commands[-1][1])
+    assert len(rolling) == 3
+    k_i = [INSIDE[0], INSIDE[0] / 2, INSIDE[0] / 2]
+    for (mode, _theta_0, k, d), k_expected in zip(rolling, k_i, strict=True):
+        assert mode == HandCommand.MODE_IMPEDANCE and k == pytest.approx(k_expected)
+        assert d == pytest.approx(0.02)  # the damping parameter (FAST)
+    assert not _torques(h.commands[-1][1])
     cancel = handle.cancel_goal_async()
     res = h.result(handle, 20.0)
     assert h.ros.spin_until(cancel.done, 10.0)
@@ -261,6 +284,30 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     h.ros.spin_until(lambda: False, 0.3)
     last = h.commands[-1][1]
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
+
+
+@pytest.mark.parametrize('stack', [['-p', 'impedance_on_device:=false']], indirect=True)
+def test_impedance_in_the_controller_sends_torques(stack) -> None:
+    """impedance_on_device false: the controller closes the loop itself (MODE_TORQUE, no
+    gains); the parameter is refused while a grasp runs and accepts only a bool."""
+    from action_msgs.msg import GoalStatus
+
+    h, _ctl, _plant = stack
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'ROLLING_UP', 15.0)
+    refused = h.set_parameter('impedance_on_device', True)
+    assert not refused.successful and 'grasp is running' in refused.reason
+    h.ros.spin_until(lambda: False, 0.3)
+    grasp = [m for _, m in h.commands if len(_torques(m)) == 3]  # APPROACH and ROLLING_UP
+    assert len(grasp) > 100
+    # the synthetic plant lags the closing equilibrium: the approach needs a real torque
+    assert max(abs(t) for m in grasp for t in _torques(m)) > 1e-3
+    assert all(len(m.stiffness) == 0 and len(m.damping) == 0 for m in grasp)
+    handle.cancel_goal_async()
+    assert h.result(handle, 20.0).status == GoalStatus.STATUS_CANCELED
+    assert not h.set_parameter('impedance_on_device', 1.0).successful
+    assert h.set_parameter('impedance_on_device', True).successful
 
 
 def test_plant_silence_aborts_with_zero_torque(stack) -> None:

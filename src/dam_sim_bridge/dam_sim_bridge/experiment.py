@@ -4,7 +4,10 @@
 :class:`~dam_spcm_controller.sequence.DamSequence` together at the device rate
 (``device.rate_hz``): each cycle the sequence sees the joint state and its command reaches the
 world ``latency_cycles`` later, torque commands slew-limited like the driver does
-(``device.torque_rate_limit_nm_per_s``). It returns the controller's end phase, the outcome as
+(``device.torque_rate_limit_nm_per_s``). IMPEDANCE commands (the default,
+``controller.impedance_on_device``) reach the world with their equilibrium and gains, and the
+world runs the law at every physics step exactly as the stand-in device does
+(:meth:`HandWorld.set_joint_commands`). It returns the controller's end phase, the outcome as
 the controller would classify it from joint signals alone, the ground-truth lift of the object
 and, on request, the recorded signals.
 
@@ -42,7 +45,8 @@ from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 #: Controller JointMode -> world (wire protocol) JointMode.
 _TO_WORLD = {int(JointMode.HOLD): int(WireMode.HOLD),
              int(JointMode.POSITION): int(WireMode.POSITION),
-             int(JointMode.TORQUE): int(WireMode.TORQUE)}
+             int(JointMode.TORQUE): int(WireMode.TORQUE),
+             int(JointMode.IMPEDANCE): int(WireMode.IMPEDANCE)}
 #: Phase -> small integer for the recorded signals.
 PHASE_CODES = {phase: i for i, phase in enumerate(Phase)}
 
@@ -157,7 +161,8 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         ``object_position`` [m], ``phase`` (codes of :data:`PHASE_CODES`) every
         ``record_every`` cycles.
     param_overrides
-        Replace :class:`SequenceParams` attributes (e.g. ``damping=0.02``).
+        Replace :class:`SequenceParams` attributes (e.g. ``damping=0.02``,
+        ``impedance_on_device=False``, ``envelope_constant_torque=True``).
 
     Raises
     ------
@@ -188,7 +193,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         js = w.joint_states()
         seq.step(0.0, js.positions, js.velocities, js.torques)
         seq.start(k_theta, delta_theta_p)
-        pending: list[tuple[np.ndarray, np.ndarray]] = []
+        pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         tau_out = np.zeros(w.n_joints)
         rec: dict[str, list[np.ndarray | float]] = {
             k: [] for k in ('t', 'positions', 'velocities', 'efforts', 'object_position',
@@ -209,15 +214,17 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                     lift_rolling_end = float(w.object_pose().position[2]) - z0
                 last_phase = seq.phase
             modes = np.array([_TO_WORLD[int(m)] for m in cmd.modes], dtype=np.int64)
-            pending.append((modes, cmd.setpoints.copy()))
+            pending.append((modes, cmd.setpoints.copy(), cmd.stiffness.copy(),
+                            cmd.damping.copy()))
             if len(pending) >= latency_cycles:
-                modes_w, sets_w = pending.pop(0)
+                modes_w, sets_w, stiff_w, damp_w = pending.pop(0)
                 torque = modes_w == int(WireMode.TORQUE)
                 tau = _slew(tau_out, np.where(torque, sets_w, 0.0),
                             float(dev.torque_limit_nm),
                             float(dev.torque_rate_limit_nm_per_s), dt)
                 tau_out = np.where(torque, tau, 0.0)
-                w.set_joint_commands(modes_w, np.where(torque, tau_out, sets_w))
+                w.set_joint_commands(modes_w, np.where(torque, tau_out, sets_w), stiff_w,
+                                     damp_w)
             w.step(steps)
             t = round(t + dt, 9)
             pos = w.object_pose().position
@@ -305,6 +312,12 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument('--max-time', type=float, default=20.0, help='simulated time limit [s]')
     p.add_argument('--fixtures', type=Path, default=None,
                    help='directory: also save every run\'s signals as .npz there')
+    p.add_argument('--impedance', choices=('device', 'controller'), default=None,
+                   help='where the compliant-joint impedance runs (default: '
+                        'controller.impedance_on_device of the configuration)')
+    p.add_argument('--envelope', choices=('impedance', 'constant-torque'), default='impedance',
+                   help='ENVELOPE with the impedance on the device: keep the impedance '
+                        '(default) or apply the paper\'s constant torque (Fig. 6(d))')
     return p.parse_args(argv)
 
 
@@ -340,6 +353,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - the experiment runs without the analysis
         sys.stderr.write(f'dam_experiment: analysis unavailable ({exc}); columns show -\n')
         analyzer = None
+    overrides: dict[str, bool] = {
+        'envelope_constant_torque': args.envelope == 'constant-torque'}
+    if args.impedance is not None:
+        overrides['impedance_on_device'] = args.impedance == 'device'
     world = HandWorld(config)
     try:
         for alpha in alphas:
@@ -348,7 +365,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                     r = run_experiment(config, k, math.radians(dp), friction_angle=alpha,
                                        world=world, latency_cycles=args.latency_cycles,
                                        max_time=args.max_time,
-                                       record=args.fixtures is not None)
+                                       record=args.fixtures is not None, **overrides)
                     suff, csm = (('-', '-') if analyzer is None else
                                  _analysis_region(analyzer, k, math.radians(dp), alpha))
                     row = r.row()

@@ -33,11 +33,16 @@ class JointMode(enum.IntEnum):
         Position control tracking a moving angle [rad] (trajectories).
     TORQUE
         Joint torque [N*m]; positive flexes the finger inward.
+    IMPEDANCE
+        Joint impedance run by the device at its physics rate: the setpoint is the equilibrium
+        ``theta_0`` [rad], :attr:`JointCommand.stiffness` and :attr:`JointCommand.damping` the
+        gains; the device applies ``k (theta_0 - theta) - d theta_dot``.
     """
 
     HOLD = 0
     POSITION = 1
     TORQUE = 2
+    IMPEDANCE = 3
 
 
 @dataclass(frozen=True)
@@ -49,11 +54,27 @@ class JointCommand:
     modes
         (3n,) int8 array of :class:`JointMode` values.
     setpoints
-        (3n,) float64: angle [rad] for HOLD/POSITION joints, torque [N*m] for TORQUE joints.
+        (3n,) float64: angle [rad] for HOLD/POSITION joints, torque [N*m] for TORQUE joints,
+        the equilibrium ``theta_0`` [rad] for IMPEDANCE joints.
+    stiffness, damping
+        (3n,) float64: stiffness [N*m/rad] and damping [N*m*s/rad] of IMPEDANCE joints, 0 for
+        the others (``None``: all zero).
     """
 
     modes: np.ndarray
     setpoints: np.ndarray
+    stiffness: np.ndarray | None = None
+    damping: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        for name in ('stiffness', 'damping'):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(np.shape(self.setpoints)))
+
+    @property
+    def has_impedance(self) -> bool:
+        """True when at least one joint is in IMPEDANCE."""
+        return bool(np.any(self.modes == JointMode.IMPEDANCE))
 
     def mode(self, index: int) -> JointMode:
         """The :class:`JointMode` of joint ``index``."""

@@ -20,8 +20,12 @@ Topics and services
 
 Parameters
 ----------
-See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only) and
-``require_lift_guarantee`` (bool). All but ``config_file`` may be changed while no grasp runs.
+See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only), ``require_lift_guarantee``
+(bool) and ``impedance_on_device`` (bool, default ``controller.impedance_on_device`` of the
+configuration, true): the compliant joints are commanded in MODE_IMPEDANCE (per-finger
+``k_theta_i``, ``theta_0``, the ``damping`` parameter) and the device runs the impedance law at
+its physics rate; false: this node computes the torque every joint state and sends
+MODE_TORQUE. All but ``config_file`` may be changed while no grasp runs.
 """
 
 from __future__ import annotations
@@ -61,7 +65,8 @@ from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 #: JointMode of the core -> HandCommand.mode on the wire.
 _WIRE_MODE = {JointMode.HOLD: HandCommand.MODE_HOLD,
               JointMode.POSITION: HandCommand.MODE_POSITION,
-              JointMode.TORQUE: HandCommand.MODE_TORQUE}
+              JointMode.TORQUE: HandCommand.MODE_TORQUE,
+              JointMode.IMPEDANCE: HandCommand.MODE_IMPEDANCE}
 
 _OUTCOME = {Outcome.SUCCESS: DamGrasp.Result.OUTCOME_SUCCESS,
             Outcome.LIFTED_DAM_FAILED: DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED,
@@ -126,8 +131,16 @@ class SpcmControllerNode(Node):
         self.declare_parameter('require_lift_guarantee', False, ParameterDescriptor(
             description='refuse (k_theta, delta_theta_p) pairs outside the sufficient-lift '
                         'region reported by /check_lift'))
+        self.declare_parameter(
+            'impedance_on_device', bool(self._config.controller.impedance_on_device),
+            ParameterDescriptor(
+                description='true: compliant joints in MODE_IMPEDANCE, the device runs the '
+                            'impedance law; false: this node computes their torque'))
         self._values = {name: float(self.get_parameter(name).value) for name in _DOUBLE_PARAMETERS}
         self._require_lift = bool(self.get_parameter('require_lift_guarantee').value)
+        self._on_device = self.get_parameter('impedance_on_device').value
+        if not isinstance(self._on_device, bool):
+            raise InputError(f'impedance_on_device must be a bool, got {self._on_device!r}')
         self._params = self._make_params(self._values)  # raises on an inconsistent start-up set
 
         self._lock = threading.RLock()
@@ -168,9 +181,11 @@ class SpcmControllerNode(Node):
     # ------------------------------------------------------------------------------------
     # Parameters
 
-    def _make_params(self, values: dict[str, float]) -> SequenceParams:
-        overrides = {attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items()
-                     if attr}
+    def _make_params(self, values: dict[str, float], on_device: bool | None = None
+                     ) -> SequenceParams:
+        overrides: dict[str, float | bool] = {
+            attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items() if attr}
+        overrides['impedance_on_device'] = self._on_device if on_device is None else on_device
         return replace(self._base_params, **overrides)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -182,6 +197,7 @@ class SpcmControllerNode(Node):
                            'parameters can only be changed while idle')
             values = dict(self._values)
             require = self._require_lift
+            on_device = self._on_device
             for param in params:
                 if param.name in _DOUBLE_PARAMETERS:
                     value = param.value
@@ -197,12 +213,19 @@ class SpcmControllerNode(Node):
                             successful=False,
                             reason=f'require_lift_guarantee must be a bool, got {param.value!r}')
                     require = param.value
+                elif param.name == 'impedance_on_device':
+                    if not isinstance(param.value, bool):
+                        return SetParametersResult(
+                            successful=False,
+                            reason=f'impedance_on_device must be a bool, got {param.value!r}')
+                    on_device = param.value
             try:
-                new_params = self._make_params(values)
+                new_params = self._make_params(values, on_device)
             except InputError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
             self._values = values
             self._require_lift = require
+            self._on_device = on_device
             self._params = new_params
         return SetParametersResult(successful=True)
 
@@ -262,6 +285,9 @@ class SpcmControllerNode(Node):
         msg.name = list(self._layout.joint_names)
         msg.mode = [_WIRE_MODE[JointMode(int(m))] for m in cmd.modes]
         msg.setpoint = [float(v) for v in cmd.setpoints]
+        if cmd.has_impedance:  # else empty: no joint in MODE_IMPEDANCE
+            msg.stiffness = [float(v) for v in cmd.stiffness]
+            msg.damping = [float(v) for v in cmd.damping]
         self._command_pub.publish(msg)
 
     def _on_watchdog(self) -> None:
@@ -292,12 +318,14 @@ class SpcmControllerNode(Node):
         self._advance(feedback=True)
 
     def _zero_torque_command(self) -> JointCommand:
-        """Torque joints at zero, moving position joints held at their last setpoint."""
+        """Torque and impedance joints at zero torque, moving position joints held at their
+        last setpoint."""
         n = self._layout.n_joints
         if self._last_cmd is None:
             return JointCommand(np.full(n, JointMode.HOLD, dtype=np.int8), self._last_pos.copy())
         modes = self._last_cmd.modes.copy()
         setpoints = self._last_cmd.setpoints.copy()
+        modes[modes == JointMode.IMPEDANCE] = JointMode.TORQUE
         setpoints[modes == JointMode.TORQUE] = 0.0
         modes[modes == JointMode.POSITION] = JointMode.HOLD
         return JointCommand(modes, setpoints)
@@ -371,6 +399,11 @@ class SpcmControllerNode(Node):
                              'position joint by the same displacement')
         if dp[0] <= 0.0:
             raise InputError(f'delta_theta_p must be positive, got {dp[0]!r} rad')
+        k_max = float(self._config.device.max_stiffness_nm_per_rad)
+        if self._on_device and float(np.max(k)) > k_max:
+            raise InputError(f'k_theta {k.tolist()!r} N*m/rad: the device accepts impedance '
+                             f'stiffness up to device.max_stiffness_nm_per_rad = {k_max:g} '
+                             'N*m/rad')
         return float(k[0]), float(dp[0])
 
     def _on_goal(self, goal: DamGrasp.Goal) -> GoalResponse:

@@ -8,12 +8,22 @@ Phases::
     APPROACH / ROLLING_UP / ENVELOPE --cancel()--> ABORTED
     APPROACH / ROLLING_UP / ENVELOPE --timeout, lost contact, joint limit, fail()--> FAILED
 
+Compliant joints are driven in one of two ways (:attr:`SequenceParams.impedance_on_device`):
+
+* on the device (default): the compliant joints are commanded in ``JointMode.IMPEDANCE`` with
+  the equilibrium as setpoint and ``k_theta_i`` and ``d`` as gains; the device runs the law
+  ``k_theta_i (theta_0 - theta) - d theta_dot`` at its physics rate, so that only the
+  equilibrium and the gains cross ROS (as the joint impedance of KUKA FRI / libfranka);
+* in this controller: the law is computed here every step and sent as a ``TORQUE``
+  command (the loop then runs over ROS and suffers its latency).
+
 IDLE
     Every joint holds the angle measured at the first step in IDLE (clean start).
 APPROACH
     Pre-shape: locked joints go to ``initial_locked_angle``, position joints to
     ``initial_position_angle`` (15 deg), both at ``approach_speed``; compliant joints stay
-    under impedance around their measured angle. Closing: the equilibrium of each compliant
+    under impedance around their measured angle (on the device: no torque ramp-in is needed,
+    the equilibrium starts at the measured angle). Closing: the equilibrium of each compliant
     joint moves inward at ``approach_speed`` until the compliant-joint torque sensor of that
     finger has read at least ``contact_torque_threshold`` for ``contact_confirm_time`` (a
     single reading is not enough: the impedance loop's transients after the torque ramp-in
@@ -24,20 +34,25 @@ ROLLING_UP
     pre-shape angle by ``delta_theta_p`` over ``trajectory_duration``; compliant joints run the
     impedance law ``tau_s = k_theta_i (theta_0 - theta) - d theta_dot``.
 ENVELOPE
-    The fingers hold the SPCM grasp that lifted the object: the compliant joints keep the
-    impedance law around ``theta_0``, its torque capped at the finger's envelope torque
+    The fingers hold the SPCM grasp that lifted the object; the position joints stay at the
+    end of their trajectory. The compliant joints: with the law in this controller they keep
+    the impedance around ``theta_0``, its torque capped at the finger's envelope torque
     ``envelope_torque * stiffness_ratio_i / max(stiffness_ratio)`` (balanced: finger 1
-    opposes fingers 2 and 3); the position joints stay at the end of their trajectory.
-    Why not the paper's constant torque (Fig. 6(d))? In the simulator a constant torque has
-    no stiffness: a cylinder held below its equator with a 5 deg friction angle slides up
-    between fingertips that keep closing and leaves the hand sideways, and a constant torque
-    on a position joint (a distal link of a few 1e-6 kg*m^2, which no torque loop at the
-    device rate can damp) throws it. Ends when the fingers have settled.
+    opposes fingers 2 and 3). On the device (where a cap cannot be expressed) they keep the
+    device impedance around ``theta_0``; with
+    :attr:`SequenceParams.envelope_constant_torque` they get the paper's constant torque
+    (Fig. 6(d)), the envelope torque ramped in over ``torque_ramp_time``
+    (docs/simulation_grasp.md compares the two). A constant torque on a position joint (a
+    distal link of a few 1e-6 kg*m^2, which no torque loop at the device rate can damp)
+    throws the object, so the position joints stay servoed. Ends when the fingers have
+    settled.
 DONE
     The ENVELOPE commands are kept (the object stays grasped).
 ABORTED, FAILED
-    The fingers relax: every torque command ramps linearly to zero over ``torque_ramp_time``;
-    moving position setpoints become HOLD at their last value.
+    The fingers relax: every torque command ramps linearly to zero over ``torque_ramp_time``
+    (an IMPEDANCE joint becomes a TORQUE joint starting from its static impedance torque
+    ``k_theta_i (theta_0 - theta)`` at the last step); moving position setpoints become HOLD
+    at their last value.
 
 All timing comes from the ``t`` argument of :meth:`DamSequence.step`; nothing reads a clock.
 """
@@ -135,6 +150,12 @@ class SequenceParams:
         joint fails this far beyond one [rad].
     contact_confirm_time
         The contact torque must persist this long during APPROACH [s].
+    impedance_on_device
+        Command the compliant joints in ``JointMode.IMPEDANCE`` (the device runs the law)
+        instead of computing their torque here.
+    envelope_constant_torque
+        With ``impedance_on_device``: ENVELOPE applies the paper's constant torque to the
+        compliant joints instead of keeping the device impedance.
     """
 
     layout: HandLayout
@@ -153,8 +174,14 @@ class SequenceParams:
     settle_time: float = 0.3
     limit_margin: float = math.radians(0.5)
     contact_confirm_time: float = 0.03
+    impedance_on_device: bool = True
+    envelope_constant_torque: bool = False
 
     def __post_init__(self) -> None:
+        for name in ('impedance_on_device', 'envelope_constant_torque'):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InputError(f'{name} must be a bool, got {getattr(self, name)!r}')
+            object.__setattr__(self, name, bool(getattr(self, name)))
         for name in ('damping', 'torque_ramp_time', 'contact_confirm_time'):
             object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
                                                          nonnegative=True))
@@ -198,7 +225,8 @@ class SequenceParams:
                      lost_contact_ratio=c.lost_contact_torque_ratio,
                      settle_speed=c.envelope_settle_speed_rad_per_s,
                      settle_time=c.envelope_settle_time_s,
-                     limit_margin=c.limit_margin_rad)
+                     limit_margin=c.limit_margin_rad,
+                     impedance_on_device=c.impedance_on_device)
         return replace(params, **overrides) if overrides else params
 
 
@@ -232,6 +260,8 @@ class DamSequence:
         self._outer_hi = lay.upper + params.limit_margin
         self._modes = np.full(self._nj, JointMode.HOLD, dtype=np.int8)
         self._set = np.zeros(self._nj)
+        self._stiff = np.zeros(self._nj)  # IMPEDANCE gains of the command [N*m/rad]
+        self._damp = np.zeros(self._nj)  # [N*m*s/rad]
         self._phase = Phase.IDLE
         self._t_last: float | None = None
         self._reset_run()
@@ -276,7 +306,10 @@ class DamSequence:
 
     @property
     def phase(self) -> Phase:
-        """Current phase. After :meth:`start`, IDLE until the next :meth:`step`."""
+        """Current phase. After :meth:`start`, APPROACH at once (the approach itself begins
+        at the next :meth:`step`, which knows the measured posture)."""
+        if self._pending_start:
+            return Phase.APPROACH
         return self._phase
 
     @property
@@ -485,7 +518,8 @@ class DamSequence:
             self._step_envelope(t, pos, vel)
         if self._phase is Phase.ABORTED or self._phase is Phase.FAILED:
             self._step_relax(t)
-        return JointCommand(modes=self._modes.copy(), setpoints=self._set.copy())
+        return JointCommand(modes=self._modes.copy(), setpoints=self._set.copy(),
+                            stiffness=self._stiff.copy(), damping=self._damp.copy())
 
     # ------------------------------------------------------------------------------------
     # Phases
@@ -495,6 +529,24 @@ class DamSequence:
             self._hold = pos.copy()
         self._modes[:] = JointMode.HOLD
         self._set[:] = self._hold
+        self._stiff[:] = 0.0
+        self._damp[:] = 0.0
+
+    def _device_impedance(self, theta_eq: np.ndarray) -> None:
+        """Command the compliant joints in IMPEDANCE around ``theta_eq`` [rad] (clipped to
+        the joint limits) with ``k_theta_i`` and ``d``."""
+        c = self._c
+        lay = self._p.layout
+        self._modes[c] = JointMode.IMPEDANCE
+        self._set[c] = np.clip(theta_eq, lay.lower[c], lay.upper[c])
+        self._stiff[c] = self._k_theta_i
+        self._damp[c] = self._p.damping
+
+    def _torque_mode(self) -> None:
+        """Compliant joints in TORQUE (gains cleared)."""
+        self._modes[self._c] = JointMode.TORQUE
+        self._stiff[:] = 0.0
+        self._damp[:] = 0.0
 
     def _enter_approach(self, t: float, pos: np.ndarray) -> None:
         lay = self._p.layout
@@ -508,7 +560,10 @@ class DamSequence:
         self._preshape_time = float(dist.max()) / self._p.approach_speed
         self._eq_start[:] = pos[self._c]
         self._modes[:] = JointMode.POSITION
-        self._modes[self._c] = JointMode.TORQUE
+        if self._p.impedance_on_device:
+            self._device_impedance(self._eq_start)
+        else:
+            self._torque_mode()
         self._progress = 0.0
 
     def _compliant_torque(self, theta_eq: np.ndarray, pos: np.ndarray,
@@ -540,10 +595,13 @@ class DamSequence:
                 self._theta_0[new] = pos[self._c][new]
                 self._contact |= new
         theta_eq = np.where(self._contact, self._theta_0, theta_eq)
-        tau = self._compliant_torque(theta_eq, pos, vel)
-        if p.torque_ramp_time > 0.0 and elapsed < p.torque_ramp_time:
-            tau = tau * (elapsed / p.torque_ramp_time)
-        self._set[self._c] = tau
+        if p.impedance_on_device:
+            self._device_impedance(theta_eq)
+        else:
+            tau = self._compliant_torque(theta_eq, pos, vel)
+            if p.torque_ramp_time > 0.0 and elapsed < p.torque_ramp_time:
+                tau = tau * (elapsed / p.torque_ramp_time)
+            self._set[self._c] = tau
         frac_pre = 1.0 if self._preshape_time <= 0.0 else min(elapsed / self._preshape_time,
                                                                1.0)
         frac = 0.5 * frac_pre + 0.5 * float(self._contact.mean())
@@ -573,10 +631,13 @@ class DamSequence:
         self._below_since[:] = np.nan
         self._loaded_since[:] = np.nan
         self._modes[self._q] = JointMode.POSITION
-        self._modes[self._c] = JointMode.TORQUE
         self._modes[self._l] = JointMode.HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
-        self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
+        if p.impedance_on_device:
+            self._device_impedance(self._theta_0)
+        else:
+            self._torque_mode()
+            self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
 
     def _step_rolling(self, t: float, pos: np.ndarray, vel: np.ndarray,
                       eff: np.ndarray) -> None:
@@ -586,7 +647,8 @@ class DamSequence:
         elapsed = t - self._t_phase
         self._set[self._q] = traj.position(elapsed)
         self._set[self._l] = p.layout.initial_locked_angle
-        self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
+        if not p.impedance_on_device:
+            self._set[self._c] = self._compliant_torque(self._theta_0, pos, vel)
         self._progress = max(self._progress, _PROGRESS_APPROACH + (
             _PROGRESS_ROLLING - _PROGRESS_APPROACH) * traj.phase(elapsed))
         # Lost contact: a finger that carried load drops below the release level. The load is
@@ -609,18 +671,28 @@ class DamSequence:
                           f'{t - self._below_since[i]:.4g} s during rolling_up')
             return
         if elapsed >= traj.duration:
-            self._enter_envelope(t, eff)
+            self._enter_envelope(t, pos)
 
-    def _enter_envelope(self, t: float, eff: np.ndarray) -> None:
+    def _enter_envelope(self, t: float, pos: np.ndarray) -> None:
+        p = self._p
         self._phase = Phase.ENVELOPE
         self._t_phase = t
         self._t_envelope = t
         self._progress = _PROGRESS_ROLLING
         self._tau_from[:] = 0.0
-        self._tau_from[self._c] = self._set[self._c]  # last compliant torque command
-        ratios = self._p.layout.stiffness_ratios
-        self._envelope_goal = self._p.envelope_torque * ratios / float(ratios.max())
-        self._modes[self._c] = JointMode.TORQUE
+        if p.impedance_on_device:
+            # the static impedance torque the device applies now
+            self._tau_from[self._c] = np.clip(
+                self._k_theta_i * (self._theta_0 - pos[self._c]), -p.torque_limit,
+                p.torque_limit)
+        else:
+            self._tau_from[self._c] = self._set[self._c]  # last compliant torque command
+        ratios = p.layout.stiffness_ratios
+        self._envelope_goal = p.envelope_torque * ratios / float(ratios.max())
+        if p.impedance_on_device and not p.envelope_constant_torque:
+            self._device_impedance(self._theta_0)
+        else:
+            self._torque_mode()
         self._modes[self._q] = JointMode.POSITION  # stays at the trajectory's goal
         self._modes[self._l] = JointMode.HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
@@ -631,9 +703,12 @@ class DamSequence:
         elapsed = t - self._t_envelope
         frac = 1.0 if p.torque_ramp_time <= 0.0 else min(elapsed / p.torque_ramp_time, 1.0)
         c = self._c
-        hold = self._compliant_torque(self._theta_0, pos, vel)
-        cap = self._tau_from[c] + (self._envelope_goal - self._tau_from[c]) * frac
-        self._set[c] = np.minimum(hold, np.maximum(cap, 0.0))
+        ramp = self._tau_from[c] + (self._envelope_goal - self._tau_from[c]) * frac
+        if not p.impedance_on_device:
+            hold = self._compliant_torque(self._theta_0, pos, vel)
+            self._set[c] = np.minimum(hold, np.maximum(ramp, 0.0))
+        elif p.envelope_constant_torque:
+            self._set[c] = np.maximum(ramp, 0.0)
         if self._phase is Phase.DONE:
             return
         settled_frac = 0.0
@@ -658,7 +733,7 @@ class DamSequence:
     # Failure, abort, relaxation
 
     def _check_limits(self, t: float, pos: np.ndarray) -> None:
-        torque = self._modes == JointMode.TORQUE
+        torque = (self._modes == JointMode.TORQUE) | (self._modes == JointMode.IMPEDANCE)
         lo = np.where(torque, self._inner_lo, self._outer_lo)
         hi = np.where(torque, self._inner_hi, self._outer_hi)
         bad = (pos < lo) | (pos > hi)
@@ -675,6 +750,17 @@ class DamSequence:
         self._enter_relax(Phase.FAILED, t)
 
     def _enter_relax(self, phase: Phase, t: float) -> None:
+        impedance = self._modes == JointMode.IMPEDANCE
+        if impedance.any():
+            # the device's static impedance torque at the last step, then ramped to zero
+            theta = np.zeros(self._nj)
+            theta[self._c] = self._last_theta_c
+            tau = np.clip(self._stiff * (self._set - theta), -self._p.torque_limit,
+                          self._p.torque_limit)
+            self._set[impedance] = tau[impedance]
+            self._modes[impedance] = JointMode.TORQUE
+            self._stiff[:] = 0.0
+            self._damp[:] = 0.0
         self._phase = phase
         self._t_phase = t
         self._relax_from_modes[:] = self._modes
