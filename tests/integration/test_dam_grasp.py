@@ -62,6 +62,7 @@ class _Grasper:
                                  lambda m: setattr(self, 'command', m), 10)
         node.create_subscription(JointState, '/joint_states',
                                  lambda m: setattr(self, 'joint_state', m), 10)
+        self.hold_pub = node.create_publisher(HandCommand, '/hand/command', 10)
         self.action = ActionClient(node, DamGrasp, '/dam_grasp')
         self.goal_type = DamGrasp.Goal
 
@@ -173,16 +174,29 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper) -> None:
 
 
 def _reset_world(stack: _Grasper) -> None:
-    """Relax the hand, put the object back on the table and open the hand. The reset can
-    stall the stand-in for longer than the driver's state timeout; then the driver is in
-    ERROR and is brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
+    """Relax the hand, hold it, put the object back on the table and open the hand. The
+    reset can stall the stand-in for longer than the driver's state timeout; then the driver
+    is in ERROR and is brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
     from std_srvs.srv import Trigger
 
+    from dam_interfaces.msg import HandCommand
+
     # The controller keeps commanding the last grasp's hold (DONE); a reset world would be hit
-    # by it. A goal cancelled at once leaves the hand relaxed (zero torque, joints held).
+    # by it. A goal cancelled at once relaxes the hand, and the controller stops publishing.
     handle = stack.send(0.5, math.radians(1.0))
     assert stack.client.wait_future(handle.cancel_goal_async(), 5.0)
     stack.result(handle, 10.0)
+    stack.client.spin_until(lambda: False, 0.2)
+    # A relaxed (zero-torque) compliant joint of the frictionless simulator swings like a
+    # pendulum: after the reset it would swing from -10 deg through the contact angle (about
+    # +5 deg) and knock the object away within a second. Every joint HOLDs instead, so the
+    # reset world keeps its open posture until the next grasp begins.
+    hold = HandCommand(name=list(stack.joint_state.name),
+                       mode=[HandCommand.MODE_HOLD] * len(stack.joint_state.name),
+                       setpoint=[0.0] * len(stack.joint_state.name))
+    for _ in range(3):
+        stack.hold_pub.publish(hold)
+        stack.client.spin_until(lambda: False, 0.05)
     reset = stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
     assert reset.success, reset.message
     stack.client.spin_until(lambda: False, 0.3)
@@ -204,10 +218,13 @@ def test_cancel_mid_grasp_zeroes_the_torque(stack: _Grasper) -> None:
     assert stack.client.wait_future(cancel, 5.0)
     answer = stack.result(handle, 10.0)
     assert answer.result.outcome == DamGrasp.Result.OUTCOME_ABORTED, answer.result.message
-    stack.command = None
     stack.client.spin_until(lambda: False, 0.5)  # the ramp (0.2 s) is over
-    cmd = stack.command
+    cmd = stack.command  # the last: the controller stops publishing once relaxed
     assert cmd is not None
+    count = len(stack.poses)
+    stack.command = None
+    stack.client.spin_until(lambda: len(stack.poses) > count + 10, 2.0)
+    assert stack.command is None, 'the controller still publishes after relaxing'
     compliant = [i for i, name in enumerate(cmd.name) if name.endswith('_compliant_joint')]
     assert len(compliant) == 3
     for i in compliant:

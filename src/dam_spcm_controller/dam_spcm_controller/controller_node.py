@@ -9,9 +9,11 @@ Topics and services
     Messages with missing names, wrong array lengths or NaN/inf are dropped (throttled log).
 /hand/command : dam_interfaces/HandCommand, published
     One command per received joint state while a grasp runs or its result is held (DONE keeps
-    the envelope torque, ABORTED/FAILED ramp the torque to zero); one hold-measured command
-    at the first valid joint state after start-up. The header stamp is that of the joint
-    state the command answers.
+    the envelope commands); ABORTED/FAILED ramp the torque to zero and stop publishing with
+    the command that reached zero (the driver keeps it: zero torque on the compliant joints,
+    the others held), so that the hand may be commanded by others between grasps; one
+    hold-measured command at the first valid joint state after start-up. The header stamp is
+    that of the joint state the command answers.
 /dam/status : dam_interfaces/DamStatus, published at ``status_rate`` and on phase change.
 /dam_grasp : dam_interfaces/action/DamGrasp, action server.
     Goals follow the ``/check_lift`` conventions; invalid goals and goals arriving while a
@@ -269,6 +271,8 @@ class SpcmControllerNode(Node):
                 return
             publish = self._publishing or not self._hold_sent
             self._hold_sent = True
+            if self._seq.phase in (Phase.ABORTED, Phase.FAILED) and self._seq.relaxed:
+                self._publishing = False  # this command is the relaxed one: the last
             self._last_cmd = cmd
             phase_changed = self._seq.phase is not self._last_phase
             self._last_phase = self._seq.phase
