@@ -10,6 +10,13 @@ torque is the paper's :math:`\\tau_s = -K_\\theta \\Delta\\theta_s` and :math:`\
 the initial state. ``K_theta = diag(k_theta_1 .. k_theta_n)`` with
 ``k_theta_i = stiffness_ratio_i * k_theta`` (paper: ``k_theta2 = k_theta3 = k_theta1 / 2``).
 
+The law runs in one of two places: by default on the device, which receives ``theta_0``,
+``k_theta_i`` and ``d`` in its joint mode IMPEDANCE and applies the law at its physics rate
+(``docs/device_protocol.md``); with ``impedance_on_device`` false, in the controller, which
+calls :func:`impedance_torque` every cycle and sends the torque. The functions here are the
+reference of that law (the stand-in's and the lockstep experiment's are checked against the
+same closed forms).
+
 All functions are vectorised over fingers and free of ROS.
 """
 
