@@ -125,3 +125,19 @@ def test_command_line_writes_csv(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert len(text) == 2
     assert 'no' in text[1]  # k 0.5 is outside both analysis regions
     assert 'k_theta' in capsys.readouterr().out
+
+
+@pytest.mark.parametrize('on_device, envelope_mode', [(True, 4), (False, 1)])
+def test_the_experiment_runs_the_impedance_where_configured(
+        cfg: DamConfig, on_device: bool, envelope_mode: int) -> None:
+    """Impedance on the device (default): the world's compliant joints end in IMPEDANCE (the
+    world runs the law every physics step); in the controller: TORQUE. Both lift the object
+    at k_theta 10 inside the sufficient region."""
+    from dam_hand_driver.protocol import JointMode as WireMode
+
+    assert int(WireMode.IMPEDANCE) == 4 and int(WireMode.TORQUE) == 1
+    with HandWorld(cfg) as world:
+        r = run_experiment(cfg, 10.0, DP, world=world, impedance_on_device=on_device)
+        assert r.phase is Phase.DONE and r.lifted, r.failure_reason or r.joint_reason
+        assert world.joint_modes()[0::3].tolist() == [envelope_mode] * 3
+        assert r.lift_final > 0.005
