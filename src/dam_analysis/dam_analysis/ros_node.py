@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import rclpy
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -55,14 +56,19 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     interpreter (``sys.setswitchinterval``; Python's default is 5 ms).
 
     SIGINT and an external shutdown end it with exit status 0. An exception of one of
-    ``startup_errors`` (a bad configuration or parameter) is logged as one fatal line
+    ``startup_errors`` (a bad configuration) or an rclpy ``ParameterException`` (a parameter
+    override of the wrong type or out of its range) is logged as one fatal line
     ``cannot start: ...`` under the logger ``name`` and ends the process with
     ``startup_exit_code``; anything else propagates with its traceback.
     """
     rclpy.init(args=args)
     node = None
     try:
-        node = make_node()
+        try:
+            node = make_node()
+        except (*startup_errors, ParameterException) as exc:
+            rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
+            raise SystemExit(startup_exit_code) from None
         if switch_interval_s is not None:
             sys.setswitchinterval(switch_interval_s)
         gc.collect()
@@ -70,9 +76,6 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except startup_errors as exc:
-        rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
-        raise SystemExit(startup_exit_code) from None
     finally:
         if node is not None:
             node.destroy_node()
