@@ -20,6 +20,7 @@ Every run uses its own free UDP ports (a copy of the configuration).
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import socket
@@ -27,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -76,6 +78,20 @@ def _realtime_client() -> RosClient:
         _SUBSCRIBER_REFUSED.append(refused)
     try:
         return RosClient()
+    finally:
+        if not refused:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@contextlib.contextmanager
+def _realtime_thread() -> Iterator[None]:
+    """The calling thread under SCHED_FIFO (subscriber priority) where permitted: a device
+    played by this process keeps its timing like the driver's link thread."""
+    from dam_hand_driver.realtime import set_thread_priority
+
+    refused = set_thread_priority(SUBSCRIBER_PRIORITY)
+    try:
+        yield
     finally:
         if not refused:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
@@ -180,7 +196,7 @@ def _round_trips(config_file: Path, n: int, rate_hz: float) -> np.ndarray:
     cmd = [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args', '-p',
            'backend:=hardware']
     times: list[float] = []
-    with node_process(cmd, env={'DAM_CONFIG': str(config_file)}):
+    with node_process(cmd, env={'DAM_CONFIG': str(config_file)}), _realtime_thread():
         seq = 0
         deadline = time.monotonic() + 30.0
         sent: dict[int, float] = {}
