@@ -4,8 +4,11 @@
    subscribes to /joint_states and records, per message, the middleware's receive time (the
    measure), the time its callback ran and the publisher's send time. Target: at least 99 %
    of periods within 20 % of nominal over 60 s at ``device.rate_hz`` (also reported at
-   1 kHz). Baseline in the same run: a minimal paced UDP sender and receiver, two plain
-   Python processes, shows what the machine's scheduler allows.
+   1 kHz). The driver and its stand-in run with their default ``thread_priority`` (SCHED_FIFO
+   50 where permitted); this process's middleware threads with SCHED_FIFO 40, so that the
+   instrument does not add its own scheduling noise. Baseline in the same run: a minimal
+   paced UDP sender and receiver, two plain Python processes with the same priorities, shows
+   what the machine's scheduler allows.
 2. This process plays the device for a ``hand_driver`` process (backend hardware): it sends
    state frames and times each until the command frame that references it comes back.
    Target: p99 round trip < 1 ms.
@@ -17,12 +20,15 @@ Every run uses its own free UDP ports (a copy of the configuration).
 
 from __future__ import annotations
 
+import contextlib
 import gc
+import os
 import socket
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +62,41 @@ def _period_stats(periods: np.ndarray, rate_hz: float) -> dict:
             'fraction_within_20pct': round(within, 4)}
 
 
+#: SCHED_FIFO priority of this process's middleware threads (below the driver's default 50).
+SUBSCRIBER_PRIORITY = 40
+_SUBSCRIBER_REFUSED: list[str] = []
+
+
+def _realtime_client() -> RosClient:
+    """A RosClient whose middleware threads (created now, inheriting the policy) run under
+    SCHED_FIFO where permitted, so that the measuring instrument is not the noise; the
+    calling thread returns to normal scheduling."""
+    from dam_hand_driver.realtime import set_thread_priority
+
+    refused = set_thread_priority(SUBSCRIBER_PRIORITY, inherit=True)
+    if refused:
+        _SUBSCRIBER_REFUSED.append(refused)
+    try:
+        return RosClient()
+    finally:
+        if not refused:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+@contextlib.contextmanager
+def _realtime_thread() -> Iterator[None]:
+    """The calling thread under SCHED_FIFO (subscriber priority) where permitted: a device
+    played by this process keeps its timing like the driver's link thread."""
+    from dam_hand_driver.realtime import set_thread_priority
+
+    refused = set_thread_priority(SUBSCRIBER_PRIORITY)
+    try:
+        yield
+    finally:
+        if not refused:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndarray]:
     """Periods [s] of /joint_states seen by this (separate) process: by the middleware's
     receive time (``received``), by the time the callback ran (``callback``) and by the
@@ -74,7 +115,7 @@ def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndar
     cmd = [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args', '-p',
            'backend:=sim']
     with node_process(cmd, env={'DAM_CONFIG': str(config_file)}):
-        client = RosClient()
+        client = _realtime_client()
         try:
             client.node.create_subscription(JointState, '/joint_states', on_joint_state, 500)
             if not client.spin_until(lambda: len(callback) > 100, 30.0):
@@ -94,10 +135,11 @@ def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndar
 
 _PACER = """
 import socket, sys, time
-from dam_sim_bridge.pacing import reduce_timer_slack, sleep_until
+from dam_hand_driver.realtime import set_thread_priority
+from dam_sim_bridge.pacing import sleep_until
 port, rate, seconds = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-reduce_timer_slack()
+set_thread_priority(50)
 deadline = time.monotonic()
 end = deadline + seconds
 while deadline < end:
@@ -109,13 +151,17 @@ while deadline < end:
 
 def _baseline_periods(rate_hz: float, seconds: float) -> np.ndarray:
     """Periods [s] of a minimal paced UDP sender, received by this process: what this
-    machine's scheduler allows two plain Python processes (no ROS, no physics)."""
+    machine's scheduler allows two plain Python processes (no ROS, no physics), with the
+    priorities of the driver (50) and of the measuring subscriber (40)."""
+    from dam_hand_driver.realtime import set_thread_priority
+
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(('127.0.0.1', 0))
     sock.settimeout(5.0)
     arrivals: list[float] = []
     proc = subprocess.Popen([sys.executable, '-c', _PACER, str(sock.getsockname()[1]),
                              str(rate_hz), str(seconds + 1.0)])
+    refused = set_thread_priority(SUBSCRIBER_PRIORITY)
     try:
         gc.collect()
         gc.freeze()
@@ -127,6 +173,8 @@ def _baseline_periods(rate_hz: float, seconds: float) -> np.ndarray:
                 break
             arrivals.append(time.perf_counter())
     finally:
+        if not refused:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         gc.unfreeze()
         proc.wait(timeout=10.0)
         sock.close()
@@ -148,7 +196,7 @@ def _round_trips(config_file: Path, n: int, rate_hz: float) -> np.ndarray:
     cmd = [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args', '-p',
            'backend:=hardware']
     times: list[float] = []
-    with node_process(cmd, env={'DAM_CONFIG': str(config_file)}):
+    with node_process(cmd, env={'DAM_CONFIG': str(config_file)}), _realtime_thread():
         seq = 0
         deadline = time.monotonic() + 30.0
         sent: dict[int, float] = {}
@@ -233,6 +281,8 @@ def run(args) -> dict:
         _period_stats(khz['callback'], 1000.0)['fraction_within_20pct']
     report.update({
         'measured_seconds': seconds,
+        'subscriber_realtime': 'no: ' + _SUBSCRIBER_REFUSED[0] if _SUBSCRIBER_REFUSED else
+        f'SCHED_FIFO {SUBSCRIBER_PRIORITY}',
         'link_round_trips': int(rtt.size),
         'link_round_trip_p50_ms': round(float(r50), 4),
         'link_round_trip_p99_ms': round(float(r99), 4),

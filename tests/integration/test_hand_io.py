@@ -115,6 +115,34 @@ def test_joint_states_rate_and_simulator_backend(system, cfg) -> None:
     assert int(values['frames_accepted']) > 0
 
 
+def _fifo_threads(pid: int) -> list[int]:
+    """Real-time priorities of the SCHED_FIFO threads of process ``pid`` (from /proc)."""
+    out = []
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        fields = (task / 'stat').read_text(encoding='ascii').rsplit(')', 1)[1].split()
+        rt_priority, policy = int(fields[37]), int(fields[38])  # stat fields 40 and 41
+        if policy == 1:  # SCHED_FIFO
+            out.append(rt_priority)
+    return out
+
+
+@pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
+def test_device_threads_run_with_the_scheduling_the_diagnostics_report(system) -> None:
+    driver, obs = system
+    obs.diagnostics.clear()
+    assert obs.client.spin_until(lambda: bool(obs.diagnostics), 3.0)
+    values = obs.diag_values()
+    reported = values['link_thread_scheduling']
+    standin = int(values['standin_pid'])
+    if reported.startswith('normal ('):  # no permission on this machine: nothing is FIFO
+        assert _fifo_threads(driver.pid) == [] and _fifo_threads(standin) == []
+        pytest.skip(reported)
+    assert reported == 'SCHED_FIFO 50'  # the default thread_priority
+    # The link thread at 50 and the executor one below it; the same in the stand-in.
+    assert sorted(_fifo_threads(driver.pid)) == [49, 50]
+    assert sorted(_fifo_threads(standin)) == [49, 50]
+
+
 def _gravity_torques(cfg, angles: np.ndarray) -> np.ndarray:
     """Static joint torques [N*m] holding one finger against gravity (closed form)."""
     lengths = np.asarray(cfg.hand.link_lengths_m)

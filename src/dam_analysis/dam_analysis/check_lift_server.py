@@ -100,7 +100,8 @@ class CheckLiftServer(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    run_node(CheckLiftServer, 'check_lift_server', args)
+    run_node(CheckLiftServer, 'check_lift_server', args,
+             startup_errors=(DamAnalysisError,))
 
 
 if __name__ == '__main__':

@@ -7,7 +7,8 @@ import sys
 from collections.abc import Callable
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
@@ -25,6 +26,23 @@ def declare_config_file(node: Node) -> str:
         ParameterDescriptor(description=CONFIG_FILE_DESCRIPTION, read_only=True)).value)
 
 
+def declare_thread_priority(node: Node, default: int = 50) -> int:
+    """Declare the read-only ``thread_priority`` parameter on ``node`` and return its value.
+
+    The priority (1-99) of the ``SCHED_FIFO`` policy a node's timed thread asks for, as
+    ``ros2_control``'s controller manager does; ``0`` keeps the normal policy. See
+    :func:`dam_hand_driver.realtime.set_thread_priority`.
+    """
+    return int(node.declare_parameter(
+        'thread_priority', default,
+        ParameterDescriptor(
+            description='SCHED_FIFO priority of the timed device thread (1-99); 0: normal '
+                        'scheduling. Needs the rtprio permission; without it the node warns '
+                        'and runs with normal scheduling',
+            integer_range=[IntegerRange(from_value=0, to_value=99, step=1)],
+            read_only=True)).value)
+
+
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None,
              startup_errors: tuple[type[BaseException], ...] = (),
              startup_exit_code: int = 1, switch_interval_s: float | None = None) -> None:
@@ -38,14 +56,19 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     interpreter (``sys.setswitchinterval``; Python's default is 5 ms).
 
     SIGINT and an external shutdown end it with exit status 0. An exception of one of
-    ``startup_errors`` (a bad configuration or parameter) is logged as one fatal line
+    ``startup_errors`` (a bad configuration) or an rclpy ``ParameterException`` (a parameter
+    override of the wrong type or out of its range) is logged as one fatal line
     ``cannot start: ...`` under the logger ``name`` and ends the process with
     ``startup_exit_code``; anything else propagates with its traceback.
     """
     rclpy.init(args=args)
     node = None
     try:
-        node = make_node()
+        try:
+            node = make_node()
+        except (*startup_errors, ParameterException) as exc:
+            rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
+            raise SystemExit(startup_exit_code) from None
         if switch_interval_s is not None:
             sys.setswitchinterval(switch_interval_s)
         gc.collect()
@@ -53,9 +76,6 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except startup_errors as exc:
-        rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
-        raise SystemExit(startup_exit_code) from None
     finally:
         if node is not None:
             node.destroy_node()

@@ -38,6 +38,9 @@ backend : string, read-only, one of auto, hardware, sim
     ``auto`` probes the device for ``device.probe_timeout_s`` and starts the simulated
     stand-in (``dam_sim_bridge sim_bridge``, a child process) when nothing answers;
     ``hardware`` never falls back; ``sim`` always starts the stand-in.
+thread_priority : int, read-only, in [0, 99], default 50
+    ``SCHED_FIFO`` priority of the device-link thread, also passed to a stand-in it starts
+    (0: normal scheduling); without the permission the node warns once and runs on.
 
 States
 ------
@@ -72,10 +75,11 @@ from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, run_node
+from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
+from dam_hand_driver.realtime import set_thread_priority
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim')
@@ -236,6 +240,8 @@ class HandDriverNode(Node):
                 read_only=True)).value)
         if self.backend not in BACKENDS:
             raise HandDriverError(f'backend {self.backend!r} is not one of {BACKENDS}')
+        self.thread_priority = declare_thread_priority(self)
+        self._scheduling = 'not started'
         self.config = load_config(config_file or None)
         dev = self.config.device
         hand = self.config.hand
@@ -284,6 +290,10 @@ class HandDriverNode(Node):
         self._select_backend()
         self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
         self._thread.start()
+        # The executor thread shares the interpreter lock with the timed thread: one priority
+        # below it, no ordinary process can preempt it while it holds the lock (the timed thread
+        # warns if real-time scheduling is refused).
+        set_thread_priority(max(0, self.thread_priority - 1))
 
     # ---------------------------------------------------------------------------------------
     # Backend
@@ -317,7 +327,8 @@ class HandDriverNode(Node):
             raise HandDriverError(f'{why}, and dam_sim_bridge is not installed: {exc}') from exc
         if not exe.is_file():
             raise HandDriverError(f'{why}, and the stand-in {str(exe)!r} does not exist')
-        cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim']
+        cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim', '-p',
+               f'thread_priority:={self.thread_priority}']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
         self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
@@ -374,6 +385,14 @@ class HandDriverNode(Node):
                                 f'call ~/reset to recover')
 
     def _loop(self) -> None:
+        refused = set_thread_priority(self.thread_priority)
+        self._scheduling = (f'normal ({refused})' if refused else
+                            f'SCHED_FIFO {self.thread_priority}' if self.thread_priority else
+                            'normal')
+        if refused:
+            self.get_logger().warning(
+                f'{refused}: the device link runs with normal scheduling, /joint_states may '
+                f'jitter on a busy machine (thread_priority:=0 silences this)')
         while self._running:
             frame = self.link.receive(min(0.01, self.state_timeout_s / 4.0))
             now = time.monotonic()
@@ -518,6 +537,7 @@ class HandDriverNode(Node):
             'state_rate_hz': f'{state_rate:.1f}',
             'joint_states_rate_hz': f'{js_rate:.1f}',
             'target_rate_hz': f'{self.config.device.rate_hz:g}',
+            'link_thread_scheduling': self._scheduling,
             'state_age_s': f'{now - last:.4f}' if last is not None else 'never',
             'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
             'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',

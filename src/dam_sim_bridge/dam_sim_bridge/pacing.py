@@ -3,38 +3,21 @@
 ``time.sleep`` alone wakes up late by the kernel's timer slack (50 us by default on Linux) plus
 the scheduling delay, and by more under load. :func:`sleep_until` sleeps to just before the
 deadline and spins the rest, so the deadline is met to a few microseconds whenever the thread
-is running; :func:`reduce_timer_slack` shortens the slack of the calling thread where the OS
-allows it.
+is running (:func:`dam_hand_driver.realtime.set_thread_priority` sees to that on a busy
+machine).
 """
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import sys
 import time
 from collections.abc import Callable
 
+from dam_hand_driver.realtime import reduce_timer_slack
+
+__all__ = ['SPIN_MARGIN_S', 'reduce_timer_slack', 'sleep_until']
+
 #: Sleep until this long before the deadline [s], then spin.
 SPIN_MARGIN_S = 3.0e-4
-_PR_SET_TIMERSLACK = 29
-
-
-def reduce_timer_slack(slack_ns: int = 1000) -> bool:
-    """Set the calling thread's timer slack to ``slack_ns`` [ns] (Linux only).
-
-    Returns
-    -------
-    bool
-        ``True`` if the slack was set, ``False`` where the OS has no such setting.
-    """
-    if not sys.platform.startswith('linux'):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
-        return libc.prctl(_PR_SET_TIMERSLACK, int(slack_ns), 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
 
 
 def sleep_until(deadline_s: float, clock: Callable[[], float] = time.monotonic,

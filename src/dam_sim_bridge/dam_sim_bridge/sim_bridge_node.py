@@ -30,6 +30,9 @@ publish_clock : bool, read-only
     Publish ``/clock`` from the simulated time.
 pose_rate_hz : double [Hz], in [1, 1000]
     Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
+thread_priority : int, read-only, in [0, 99], default 50
+    ``SCHED_FIFO`` priority of the simulated device's thread (0: normal scheduling); without
+    the permission the node warns once and runs on with normal scheduling.
 """
 
 from __future__ import annotations
@@ -49,7 +52,8 @@ from std_srvs.srv import Trigger
 
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, run_node
+from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
+from dam_hand_driver.realtime import set_thread_priority
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -95,6 +99,7 @@ class SimBridgeNode(Node):
                 floating_point_range=[FloatingPointRange(
                     from_value=_POSE_RATE_RANGE[0], to_value=_POSE_RATE_RANGE[1],
                     step=0.0)])).value)
+        self._thread_priority = declare_thread_priority(self)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._config = load_config(config_file or None)
@@ -104,7 +109,7 @@ class SimBridgeNode(Node):
         except BaseException:
             world.close()
             raise
-        self._thread = threading.Thread(target=self._device.run, name='sim_device',
+        self._thread = threading.Thread(target=self._run_device, name='sim_device',
                                         daemon=True)
         self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose', 10)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
@@ -114,6 +119,10 @@ class SimBridgeNode(Node):
         self._friction_srv = self.create_service(
             SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
         self._thread.start()
+        # The executor thread shares the interpreter lock with the timed thread: one priority
+        # below it, no ordinary process can preempt it while it holds the lock (the timed thread
+        # warns if real-time scheduling is refused).
+        set_thread_priority(max(0, self._thread_priority - 1))
         dev = self._config.device
         self.get_logger().info(
             f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '
@@ -122,6 +131,15 @@ class SimBridgeNode(Node):
             f'{self._config.source}{", GUI" if gui else ""}')
 
     # ---------------------------------------------------------------------------------------
+
+    def _run_device(self) -> None:
+        refused = set_thread_priority(self._thread_priority)
+        if refused:
+            self.get_logger().warning(
+                f'{refused}: the simulated device runs with normal scheduling, its state '
+                f'frames may be late on a busy machine (thread_priority:=0 silences this)')
+        self._device.run()
+
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for param in params:

@@ -614,7 +614,8 @@ class SpcmControllerNode(Node):
 def main(args: list[str] | None = None) -> None:
     # A bad start-up parameter: one clear fatal line and exit status 2.
     run_node(SpcmControllerNode, 'spcm_controller', args,
-             startup_errors=(ParameterException, InputError), startup_exit_code=2)
+             startup_errors=(ParameterException, InputError, DamAnalysisError),
+             startup_exit_code=2)
 
 
 if __name__ == '__main__':

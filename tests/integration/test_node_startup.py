@@ -1,0 +1,68 @@
+"""Every node refuses a bad start-up configuration with one clear line and a non-zero exit
+status, never a traceback: a configuration file that does not exist, one that does not
+validate, a parameter override of the wrong type or out of its range."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from ros_testing import installed_executable
+
+pytestmark = pytest.mark.integration
+
+#: (package, executable, exit status on a start-up error)
+NODES = [('dam_analysis', 'check_lift_server', 1), ('dam_hand_driver', 'hand_driver', 1),
+         ('dam_sim_bridge', 'sim_bridge', 1), ('dam_spcm_controller', 'spcm_controller', 2)]
+
+
+def _start(package: str, executable: str, *ros_args: str) -> subprocess.CompletedProcess:
+    cmd = [str(installed_executable(package, executable)), '--ros-args', *ros_args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=60,
+                          stdin=subprocess.DEVNULL)
+
+
+def _assert_refused(proc: subprocess.CompletedProcess, status: int, *words: str) -> None:
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == status, output
+    assert 'cannot start' in output, output
+    assert 'Traceback' not in output, output
+    for word in words:
+        assert word in output, output
+
+
+@pytest.mark.parametrize(('package', 'executable', 'status'), NODES)
+def test_a_missing_config_file_is_refused_by_name(tmp_path: Path, package: str,
+                                                   executable: str, status: int) -> None:
+    missing = tmp_path / 'no_such_dam.yaml'
+    proc = _start(package, executable, '-p', f'config_file:={missing}')
+    _assert_refused(proc, status, str(missing))
+
+
+@pytest.mark.parametrize(('package', 'executable', 'status'), NODES)
+def test_an_invalid_config_file_is_refused_by_key(tmp_path: Path, package: str,
+                                                   executable: str, status: int) -> None:
+    repo = Path(__file__).resolve().parents[2]
+    text = (repo / 'config' / 'dam.yaml').read_text(encoding='utf-8')
+    bad = tmp_path / 'dam.yaml'
+    import yaml
+
+    data = yaml.safe_load(text)
+    data['object']['radius_m'] = -0.01
+    bad.write_text(yaml.safe_dump(data), encoding='utf-8')
+    proc = _start(package, executable, '-p', f'config_file:={bad}')
+    _assert_refused(proc, status, 'radius_m', '-0.01')
+
+
+@pytest.mark.parametrize(('package', 'executable', 'override', 'word'), [
+    ('dam_analysis', 'check_lift_server', 'default_friction_angle:=2.0', 'default_friction_angle'),
+    ('dam_hand_driver', 'hand_driver', 'thread_priority:=200', 'thread_priority'),
+    ('dam_hand_driver', 'hand_driver', 'thread_priority:=high', 'thread_priority'),
+    ('dam_sim_bridge', 'sim_bridge', 'thread_priority:=-3', 'thread_priority'),
+])
+def test_a_bad_parameter_override_is_refused_by_name(package: str, executable: str,
+                                                      override: str, word: str) -> None:
+    proc = _start(package, executable, '-p', override)
+    _assert_refused(proc, 1, word)
