@@ -3,8 +3,9 @@
 1. Compute: ``DamSequence.step`` during ROLLING_UP (driven offline by the synthetic plant)
    against a trivial numpy baseline (the impedance law on the same (9,) arrays), same run.
 2. Latency: this process plays the hand at 500 Hz (synthetic plant, /joint_states out,
-   /hand/command in) while the installed ``spcm_controller`` runs a grasp; each command carries
-   the stamp of the joint state it answers, so the latency is receive time minus send time.
+   /hand/command in, the device's impedance law for MODE_IMPEDANCE joints) while the installed
+   ``spcm_controller`` runs a grasp with its default parameters; each command carries the stamp
+   of the joint state it answers, so the latency is receive time minus send time.
 
 Target (issue): step under 0.2 ms and /joint_states -> /hand/command latency p99 under 2 ms.
 """
@@ -80,7 +81,8 @@ def _latency(seconds: float) -> dict:
 
     core_mode = {HandCommand.MODE_TORQUE: JointMode.TORQUE,
                  HandCommand.MODE_POSITION: JointMode.POSITION,
-                 HandCommand.MODE_HOLD: JointMode.HOLD}
+                 HandCommand.MODE_HOLD: JointMode.HOLD,
+                 HandCommand.MODE_IMPEDANCE: JointMode.IMPEDANCE}
     layout = HandLayout.from_hand_config(load_config().hand)
     names = list(layout.joint_names)
     hand = SyntheticHand(layout, b=0.1)
@@ -105,7 +107,11 @@ def _latency(seconds: float) -> dict:
                     latencies.append(now - sent.pop(key))
                 index = layout.index_of(list(msg.name))
                 modes = np.array([core_mode[int(m)] for m in msg.mode], dtype=np.int8)[index]
-                state['cmd'] = JointCommand(modes, np.asarray(msg.setpoint)[index])
+                gains = {}
+                if len(msg.stiffness):  # IMPEDANCE joints: the plant plays the device's law
+                    gains = {'stiffness': np.asarray(msg.stiffness)[index],
+                             'damping': np.asarray(msg.damping)[index]}
+                state['cmd'] = JointCommand(modes, np.asarray(msg.setpoint)[index], **gains)
 
             def on_timer() -> None:
                 now = time.monotonic()
