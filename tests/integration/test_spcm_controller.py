@@ -10,6 +10,7 @@ from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ros_testing import RosClient, fixture_command, installed_executable, node_process
@@ -308,6 +309,31 @@ def test_impedance_in_the_controller_sends_torques(stack) -> None:
     assert h.result(handle, 20.0).status == GoalStatus.STATUS_CANCELED
     assert not h.set_parameter('impedance_on_device', 1.0).successful
     assert h.set_parameter('impedance_on_device', True).successful
+
+
+@pytest.mark.parametrize('stack', [['-p', 'envelope_constant_torque:=true']], indirect=True)
+def test_envelope_constant_torque_closes_with_the_paper_torque(stack) -> None:
+    """envelope_constant_torque: ENVELOPE puts the compliant joints in MODE_TORQUE and ramps
+    them to envelope_torque * ratio_i / max ratio (paper Fig. 6(d)); refused while running."""
+    from dam_analysis.config import load_config
+    from dam_interfaces.msg import HandCommand
+
+    cfg = load_config()
+    ratios = np.asarray(cfg.hand.stiffness_ratios, dtype=float)
+    expected = cfg.controller.envelope_torque_nm * ratios / ratios.max()
+    h, _ctl, _plant = stack
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'ENVELOPE', 30.0)
+    refused = h.set_parameter('envelope_constant_torque', False)
+    assert not refused.successful and 'grasp is running' in refused.reason
+    h.ros.spin_until(lambda: False, 0.5)  # past the torque ramp
+    last = _compliant(h.commands[-1][1])
+    assert [mode for mode, *_ in last] == [HandCommand.MODE_TORQUE] * 3, last
+    np.testing.assert_allclose([sp for _, sp, _, _ in last], expected, rtol=1e-9)
+    h.result(handle, 40.0)
+    assert not h.set_parameter('envelope_constant_torque', 'yes').successful
+    assert h.set_parameter('envelope_constant_torque', False).successful
 
 
 def test_plant_silence_aborts_with_zero_torque(stack) -> None:

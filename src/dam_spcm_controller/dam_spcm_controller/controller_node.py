@@ -27,7 +27,10 @@ See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only), ``require_lift
 configuration, true): the compliant joints are commanded in MODE_IMPEDANCE (per-finger
 ``k_theta_i``, ``theta_0``, the ``damping`` parameter) and the device runs the impedance law at
 its physics rate; false: this node computes the torque every joint state and sends
-MODE_TORQUE. All but ``config_file`` may be changed while no grasp runs.
+MODE_TORQUE; ``envelope_constant_torque`` (bool, default false): ENVELOPE applies the constant
+``envelope_torque`` to the compliant joints as in the paper's Fig. 6(d) instead of keeping the
+SPCM impedance (in simulation the constant torque pushes the lifted object out of the hand:
+``docs/simulation_grasp.md``). All but ``config_file`` may be changed while no grasp runs.
 """
 
 from __future__ import annotations
@@ -138,11 +141,22 @@ class SpcmControllerNode(Node):
             ParameterDescriptor(
                 description='true: compliant joints in MODE_IMPEDANCE, the device runs the '
                             'impedance law; false: this node computes their torque'))
+        self.declare_parameter(
+            'envelope_constant_torque', False,
+            ParameterDescriptor(
+                description='true: ENVELOPE closes the fingers with the constant '
+                            'envelope_torque on the compliant joints (the paper, Fig. 6(d)); '
+                            'false: ENVELOPE keeps the SPCM impedance (docs/simulation_grasp.md '
+                            'explains why that is the default)'))
         self._values = {name: float(self.get_parameter(name).value) for name in _DOUBLE_PARAMETERS}
         self._require_lift = bool(self.get_parameter('require_lift_guarantee').value)
         self._on_device = self.get_parameter('impedance_on_device').value
         if not isinstance(self._on_device, bool):
             raise InputError(f'impedance_on_device must be a bool, got {self._on_device!r}')
+        self._constant_envelope = self.get_parameter('envelope_constant_torque').value
+        if not isinstance(self._constant_envelope, bool):
+            raise InputError(f'envelope_constant_torque must be a bool, got '
+                             f'{self._constant_envelope!r}')
         self._params = self._make_params(self._values)  # raises on an inconsistent start-up set
 
         self._lock = threading.RLock()
@@ -183,11 +197,14 @@ class SpcmControllerNode(Node):
     # ------------------------------------------------------------------------------------
     # Parameters
 
-    def _make_params(self, values: dict[str, float], on_device: bool | None = None
-                     ) -> SequenceParams:
+    def _make_params(self, values: dict[str, float], on_device: bool | None = None,
+                     constant_envelope: bool | None = None) -> SequenceParams:
         overrides: dict[str, float | bool] = {
             attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items() if attr}
         overrides['impedance_on_device'] = self._on_device if on_device is None else on_device
+        overrides['envelope_constant_torque'] = (self._constant_envelope
+                                                 if constant_envelope is None
+                                                 else constant_envelope)
         return replace(self._base_params, **overrides)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -200,6 +217,7 @@ class SpcmControllerNode(Node):
             values = dict(self._values)
             require = self._require_lift
             on_device = self._on_device
+            constant_envelope = self._constant_envelope
             for param in params:
                 if param.name in _DOUBLE_PARAMETERS:
                     value = param.value
@@ -221,13 +239,21 @@ class SpcmControllerNode(Node):
                             successful=False,
                             reason=f'impedance_on_device must be a bool, got {param.value!r}')
                     on_device = param.value
+                elif param.name == 'envelope_constant_torque':
+                    if not isinstance(param.value, bool):
+                        return SetParametersResult(
+                            successful=False,
+                            reason=f'envelope_constant_torque must be a bool, got '
+                                   f'{param.value!r}')
+                    constant_envelope = param.value
             try:
-                new_params = self._make_params(values, on_device)
+                new_params = self._make_params(values, on_device, constant_envelope)
             except InputError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
             self._values = values
             self._require_lift = require
             self._on_device = on_device
+            self._constant_envelope = constant_envelope
             self._params = new_params
         return SetParametersResult(successful=True)
 
