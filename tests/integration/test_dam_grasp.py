@@ -89,7 +89,11 @@ class _Grasper:
 
     def result(self, handle, timeout: float = 30.0):
         future = handle.get_result_async()
-        assert self.client.wait_future(future, timeout), 'no result in time'
+        if not self.client.wait_future(future, timeout):
+            controller = getattr(self, 'controller', None)
+            log = controller.output()[-4000:] if controller is not None else ''
+            raise AssertionError(f'no result within {timeout} s (goal status '
+                                 f'{handle.status}); controller log:\n{log}')
         return future.result()
 
     def close(self) -> None:
