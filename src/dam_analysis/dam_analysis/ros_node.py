@@ -71,8 +71,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
             raise SystemExit(startup_exit_code) from None
         if switch_interval_s is not None:
             sys.setswitchinterval(switch_interval_s)
-        gc.collect()
-        gc.freeze()
+        gc.freeze()  # no gc.collect() first: a full collection could stall a running thread
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

@@ -400,9 +400,15 @@ class HandDriverNode(Node):
                 last = self.link.last_state_time
                 if self.state is DriverState.ACTIVE and last is not None \
                         and now - last > self.state_timeout_s:
-                    self._enter_error(f'no state frame for {now - last:.3f} s (timeout '
-                                      f'{self.state_timeout_s} s)')
-                continue
+                    # This thread may itself have been held up (interpreter lock, CPU):
+                    # frames that arrived meanwhile are waiting in the socket.
+                    frame = self.link.receive(0.0)
+                    if frame is None:
+                        self._enter_error(f'no state frame for {now - last:.3f} s (timeout '
+                                          f'{self.state_timeout_s} s)')
+                if frame is None:
+                    continue
+                now = time.monotonic()
             self._last_frame = frame
             if self.state is DriverState.WAITING:
                 self._activate(frame)
