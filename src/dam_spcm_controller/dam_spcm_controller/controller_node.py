@@ -102,6 +102,8 @@ _DOUBLE_PARAMETERS: dict[str, tuple[str | None, str, float, float]] = {
     'status_rate': (None, '/dam/status and feedback rate [Hz] (read at start-up)', 0.1, 1000.0),
 }
 _READ_ONLY = {'status_rate'}
+#: The bool parameters (declared with their descriptions in the node).
+_BOOL_PARAMETERS = ('require_lift_guarantee', 'impedance_on_device', 'envelope_constant_torque')
 
 
 def _phase_name(phase: Phase) -> str:
@@ -149,14 +151,14 @@ class SpcmControllerNode(Node):
                             'false: ENVELOPE keeps the SPCM impedance (docs/simulation_grasp.md '
                             'explains why that is the default)'))
         self._values = {name: float(self.get_parameter(name).value) for name in _DOUBLE_PARAMETERS}
-        self._require_lift = bool(self.get_parameter('require_lift_guarantee').value)
-        self._on_device = self.get_parameter('impedance_on_device').value
-        if not isinstance(self._on_device, bool):
-            raise InputError(f'impedance_on_device must be a bool, got {self._on_device!r}')
-        self._constant_envelope = self.get_parameter('envelope_constant_torque').value
-        if not isinstance(self._constant_envelope, bool):
-            raise InputError(f'envelope_constant_torque must be a bool, got '
-                             f'{self._constant_envelope!r}')
+        #: The bool parameters (require_lift_guarantee, impedance_on_device,
+        #: envelope_constant_torque) by name.
+        self._flags: dict[str, bool] = {}
+        for name in _BOOL_PARAMETERS:
+            value = self.get_parameter(name).value
+            if not isinstance(value, bool):
+                raise InputError(f'{name} must be a bool, got {value!r}')
+            self._flags[name] = value
         self._params = self._make_params(self._values)  # raises on an inconsistent start-up set
 
         self._lock = threading.RLock()
@@ -197,14 +199,13 @@ class SpcmControllerNode(Node):
     # ------------------------------------------------------------------------------------
     # Parameters
 
-    def _make_params(self, values: dict[str, float], on_device: bool | None = None,
-                     constant_envelope: bool | None = None) -> SequenceParams:
+    def _make_params(self, values: dict[str, float], flags: dict[str, bool] | None = None
+                     ) -> SequenceParams:
+        flags = self._flags if flags is None else flags
         overrides: dict[str, float | bool] = {
             attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items() if attr}
-        overrides['impedance_on_device'] = self._on_device if on_device is None else on_device
-        overrides['envelope_constant_torque'] = (self._constant_envelope
-                                                 if constant_envelope is None
-                                                 else constant_envelope)
+        for name in ('impedance_on_device', 'envelope_constant_torque'):
+            overrides[name] = flags[name]  # SequenceParams has both under these names
         return replace(self._base_params, **overrides)
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -215,9 +216,7 @@ class SpcmControllerNode(Node):
                     reason=f'a grasp is running (phase {_phase_name(self._seq.phase)}); '
                            'parameters can only be changed while idle')
             values = dict(self._values)
-            require = self._require_lift
-            on_device = self._on_device
-            constant_envelope = self._constant_envelope
+            flags = dict(self._flags)
             for param in params:
                 if param.name in _DOUBLE_PARAMETERS:
                     value = param.value
@@ -227,33 +226,18 @@ class SpcmControllerNode(Node):
                             successful=False,
                             reason=f'{param.name} must be a finite number, got {value!r}')
                     values[param.name] = float(value)
-                elif param.name == 'require_lift_guarantee':
+                elif param.name in _BOOL_PARAMETERS:
                     if not isinstance(param.value, bool):
                         return SetParametersResult(
                             successful=False,
-                            reason=f'require_lift_guarantee must be a bool, got {param.value!r}')
-                    require = param.value
-                elif param.name == 'impedance_on_device':
-                    if not isinstance(param.value, bool):
-                        return SetParametersResult(
-                            successful=False,
-                            reason=f'impedance_on_device must be a bool, got {param.value!r}')
-                    on_device = param.value
-                elif param.name == 'envelope_constant_torque':
-                    if not isinstance(param.value, bool):
-                        return SetParametersResult(
-                            successful=False,
-                            reason=f'envelope_constant_torque must be a bool, got '
-                                   f'{param.value!r}')
-                    constant_envelope = param.value
+                            reason=f'{param.name} must be a bool, got {param.value!r}')
+                    flags[param.name] = param.value
             try:
-                new_params = self._make_params(values, on_device, constant_envelope)
+                new_params = self._make_params(values, flags)
             except InputError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
             self._values = values
-            self._require_lift = require
-            self._on_device = on_device
-            self._constant_envelope = constant_envelope
+            self._flags = flags
             self._params = new_params
         return SetParametersResult(successful=True)
 
@@ -430,7 +414,7 @@ class SpcmControllerNode(Node):
         if dp[0] <= 0.0:
             raise InputError(f'delta_theta_p must be positive, got {dp[0]!r} rad')
         k_max = float(self._config.device.max_stiffness_nm_per_rad)
-        if self._on_device and float(np.max(k)) > k_max:
+        if self._flags['impedance_on_device'] and float(np.max(k)) > k_max:
             raise InputError(f'k_theta {k.tolist()!r} N*m/rad: the device accepts impedance '
                              f'stiffness up to device.max_stiffness_nm_per_rad = {k_max:g} '
                              'N*m/rad')
@@ -576,7 +560,7 @@ class SpcmControllerNode(Node):
             feedback.csm_lift = bool(answer.csm_lift)
             feedback.csm_margin = float(answer.csm_margin)
         goal_handle.publish_feedback(feedback)
-        if self._require_lift:
+        if self._flags['require_lift_guarantee']:
             if answer is None:
                 return self._finish(goal_handle, 'abort', aborted,
                                     'require_lift_guarantee is set but /check_lift did not '
