@@ -287,6 +287,17 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
 
 
+def _grasp_until(h: Harness, phase: str, timeout: float, refused: tuple[str, object]):
+    """Send the INSIDE goal, wait for ``phase`` and check that setting the parameter
+    ``refused`` = (name, value) is refused while the grasp runs; return the goal handle."""
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, phase, timeout)
+    answer = h.set_parameter(*refused)
+    assert not answer.successful and 'grasp is running' in answer.reason
+    return handle
+
+
 @pytest.mark.parametrize('stack', [['-p', 'impedance_on_device:=false']], indirect=True)
 def test_impedance_in_the_controller_sends_torques(stack) -> None:
     """impedance_on_device false: the controller closes the loop itself (MODE_TORQUE, no
@@ -294,11 +305,7 @@ def test_impedance_in_the_controller_sends_torques(stack) -> None:
     from action_msgs.msg import GoalStatus
 
     h, _ctl, _plant = stack
-    handle = h.send([INSIDE[0]], [INSIDE[1]])
-    assert handle.accepted
-    h.wait_phase(handle, 'ROLLING_UP', 15.0)
-    refused = h.set_parameter('impedance_on_device', True)
-    assert not refused.successful and 'grasp is running' in refused.reason
+    handle = _grasp_until(h, 'ROLLING_UP', 15.0, refused=('impedance_on_device', True))
     h.ros.spin_until(lambda: False, 0.3)
     grasp = [m for _, m in h.commands if len(_torques(m)) == 3]  # APPROACH and ROLLING_UP
     assert len(grasp) > 100
@@ -322,11 +329,7 @@ def test_envelope_constant_torque_closes_with_the_paper_torque(stack) -> None:
     ratios = np.asarray(cfg.hand.stiffness_ratios, dtype=float)
     expected = cfg.controller.envelope_torque_nm * ratios / ratios.max()
     h, _ctl, _plant = stack
-    handle = h.send([INSIDE[0]], [INSIDE[1]])
-    assert handle.accepted
-    h.wait_phase(handle, 'ENVELOPE', 30.0)
-    refused = h.set_parameter('envelope_constant_torque', False)
-    assert not refused.successful and 'grasp is running' in refused.reason
+    handle = _grasp_until(h, 'ENVELOPE', 30.0, refused=('envelope_constant_torque', False))
     h.ros.spin_until(lambda: False, 0.5)  # past the torque ramp
     last = _compliant(h.commands[-1][1])
     assert [mode for mode, *_ in last] == [HandCommand.MODE_TORQUE] * 3, last
