@@ -75,3 +75,32 @@ def test_fifo_is_set_or_the_refusal_explained(inherit: bool) -> None:
 def test_timer_slack_is_set_on_linux() -> None:
     result = reduce_timer_slack()
     assert result is (os.uname().sysname == 'Linux')
+
+
+_PROCESS_PROBE = """
+import os, threading, time
+from dam_hand_driver.realtime import set_process_priority
+stop = threading.Event()
+workers = [threading.Thread(target=stop.wait) for _ in range(2)]
+for w in workers:
+    w.start()
+result = set_process_priority(6)
+policies = sorted({(os.sched_getscheduler(int(t)), os.sched_getparam(int(t)).sched_priority)
+                   for t in os.listdir('/proc/self/task')})
+stop.set()
+print(repr(result), policies)
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir('/proc/self/task'), reason='reads /proc')
+def test_process_priority_reaches_every_thread() -> None:
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, '-c', _PROCESS_PROBE], capture_output=True,
+                          text=True, timeout=30, check=True)
+    result, policies = proc.stdout.strip().split(' ', 1)
+    if result != 'None':  # no permission here
+        assert 'refused' in result
+        pytest.skip(result)
+    assert policies == repr([(os.SCHED_FIFO, 6)])  # main thread and both workers

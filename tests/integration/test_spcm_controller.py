@@ -287,6 +287,19 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
 
 
+@pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
+def test_controller_threads_are_real_time_where_permitted(stack) -> None:
+    _h, ctl, _plant = stack
+    policies = set()
+    for task in Path(f'/proc/{ctl.pid}/task').iterdir():
+        fields = (task / 'stat').read_text(encoding='ascii').rsplit(')', 1)[1].split()
+        policies.add((int(fields[38]), int(fields[37])))  # stat fields 41 (policy), 40
+    if 'refused' in ctl.output():  # no permission on this machine
+        assert policies == {(0, 0)}
+        pytest.skip('SCHED_FIFO not permitted here')
+    assert policies == {(1, 45)}  # SCHED_FIFO at the default thread_priority, every thread
+
+
 def _grasp_until(h: Harness, phase: str, timeout: float, refused: tuple[str, object]):
     """Send the INSIDE goal, wait for ``phase`` and check that setting the parameter
     ``refused`` = (name, value) is refused while the grasp runs; return the goal handle."""

@@ -26,19 +26,20 @@ def declare_config_file(node: Node) -> str:
         ParameterDescriptor(description=CONFIG_FILE_DESCRIPTION, read_only=True)).value)
 
 
-def declare_thread_priority(node: Node, default: int = 50) -> int:
+def declare_thread_priority(node: Node, default: int = 50,
+                            what: str = 'the timed device thread') -> int:
     """Declare the read-only ``thread_priority`` parameter on ``node`` and return its value.
 
-    The priority (1-99) of the ``SCHED_FIFO`` policy a node's timed thread asks for, as
-    ``ros2_control``'s controller manager does; ``0`` keeps the normal policy. See
-    :func:`dam_hand_driver.realtime.set_thread_priority`.
+    The priority (1-99) of the ``SCHED_FIFO`` policy ``what`` asks for, as ``ros2_control``'s
+    controller manager does; ``0`` keeps the normal policy. See
+    :mod:`dam_hand_driver.realtime`.
     """
     return int(node.declare_parameter(
         'thread_priority', default,
         ParameterDescriptor(
-            description='SCHED_FIFO priority of the timed device thread (1-99); 0: normal '
-                        'scheduling. Needs the rtprio permission; without it the node warns '
-                        'and runs with normal scheduling',
+            description=f'SCHED_FIFO priority of {what} (1-99); 0: normal scheduling. Needs '
+                        'the rtprio permission; without it the node warns and runs with '
+                        'normal scheduling',
             integer_range=[IntegerRange(from_value=0, to_value=99, step=1)],
             read_only=True)).value)
 

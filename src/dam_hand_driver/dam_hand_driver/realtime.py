@@ -77,3 +77,35 @@ def set_thread_priority(priority: int, inherit: bool = False) -> str | None:
     except OSError as exc:
         return f'SCHED_FIFO priority {priority} refused: {exc.strerror or exc}'
     return None
+
+
+def set_process_priority(priority: int) -> str | None:
+    """Run every thread the process has now (Linux: ``/proc/self/task``) under ``SCHED_FIFO``
+    at ``priority``; ``0`` leaves them as they are. For a node whose middleware threads and
+    executor together make its control loop (they exist once the node is built).
+
+    Returns
+    -------
+    str | None
+        ``None`` on success, else why not (threads already set keep the policy).
+
+    Raises
+    ------
+    ValueError
+        ``priority`` is outside [0, 99].
+    """
+    refused = set_thread_priority(priority, inherit=True)  # validates; the calling thread
+    if refused or priority == 0:
+        return refused
+    try:
+        tids = [int(t) for t in os.listdir('/proc/self/task')]
+    except OSError:
+        return None  # no /proc: the calling thread at least
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+        except ProcessLookupError:
+            continue  # the thread ended meanwhile
+        except OSError as exc:
+            return f'SCHED_FIFO priority {priority} refused for thread {tid}: {exc.strerror}'
+    return None

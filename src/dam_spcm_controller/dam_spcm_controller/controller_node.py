@@ -30,7 +30,10 @@ its physics rate; false: this node computes the torque every joint state and sen
 MODE_TORQUE; ``envelope_constant_torque`` (bool, default false): ENVELOPE applies the constant
 ``envelope_torque`` to the compliant joints as in the paper's Fig. 6(d) instead of keeping the
 SPCM impedance (in simulation the constant torque pushes the lifted object out of the hand:
-``docs/simulation_grasp.md``). All but ``config_file`` may be changed while no grasp runs.
+``docs/simulation_grasp.md``); ``thread_priority`` (int, read-only, default 45, 0: off): every
+thread of the node (middleware and executor) runs under ``SCHED_FIFO`` at that priority where
+permitted, below the driver's device thread. All but ``config_file`` and ``thread_priority``
+may be changed while no grasp runs.
 """
 
 from __future__ import annotations
@@ -53,7 +56,8 @@ from sensor_msgs.msg import JointState
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, run_node
+from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
+from dam_hand_driver.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
@@ -102,6 +106,8 @@ _DOUBLE_PARAMETERS: dict[str, tuple[str | None, str, float, float]] = {
     'status_rate': (None, '/dam/status and feedback rate [Hz] (read at start-up)', 0.1, 1000.0),
 }
 _READ_ONLY = {'status_rate'}
+#: Default SCHED_FIFO priority of the controller's threads (the driver's device thread: 50).
+_THREAD_PRIORITY = 45
 #: The bool parameters (declared with their descriptions in the node).
 _BOOL_PARAMETERS = ('require_lift_guarantee', 'impedance_on_device', 'envelope_constant_torque')
 
@@ -120,6 +126,8 @@ class SpcmControllerNode(Node):
     def __init__(self) -> None:
         super().__init__('spcm_controller')
         config_file = declare_config_file(self)
+        self._thread_priority = declare_thread_priority(
+            self, default=_THREAD_PRIORITY, what='every thread of the controller')
         self._config = load_config(config_file or None)
         self._base_params = SequenceParams.from_config(self._config)
         self._layout = self._base_params.layout
@@ -193,6 +201,13 @@ class SpcmControllerNode(Node):
             self, DamGrasp, '/dam_grasp', execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=self._on_cancel)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        # The control loop is this process's middleware threads plus its executor: all of
+        # them real-time where permitted, below the driver's device thread (50).
+        refused = set_process_priority(self._thread_priority)
+        if refused:
+            self.get_logger().warning(
+                f'{refused}: the controller runs with normal scheduling; on a busy machine '
+                f'/joint_states may reach it late (thread_priority:=0 silences this)')
         self.get_logger().info(f'spcm_controller ready ({self._config.source}); joints '
                                f'{list(self._layout.joint_names)}')
 
