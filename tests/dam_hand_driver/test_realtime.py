@@ -88,7 +88,8 @@ result = set_process_priority(6)
 policies = sorted({(os.sched_getscheduler(int(t)), os.sched_getparam(int(t)).sched_priority)
                    for t in os.listdir('/proc/self/task')})
 stop.set()
-print(repr(result), policies)
+print(repr(result))
+print(policies)
 """
 
 
@@ -99,7 +100,7 @@ def test_process_priority_reaches_every_thread() -> None:
 
     proc = subprocess.run([sys.executable, '-c', _PROCESS_PROBE], capture_output=True,
                           text=True, timeout=30, check=True)
-    result, policies = proc.stdout.strip().split(' ', 1)
+    result, policies = proc.stdout.strip().splitlines()
     if result != 'None':  # no permission here
         assert 'refused' in result
         pytest.skip(result)
