@@ -507,7 +507,7 @@ class FakeClock:
 
 def test_watchdog_starts_tripped_and_holds() -> None:
     wd = DeviceWatchdog(3, 0.04, clock=FakeClock())
-    modes, setpoints, tripped = wd.output()
+    modes, setpoints, _k, _d, tripped = wd.output()
     assert tripped and modes.tolist() == [H, H, H] and setpoints.tolist() == [0, 0, 0]
 
 
@@ -516,34 +516,34 @@ def test_watchdog_zeroes_torque_holds_positions_until_fresh_command() -> None:
     wd = DeviceWatchdog(3, 0.04, clock=clock)
     wd.feed([T, P, H], [500, 1234, 0])
     clock.now += 0.039
-    modes, setpoints, tripped = wd.output()
+    modes, setpoints, _k, _d, tripped = wd.output()
     assert not tripped and modes.tolist() == [T, P, H] and setpoints.tolist() == [500, 1234, 0]
     clock.now += 0.002  # 41 ms without a command
-    modes, setpoints, tripped = wd.output()
+    modes, setpoints, _k, _d, tripped = wd.output()
     assert tripped
     assert modes.tolist() == [T, H, H]  # torque joint stays in torque mode, at zero torque
     assert setpoints.tolist() == [0, 0, 0]
     assert wd.trips == 1
     clock.now += 10.0  # stays tripped however long
-    assert wd.output()[2] and wd.trips == 1
+    assert wd.output().tripped and wd.trips == 1
     wd.feed_frame(CommandFrame(seq=2, ref_state_seq=1, modes=np.array([T, T, P]),
                                setpoints=np.array([-7, 8, 9])))
-    modes, setpoints, tripped = wd.output()
+    modes, setpoints, _k, _d, tripped = wd.output()
     assert not tripped and modes.tolist() == [T, T, P] and setpoints.tolist() == [-7, 8, 9]
     clock.now += 0.05
-    assert wd.output()[2] and wd.trips == 2
+    assert wd.output().tripped and wd.trips == 2
 
 
 def test_watchdog_passes_gains_and_zeroes_impedance_torque_on_timeout() -> None:
     clock = FakeClock()
     wd = DeviceWatchdog(3, 0.04, clock=clock)
     wd.feed([IMP, P, T], [2618, 100, 5], [100_000, 0, 0], [200_000, 0, 0])
-    out = wd.output_full()
+    out = wd.output()
     assert not out.tripped and out.modes.tolist() == [IMP, P, T]
     assert out.setpoints.tolist() == [2618, 100, 5]
     assert out.stiffness.tolist() == [100_000, 0, 0] and out.damping.tolist() == [200_000, 0, 0]
     clock.now += 0.05
-    out = wd.output_full()
+    out = wd.output()
     assert out.tripped
     assert out.modes.tolist() == [T, H, T]  # IMPEDANCE joint: torque-controlled, zero torque
     assert out.setpoints.tolist() == [0, 0, 0]
@@ -569,4 +569,4 @@ def test_watchdog_rejects_bad_feed() -> None:
         wd.feed([T, 0, P], [0, 0, 0])
     with pytest.raises(ParameterError, match='shape'):
         wd.feed([T, P], [0, 0])
-    assert wd.output()[2]  # a rejected feed does not disarm the watchdog
+    assert wd.output().tripped  # a rejected feed does not disarm the watchdog

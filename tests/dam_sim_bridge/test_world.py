@@ -611,7 +611,7 @@ def test_watchdog_safe_state_zeroes_impedance_torque(world: HandWorld, cfg: DamC
     watchdog.feed(modes, cal.setpoints_raw(modes, np.where(modes == IMP, theta_0, 0.0)),
                   k_raw, d_raw)
     for _ in range(int(cfg.device.watchdog_s / world.time_step_s) + 50):
-        out = watchdog.output_full()
+        out = watchdog.output()
         k, d = cal.gains_si(out.stiffness, out.damping)
         world.set_joint_commands(out.modes, cal.setpoints_si(out.modes, out.setpoints), k, d)
         world.step(1)
@@ -629,7 +629,7 @@ def test_watchdog_safe_state_zeroes_torque_and_holds_servoed_joints(
 
     def run(steps: int) -> bool:
         for _ in range(steps):
-            modes, raw, tripped = watchdog.output()
+            modes, raw, _k, _d, tripped = watchdog.output()
             world.set_joint_commands(modes, cal.setpoints_si(modes, raw))
             world.step(1)
             now[0] += world.time_step_s

@@ -53,13 +53,11 @@ through ``~/reset``.
 from __future__ import annotations
 
 import array
-import ctypes
 import enum
 import math
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections import deque
@@ -79,7 +77,7 @@ from dam_analysis.ros_node import declare_config_file, declare_thread_priority, 
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
-from dam_hand_driver.realtime import set_thread_priority
+from dam_hand_driver.realtime import SWITCH_INTERVAL_S, die_with_parent, set_thread_priority
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim')
@@ -92,21 +90,6 @@ MSG_TO_WIRE_MODE: dict[int, JointMode] = {
 }
 _STANDIN_START_TIMEOUT_S = 20.0
 _LOG_THROTTLE_S = 1.0
-_PR_SET_PDEATHSIG = 1
-#: The device-link thread waits at most this long for the interpreter [s].
-_SWITCH_INTERVAL_S = 2.0e-4
-
-
-def _die_with_parent() -> None:
-    """In the stand-in child, before exec: have the kernel send it SIGTERM when the driver
-    dies, however it dies (Linux; elsewhere the driver's normal exit still stops it)."""
-    if not sys.platform.startswith('linux'):
-        return
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
 
 
 class DriverState(enum.Enum):
@@ -332,7 +315,7 @@ class HandDriverNode(Node):
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
         self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
-                                       preexec_fn=_die_with_parent)
+                                       preexec_fn=die_with_parent)
         self.get_logger().warning(
             f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
             f'(PID {self._child.pid})')
@@ -575,4 +558,4 @@ class HandDriverNode(Node):
 def main(args: list[str] | None = None) -> None:
     run_node(HandDriverNode, 'hand_driver', args,
              startup_errors=(HandDriverError, DamAnalysisError, OSError),
-             switch_interval_s=_SWITCH_INTERVAL_S)
+             switch_interval_s=SWITCH_INTERVAL_S)

@@ -793,7 +793,7 @@ def check_watchdog_timeout(timeout_s: float) -> float:
 
 
 class DeviceOutput(NamedTuple):
-    """What the device applies now (:meth:`DeviceWatchdog.output_full`), raw units."""
+    """What the device applies now (:meth:`DeviceWatchdog.output`), raw units."""
 
     modes: np.ndarray  #: (n,) int64 :class:`JointMode` values
     setpoints: np.ndarray  #: (n,) int64 raw setpoints (0 for HOLD)
@@ -891,20 +891,9 @@ class DeviceWatchdog:
             return True
         return self._clock() - self._last_feed_s >= self.timeout_s
 
-    def output(self) -> tuple[np.ndarray, np.ndarray, bool]:
-        """The modes and raw setpoints the device applies now.
-
-        Returns
-        -------
-        modes, setpoints, tripped
-            (n,) int64 :class:`JointMode` values and raw setpoints (0 for HOLD), and whether
-            the watchdog is tripped. See :meth:`output_full` for the impedance gains.
-        """
-        out = self.output_full()
-        return out.modes, out.setpoints, out.tripped
-
-    def output_full(self) -> DeviceOutput:
-        """Modes, raw setpoints, raw impedance gains and the tripped flag applied now."""
+    def output(self) -> DeviceOutput:
+        """Modes, raw setpoints (0 for HOLD), raw impedance gains and the tripped flag the
+        device applies now."""
         tripped = self.tripped
         if tripped and not self._was_tripped:
             self.trips += 1

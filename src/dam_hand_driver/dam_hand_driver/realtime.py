@@ -18,11 +18,39 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import signal
 import sys
 
 #: The ``thread_priority`` parameter's range; 0 disables real-time scheduling.
 PRIORITY_RANGE = (0, 99)
+#: ``sys.setswitchinterval`` of a node with a timed thread: the longest another thread of the
+#: process may keep it from the interpreter [s] (Python's default is 5 ms).
+SWITCH_INTERVAL_S = 2.0e-4
+_PR_SET_PDEATHSIG = 1
 _PR_SET_TIMERSLACK = 29
+
+
+def _prctl(option: int, value: int) -> bool:
+    """``prctl(option, value)`` on Linux; ``False`` where it is not available or fails."""
+    if not sys.platform.startswith('linux'):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
+        return libc.prctl(option, int(value), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def die_with_parent() -> bool:
+    """Have the kernel send the calling process SIGTERM when its parent dies, however it dies
+    (Linux). Meant as ``preexec_fn`` of a child process.
+
+    Returns
+    -------
+    bool
+        ``True`` if set, ``False`` where the OS has no such setting.
+    """
+    return _prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 
 def reduce_timer_slack(slack_ns: int = 1000) -> bool:
@@ -34,13 +62,7 @@ def reduce_timer_slack(slack_ns: int = 1000) -> bool:
     bool
         ``True`` if the slack was set, ``False`` where the OS has no such setting.
     """
-    if not sys.platform.startswith('linux'):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library('c') or 'libc.so.6', use_errno=True)
-        return libc.prctl(_PR_SET_TIMERSLACK, int(slack_ns), 0, 0, 0) == 0
-    except (OSError, AttributeError):
-        return False
+    return _prctl(_PR_SET_TIMERSLACK, slack_ns)
 
 
 def set_thread_priority(priority: int, inherit: bool = False) -> str | None:

@@ -12,10 +12,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from dam_hand_driver.realtime import reduce_timer_slack
-
-__all__ = ['SPIN_MARGIN_S', 'reduce_timer_slack', 'sleep_until']
-
 #: Sleep until this long before the deadline [s], then spin.
 SPIN_MARGIN_S = 3.0e-4
 

@@ -53,7 +53,7 @@ from std_srvs.srv import Trigger
 from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
 from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
-from dam_hand_driver.realtime import set_thread_priority
+from dam_hand_driver.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -224,4 +224,4 @@ def main(args: list[str] | None = None) -> None:
     gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
              startup_errors=(SimBridgeError, DamAnalysisError, OSError),
-             switch_interval_s=2.0e-4)
+             switch_interval_s=SWITCH_INTERVAL_S)

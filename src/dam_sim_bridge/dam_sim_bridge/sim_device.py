@@ -42,8 +42,9 @@ from dam_hand_driver.protocol import (
     JointFault,
     encode_state,
 )
+from dam_hand_driver.realtime import reduce_timer_slack
 from dam_sim_bridge.errors import WorldConfigError
-from dam_sim_bridge.pacing import reduce_timer_slack, sleep_until
+from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.world import HandWorld
 
 if TYPE_CHECKING:
@@ -181,7 +182,7 @@ class SimDevice:
         with self.lock:
             if drain:
                 self._drain_commands()
-            out = self.watchdog.output_full()
+            out = self.watchdog.output()
             modes, setpoints, tripped = out.modes, out.setpoints, out.tripped
             self.tripped = tripped
             key = (modes.tobytes(), setpoints.tobytes(), out.stiffness.tobytes(),
