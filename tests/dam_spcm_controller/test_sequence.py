@@ -600,3 +600,19 @@ def test_device_mode_equilibrium_never_leaves_the_joint_limits(dev_params):
         imp = cmd.modes == JointMode.IMPEDANCE
         assert np.all(cmd.setpoints[imp] <= lay.upper[imp])
         assert np.all(cmd.setpoints[imp] >= lay.lower[imp])
+
+
+def test_controller_mode_constant_torque_envelope_ramps_to_the_paper_torque(params):
+    """envelope_constant_torque means the same with the law in the controller: the envelope
+    torque itself, not capped by the impedance hold torque (here below it)."""
+    from dataclasses import replace
+
+    p = replace(params, envelope_constant_torque=True, envelope_torque=0.4)
+    seq, hand = _started(p)
+    t, _ = _run_to(seq, hand, Phase.ENVELOPE, 0.051)
+    t_end, _ = run(seq, hand, t + 0.001, t + p.torque_ramp_time + 0.05)
+    cmd = seq.step(t_end + 0.001, hand.q, hand.qd, hand.effort)
+    ratios = p.layout.stiffness_ratios
+    assert seq.phase is Phase.ENVELOPE
+    assert np.all(cmd.modes[0::3] == JointMode.TORQUE)
+    assert np.allclose(cmd.setpoints[0::3], p.envelope_torque * ratios / ratios.max())

@@ -154,8 +154,8 @@ class SequenceParams:
         Command the compliant joints in ``JointMode.IMPEDANCE`` (the device runs the law)
         instead of computing their torque here.
     envelope_constant_torque
-        With ``impedance_on_device``: ENVELOPE applies the paper's constant torque to the
-        compliant joints instead of keeping the device impedance.
+        ENVELOPE applies the paper's constant torque to the compliant joints instead of
+        keeping the impedance (on the device, or capped in this controller).
     """
 
     layout: HandLayout
@@ -704,11 +704,11 @@ class DamSequence:
         frac = 1.0 if p.torque_ramp_time <= 0.0 else min(elapsed / p.torque_ramp_time, 1.0)
         c = self._c
         ramp = self._tau_from[c] + (self._envelope_goal - self._tau_from[c]) * frac
-        if not p.impedance_on_device:
+        if p.envelope_constant_torque:
+            self._set[c] = np.maximum(ramp, 0.0)
+        elif not p.impedance_on_device:
             hold = self._compliant_torque(self._theta_0, pos, vel)
             self._set[c] = np.minimum(hold, np.maximum(ramp, 0.0))
-        elif p.envelope_constant_torque:
-            self._set[c] = np.maximum(ramp, 0.0)
         if self._phase is Phase.DONE:
             return
         settled_frac = 0.0
