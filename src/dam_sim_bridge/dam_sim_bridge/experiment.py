@@ -316,8 +316,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
                    help='where the compliant-joint impedance runs (default: '
                         'controller.impedance_on_device of the configuration)')
     p.add_argument('--envelope', choices=('impedance', 'constant-torque'), default='impedance',
-                   help='ENVELOPE with the impedance on the device: keep the impedance '
-                        '(default) or apply the paper\'s constant torque (Fig. 6(d))')
+                   help='ENVELOPE: keep the SPCM impedance (default) or apply the '
+                        'paper\'s constant torque (Fig. 6(d))')
     return p.parse_args(argv)
 
 

@@ -47,7 +47,6 @@ import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
-from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
@@ -639,7 +638,7 @@ class SpcmControllerNode(Node):
 def main(args: list[str] | None = None) -> None:
     # A bad start-up parameter: one clear fatal line and exit status 2.
     run_node(SpcmControllerNode, 'spcm_controller', args,
-             startup_errors=(ParameterException, InputError, DamAnalysisError),
+             startup_errors=(InputError, DamAnalysisError),
              startup_exit_code=2)
 
 
