@@ -67,34 +67,28 @@ SUBSCRIBER_PRIORITY = 40
 _SUBSCRIBER_REFUSED: list[str] = []
 
 
-def _realtime_client() -> RosClient:
-    """A RosClient whose middleware threads (created now, inheriting the policy) run under
-    SCHED_FIFO where permitted, so that the measuring instrument is not the noise; the
-    calling thread returns to normal scheduling."""
-    from dam_hand_driver.realtime import set_thread_priority
-
-    refused = set_thread_priority(SUBSCRIBER_PRIORITY, inherit=True)
-    if refused:
-        _SUBSCRIBER_REFUSED.append(refused)
-    try:
-        return RosClient()
-    finally:
-        if not refused:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-
-
 @contextlib.contextmanager
-def _realtime_thread() -> Iterator[None]:
-    """The calling thread under SCHED_FIFO (subscriber priority) where permitted: a device
-    played by this process keeps its timing like the driver's link thread."""
+def _realtime_thread(inherit: bool = False) -> Iterator[None]:
+    """The calling thread under SCHED_FIFO (subscriber priority) where permitted, back to
+    normal scheduling afterwards; with ``inherit`` the threads it starts meanwhile keep the
+    policy. A refusal is recorded for the report."""
     from dam_hand_driver.realtime import set_thread_priority
 
-    refused = set_thread_priority(SUBSCRIBER_PRIORITY)
+    refused = set_thread_priority(SUBSCRIBER_PRIORITY, inherit=inherit)
+    if refused and not _SUBSCRIBER_REFUSED:
+        _SUBSCRIBER_REFUSED.append(refused)
     try:
         yield
     finally:
         if not refused:
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _realtime_client() -> RosClient:
+    """A RosClient whose middleware threads (created now, inheriting the policy) run under
+    SCHED_FIFO where permitted, so that the measuring instrument is not the noise."""
+    with _realtime_thread(inherit=True):
+        return RosClient()
 
 
 def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndarray]:
@@ -153,28 +147,24 @@ def _baseline_periods(rate_hz: float, seconds: float) -> np.ndarray:
     """Periods [s] of a minimal paced UDP sender, received by this process: what this
     machine's scheduler allows two plain Python processes (no ROS, no physics), with the
     priorities of the driver (50) and of the measuring subscriber (40)."""
-    from dam_hand_driver.realtime import set_thread_priority
-
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(('127.0.0.1', 0))
     sock.settimeout(5.0)
     arrivals: list[float] = []
     proc = subprocess.Popen([sys.executable, '-c', _PACER, str(sock.getsockname()[1]),
                              str(rate_hz), str(seconds + 1.0)])
-    refused = set_thread_priority(SUBSCRIBER_PRIORITY)
     try:
-        gc.collect()
-        gc.freeze()
-        end = time.monotonic() + seconds + 0.5
-        while time.monotonic() < end:
-            try:
-                sock.recv(256)
-            except TimeoutError:
-                break
-            arrivals.append(time.perf_counter())
+        with _realtime_thread():
+            gc.collect()
+            gc.freeze()
+            end = time.monotonic() + seconds + 0.5
+            while time.monotonic() < end:
+                try:
+                    sock.recv(256)
+                except TimeoutError:
+                    break
+                arrivals.append(time.perf_counter())
     finally:
-        if not refused:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         gc.unfreeze()
         proc.wait(timeout=10.0)
         sock.close()
