@@ -105,6 +105,29 @@ def free_udp_ports(n: int) -> list[int]:
             sock.close()
 
 
+def _proc_stat(path: str | os.PathLike[str]) -> list[str]:
+    """The fields of a /proc ``stat`` file after the command name (field 3 onwards)."""
+    return Path(path).read_text(encoding='ascii').rsplit(')', 1)[1].split()
+
+
+def thread_policies(pid: int) -> list[tuple[int, int]]:
+    """(scheduling policy, real-time priority) of every thread of process ``pid``, from /proc
+    (policy 0: normal, 1: SCHED_FIFO)."""
+    out = []
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        fields = _proc_stat(task / 'stat')
+        out.append((int(fields[38]), int(fields[37])))  # stat fields 41 and 40
+    return out
+
+
+def process_gone(pid: int) -> bool:
+    """The process has exited (no such process, or a zombie nobody reaped yet)."""
+    try:
+        return _proc_stat(f'/proc/{pid}/stat')[0] in ('Z', 'X')
+    except FileNotFoundError:
+        return True
+
+
 def fixture_command(script: str, *args: str) -> list[str]:
     """Command that runs a test fixture script from tests/fixtures with this interpreter."""
     return [sys.executable, str(FIXTURES_DIR / script), *args]

@@ -17,7 +17,14 @@ import numpy as np
 import pytest
 import yaml
 
-from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
+from ros_testing import (
+    RosClient,
+    free_udp_ports,
+    installed_executable,
+    node_process,
+    process_gone,
+    thread_policies,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -116,14 +123,8 @@ def test_joint_states_rate_and_simulator_backend(system, cfg) -> None:
 
 
 def _fifo_threads(pid: int) -> list[int]:
-    """Real-time priorities of the SCHED_FIFO threads of process ``pid`` (from /proc)."""
-    out = []
-    for task in Path(f'/proc/{pid}/task').iterdir():
-        fields = (task / 'stat').read_text(encoding='ascii').rsplit(')', 1)[1].split()
-        rt_priority, policy = int(fields[37]), int(fields[38])  # stat fields 40 and 41
-        if policy == 1:  # SCHED_FIFO
-            out.append(rt_priority)
-    return out
+    """Real-time priorities of the SCHED_FIFO threads of process ``pid``."""
+    return [priority for policy, priority in thread_policies(pid) if policy == 1]
 
 
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
@@ -396,15 +397,6 @@ def test_sim_bridge_services_and_driver_recovery(tmp_path: Path, cfg) -> None:
         client.close()
 
 
-def _process_gone(pid: int) -> bool:
-    """The process has exited (no such process, or a zombie nobody reaped yet)."""
-    try:
-        with open(f'/proc/{pid}/stat', encoding='ascii') as stat:
-            return stat.read().rsplit(')', 1)[1].split()[0] in ('Z', 'X')
-    except FileNotFoundError:
-        return True
-
-
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
 def test_a_killed_driver_takes_its_standin_with_it(tmp_path: Path) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
@@ -425,12 +417,12 @@ def test_a_killed_driver_takes_its_standin_with_it(tmp_path: Path) -> None:
             assert client.spin_until(lambda: bool(diags), 30.0), driver.output()
             values = {kv.key: kv.value for kv in diags[-1].status[0].values}
             standin = int(values['standin_pid'])
-            assert not _process_gone(standin)
+            assert not process_gone(standin)
             os.kill(driver.pid, signal.SIGKILL)  # no chance to stop its child itself
             deadline = time.monotonic() + 10.0
-            while time.monotonic() < deadline and not _process_gone(standin):
+            while time.monotonic() < deadline and not process_gone(standin):
                 time.sleep(0.05)
-            gone = _process_gone(standin)
+            gone = process_gone(standin)
             if not gone:
                 os.kill(standin, signal.SIGKILL)  # do not leave it behind
             assert gone, 'the stand-in outlived its driver'

@@ -13,7 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ros_testing import RosClient, fixture_command, installed_executable, node_process
+from ros_testing import (
+    RosClient,
+    fixture_command,
+    installed_executable,
+    node_process,
+    thread_policies,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -290,10 +296,7 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
 def test_controller_threads_are_real_time_where_permitted(stack) -> None:
     _h, ctl, _plant = stack
-    policies = set()
-    for task in Path(f'/proc/{ctl.pid}/task').iterdir():
-        fields = (task / 'stat').read_text(encoding='ascii').rsplit(')', 1)[1].split()
-        policies.add((int(fields[38]), int(fields[37])))  # stat fields 41 (policy), 40
+    policies = set(thread_policies(ctl.pid))
     if 'refused' in ctl.output():  # no permission on this machine
         assert policies == {(0, 0)}
         pytest.skip('SCHED_FIFO not permitted here')
