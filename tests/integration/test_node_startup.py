@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
+import yaml
 
 from ros_testing import installed_executable
 
@@ -47,8 +48,6 @@ def test_an_invalid_config_file_is_refused_by_key(tmp_path: Path, package: str,
     repo = Path(__file__).resolve().parents[2]
     text = (repo / 'config' / 'dam.yaml').read_text(encoding='utf-8')
     bad = tmp_path / 'dam.yaml'
-    import yaml
-
     data = yaml.safe_load(text)
     data['object']['radius_m'] = -0.01
     bad.write_text(yaml.safe_dump(data), encoding='utf-8')
