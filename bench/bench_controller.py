@@ -30,7 +30,7 @@ PERIOD = 1.0 / 500.0  # control period [s]
 def _compute(n: int) -> dict:
     from spcm_plant import SyntheticHand
 
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
     from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 
     # The synthetic plant is massless: it needs a damping below its friction (as in the tests).
@@ -74,7 +74,7 @@ def _latency(seconds: float) -> dict:
     from sensor_msgs.msg import JointState
     from spcm_plant import SyntheticHand
 
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
     from dam_interfaces.action import DamGrasp
     from dam_interfaces.msg import HandCommand
     from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode

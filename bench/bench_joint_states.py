@@ -72,7 +72,7 @@ def _realtime_thread(inherit: bool = False) -> Iterator[None]:
     """The calling thread under SCHED_FIFO (subscriber priority) where permitted, back to
     normal scheduling afterwards; with ``inherit`` the threads it starts meanwhile keep the
     policy. A refusal is recorded for the report."""
-    from dam_hand_driver.realtime import set_thread_priority
+    from dam_common.realtime import set_thread_priority
 
     refused = set_thread_priority(SUBSCRIBER_PRIORITY, inherit=inherit)
     if refused and not _SUBSCRIBER_REFUSED:
@@ -129,7 +129,7 @@ def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndar
 
 _PACER = """
 import socket, sys, time
-from dam_hand_driver.realtime import set_thread_priority
+from dam_common.realtime import set_thread_priority
 from dam_sim_bridge.pacing import sleep_until
 port, rate, seconds = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
 sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -172,7 +172,7 @@ def _baseline_periods(rate_hz: float, seconds: float) -> np.ndarray:
 
 
 def _round_trips(config_file: Path, n: int, rate_hz: float) -> np.ndarray:
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
     from dam_hand_driver.protocol import FrameDecoder, FrameKind, encode_state
 
     cfg = load_config(config_file)
@@ -218,7 +218,7 @@ def _round_trips(config_file: Path, n: int, rate_hz: float) -> np.ndarray:
 
 
 def _lockstep_speed(cycles: int) -> float:
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
     from dam_sim_bridge.sim_device import SimDevice
 
     cfg = load_config()
@@ -238,7 +238,7 @@ def _lockstep_speed(cycles: int) -> float:
 
 
 def run(args) -> dict:
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
 
     rate_hz = float(load_config().device.rate_hz)
     seconds = 5.0 if args.quick else 60.0

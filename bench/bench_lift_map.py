@@ -27,8 +27,8 @@ import numpy as np
 from scipy.optimize import linprog
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.config import load_config
 from dam_analysis.errors import NoSolutionError
+from dam_common.config import load_config
 
 ALPHAS_DEG = (1.0, 5.0, 30.0)
 N_DP = 200

@@ -5,7 +5,7 @@ import sys
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from dam_analysis.ros_node import run_node
+from dam_common.node import run_node
 
 
 class TriggerServer(Node):

@@ -35,7 +35,7 @@ set -u
 if [ -z "$k_theta" ] || [ -z "$delta_theta_p" ]; then
   read -r cfg_k cfg_dp < <(python -c '
 import math
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 task = load_config().task
 print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg")')
   k_theta=${k_theta:-$cfg_k}

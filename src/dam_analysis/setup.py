@@ -1,5 +1,4 @@
 import os
-from glob import glob
 
 from setuptools import find_packages, setup
 
@@ -13,11 +12,6 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
-        # The single source of truth config/ at the repository root, installed for `ros2 run`.
-        # Paths relative to this file, as colcon requires.
-        ('share/' + PACKAGE_NAME + '/config',
-         sorted(os.path.relpath(p, HERE)
-                for p in glob(os.path.join(HERE, '..', '..', 'config', '*.yaml')))),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -29,7 +23,7 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
-            'check_lift_server = dam_analysis.check_lift_server:main',
+            'check_lift_server = dam_analysis.entry_points:check_lift_server',
             'check_lift = dam_analysis.check_lift_client:entry_point',
             'lift_map = dam_analysis.lift_map:entry_point',
         ],

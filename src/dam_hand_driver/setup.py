@@ -23,7 +23,7 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
-            'hand_driver = dam_hand_driver.driver_node:main',
+            'hand_driver = dam_hand_driver.entry_points:hand_driver',
         ],
     },
 )

@@ -23,7 +23,7 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
-            'sim_bridge = dam_sim_bridge.sim_bridge_node:main',
+            'sim_bridge = dam_sim_bridge.entry_points:sim_bridge',
             'dam_experiment = dam_sim_bridge.experiment:main',
         ],
     },

@@ -23,8 +23,8 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
-            'spcm_controller = dam_spcm_controller.controller_node:main',
-            'dam_grasp = dam_spcm_controller.grasp_client:main',
+            'spcm_controller = dam_spcm_controller.entry_points:spcm_controller',
+            'dam_grasp = dam_spcm_controller.entry_points:dam_grasp',
         ],
     },
 )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 
 
 @pytest.fixture(scope='session')

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import yaml
 
-from dam_analysis.config import config_from_dict
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.model import (
     build_hand_model,
@@ -19,6 +18,7 @@ from dam_analysis.model import (
     link_clearances,
     table_clearance,
 )
+from dam_common.config import config_from_dict
 
 
 def test_forward_kinematics_closed_form(config):

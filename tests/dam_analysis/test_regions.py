@@ -166,7 +166,7 @@ def test_csm_boundary_with_soft_contact_uses_exact_margin():
     import yaml
 
     from dam_analysis.analysis import LiftAnalyzer
-    from dam_analysis.config import config_from_dict
+    from dam_common.config import config_from_dict
     with open(Path(__file__).resolve().parents[2] / 'config' / 'dam.yaml',
               encoding='utf-8') as fh:
         raw = yaml.safe_load(fh)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_hand_driver.errors import EncodeError, ParameterError
 from dam_hand_driver.protocol import (
     MAGIC,

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dam_analysis.config import DamConfig, load_config
+from dam_common.config import DamConfig, load_config
 from dam_sim_bridge.experiment import (
     PHASE_CODES,
     ExperimentResult,

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_hand_driver.protocol import FrameDecoder, FrameKind, StateFrame
 from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.sim_device import SimDevice

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from dam_analysis.config import DamConfig, load_config
+from dam_common.config import DamConfig, load_config
 from dam_hand_driver.protocol import (
     Calibration,
     DeviceStatus,

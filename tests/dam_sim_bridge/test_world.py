@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from dam_analysis.config import DamConfig, load_config
+from dam_common.config import DamConfig, load_config
 from dam_hand_driver.protocol import Calibration, DeviceWatchdog, JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions

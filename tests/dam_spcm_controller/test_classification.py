@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_spcm_controller.classification import (
     ClassifierSettings,
     HandGeometry,

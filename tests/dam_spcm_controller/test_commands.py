@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
 from dam_spcm_controller.errors import InputError
 

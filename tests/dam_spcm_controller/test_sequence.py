@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from spcm_plant import SyntheticHand, run
 
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_spcm_controller.commands import JointMode
 from dam_spcm_controller.errors import InputError, StateError
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams

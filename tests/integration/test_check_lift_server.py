@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from ros_testing import RosClient, installed_executable, node_process
 
 pytestmark = pytest.mark.integration

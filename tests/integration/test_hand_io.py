@@ -87,7 +87,7 @@ def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope='module')
 def cfg(config_file: Path):
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
 
     return load_config(config_file)
 

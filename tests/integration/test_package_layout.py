@@ -12,7 +12,8 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SRC = REPO_ROOT / 'src'
 INSTALL = REPO_ROOT / 'ros2_ws' / 'install'
-PYTHON_PACKAGES = ['dam_analysis', 'dam_sim_bridge', 'dam_hand_driver', 'dam_spcm_controller']
+PYTHON_PACKAGES = ['dam_common', 'dam_analysis', 'dam_sim_bridge', 'dam_hand_driver',
+                   'dam_spcm_controller']
 
 
 def declared_executables(setup_py: Path) -> list[str]:
@@ -46,7 +47,10 @@ def test_package_xml_is_format_3_with_real_dependencies(package: str) -> None:
     if package == 'dam_interfaces':
         assert {'rosidl_default_generators', 'rosidl_default_runtime'} <= depends
     else:
-        assert 'rclpy' in depends and 'dam_interfaces' in depends
+        assert 'rclpy' in depends
+        if package != 'dam_common':
+            # Node packages: messages, and the shared plumbing from dam_common only.
+            assert {'dam_interfaces', 'dam_common'} <= depends
         # Every package.xml dependency that names one of ours must exist.
         for dep in depends:
             if dep.startswith('dam_'):
@@ -83,7 +87,7 @@ def test_interfaces_are_generated_for_python() -> None:
 
 
 def test_config_is_installed_with_dam_analysis() -> None:
-    installed = INSTALL / 'dam_analysis' / 'share' / 'dam_analysis' / 'config' / 'dam.yaml'
+    installed = INSTALL / 'dam_common' / 'share' / 'dam_common' / 'config' / 'dam.yaml'
     assert installed.read_text() == (REPO_ROOT / 'config' / 'dam.yaml').read_text()
 
 
@@ -106,3 +110,17 @@ def test_hand_command_and_grasp_action_are_generated() -> None:
     assert len(outcomes) == 5
     assert 'phase' in DamGrasp.Feedback.get_fields_and_field_types()
     assert DamStatus.get_fields_and_field_types()['compliant_torque'] == 'sequence<double>'
+
+
+def test_node_plumbing_comes_from_dam_common_only() -> None:
+    """The driver needs nothing of the analysis, the controller nothing of the driver."""
+    def depends(package: str) -> set[str]:
+        root = ET.parse(SRC / package / 'package.xml').getroot()
+        return {e.text for e in root if e.tag.endswith('depend')}
+
+    assert 'dam_analysis' not in depends('dam_hand_driver')
+    assert 'dam_hand_driver' not in depends('dam_spcm_controller')
+    for package in ('dam_hand_driver', 'dam_spcm_controller'):
+        sources = '\n'.join(p.read_text() for p in (SRC / package / package).glob('*.py'))
+        forbidden = 'dam_analysis' if package == 'dam_hand_driver' else 'dam_hand_driver'
+        assert f'from {forbidden}' not in sources and f'import {forbidden}' not in sources

@@ -338,7 +338,7 @@ def test_impedance_in_the_controller_sends_torques(stack) -> None:
 def test_envelope_constant_torque_closes_with_the_paper_torque(stack) -> None:
     """envelope_constant_torque: ENVELOPE puts the compliant joints in MODE_TORQUE and ramps
     them to envelope_torque * ratio_i / max ratio (paper Fig. 6(d)); refused while running."""
-    from dam_analysis.config import load_config
+    from dam_common.config import load_config
     from dam_interfaces.msg import HandCommand
 
     cfg = load_config()

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dam_analysis.config import DamConfig, load_config
 from dam_analysis.errors import InputError
 from dam_analysis.lift import STATUS_BOUNDED, worst_case_cone
 from dam_analysis.model import HandModel, build_hand_model
@@ -37,6 +36,7 @@ from dam_analysis.regions import (
     region_boundaries,
 )
 from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths
+from dam_common.config import DamConfig, load_config
 
 ArrayLike = float | Sequence[float] | np.ndarray
 

@@ -23,9 +23,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, run_node
+from dam_common.config import load_config
+from dam_common.node import declare_config_file, run_node
 from dam_interfaces.srv import CheckLift
 
 _MAX_FRICTION_ANGLE = math.pi / 2

@@ -11,13 +11,6 @@ class DamAnalysisError(Exception):
     """Base class of every error raised by this package."""
 
 
-class ConfigError(DamAnalysisError, ValueError):
-    """The configuration file is missing, unreadable or holds a bad value.
-
-    The message starts with the dotted key path (``hand.link_lengths_m[1]``) and names the value.
-    """
-
-
 class InputError(DamAnalysisError, ValueError):
     """An argument to an analysis function is malformed (NaN, wrong shape, out of range)."""
 

@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.config import load_config
-from dam_analysis.errors import ConfigError
 from dam_analysis.regions import Boundaries
+from dam_common.config import load_config
+from dam_common.errors import ConfigError
 
 #: Smallest default top of the k_theta axis (and the value when nothing lifts) [N m/rad].
 DEFAULT_K_MAX = 10.0

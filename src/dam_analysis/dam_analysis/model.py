@@ -6,7 +6,7 @@ each finger moves in its own vertical plane spanned by the world z axis and the 
 ``inward_direction`` and ``z`` vertical, both measured from the compliant joint (the finger
 base). A link at cumulative angle ``phi`` points along ``(sin phi, -cos phi)``: ``phi = 0``
 hangs straight down and a positive angle flexes the finger inward (the sign convention of
-:class:`dam_analysis.config.FingerConfig`).
+:class:`dam_common.config.FingerConfig`).
 
 Every link is a capsule (segment plus ``link_radius_m``); the object is a cylinder lying on the
 table, so in the finger plane it is a disc of radius ``R`` centred at the cylinder axis. The
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dam_analysis.config import DamConfig
 from dam_analysis.errors import NoSolutionError
+from dam_common.config import DamConfig
 
 #: Step of the scan that closes the compliant joint to the first contact [rad].
 _SCAN_STEP_RAD = math.radians(0.05)

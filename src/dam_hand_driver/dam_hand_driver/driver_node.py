@@ -71,13 +71,14 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from dam_analysis.config import load_config
-from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
+from dam_common.clock import create_steady_timer
+from dam_common.config import load_config
+from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.realtime import SWITCH_INTERVAL_S, die_with_parent, set_thread_priority
+from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
-from dam_hand_driver.realtime import SWITCH_INTERVAL_S, die_with_parent, set_thread_priority
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim')
@@ -268,9 +269,13 @@ class HandDriverNode(Node):
         self._cmd_sub = self.create_subscription(HandCommand, '/hand/command',
                                                  self._on_command, 10)
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
-        self._diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        self._diag_timer = create_steady_timer(self, 1.0, self._publish_diagnostics)
 
-        self._select_backend()
+        try:
+            self._select_backend()
+        except BaseException:
+            self.destroy_node()  # a stand-in already started goes with it
+            raise
         self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
         self._thread.start()
         # The executor thread shares the interpreter lock with the timed thread: one priority
@@ -287,7 +292,7 @@ class HandDriverNode(Node):
         if self.backend == 'sim':
             self._start_standin('backend sim')
             return
-        probe = self.link.receive(float(dev.probe_timeout_s))
+        probe = self._receive_at_start(float(dev.probe_timeout_s))
         if probe is not None:
             kind = 'simulated' if probe.status & DeviceStatus.SIMULATED else 'hardware'
             self.get_logger().info(f'device answered at {addr}: backend {self.backend}, '
@@ -321,13 +326,25 @@ class HandDriverNode(Node):
             f'(PID {self._child.pid})')
         deadline = time.monotonic() + _STANDIN_START_TIMEOUT_S
         while time.monotonic() < deadline and self._child.poll() is None:
-            if self.link.receive(0.1) is not None:
+            if self._receive_at_start(0.1) is not None:
                 return
         if self._child.poll() is not None:
             raise HandDriverError(f'the stand-in exited with code {self._child.returncode} '
                                   f'before sending a state frame')
         self.get_logger().error(f'the stand-in sent no state frame within '
                                 f'{_STANDIN_START_TIMEOUT_S} s')
+
+    def _receive_at_start(self, timeout_s: float) -> StateFrame | None:
+        """A state frame within ``timeout_s`` [s], or ``None``; in short waits, so that a stop
+        request (SIGINT, SIGTERM) ends the start-up at once
+        (:class:`~dam_common.shutdown.StartupInterrupted`)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            SHUTDOWN.raise_if_requested()
+            left = deadline - time.monotonic()
+            frame = self.link.receive(min(0.05, max(left, 0.0)))
+            if frame is not None or left <= 0.05:
+                return frame
 
     def _stop_standin(self) -> None:
         child, self._child = self._child, None
@@ -557,5 +574,5 @@ class HandDriverNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     run_node(HandDriverNode, 'hand_driver', args,
-             startup_errors=(HandDriverError, DamAnalysisError, OSError),
+             startup_errors=(HandDriverError, OSError),
              switch_interval_s=SWITCH_INTERVAL_S)

@@ -34,7 +34,7 @@ import numpy as np
 from dam_hand_driver.errors import EncodeError, ParameterError
 
 if TYPE_CHECKING:
-    from dam_analysis.config import DamConfig
+    from dam_common.config import DamConfig
 
 # --------------------------------------------------------------------------------------------
 # Constants and enums

@@ -140,7 +140,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
     Parameters
     ----------
     config
-        ``DamConfig`` (``dam_analysis.config.load_config()``).
+        ``DamConfig`` (``dam_common.config.load_config()``).
     k_theta
         Finger-1 stiffness [N*m/rad] (the others by their stiffness ratio).
     delta_theta_p
@@ -323,8 +323,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments."""
-    from dam_analysis.config import load_config  # noqa: PLC0415
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415
+    from dam_common.config import load_config  # noqa: PLC0415
 
     args = _parse(sys.argv[1:] if argv is None else argv)
     try:

@@ -3,7 +3,7 @@
 ``time.sleep`` alone wakes up late by the kernel's timer slack (50 us by default on Linux) plus
 the scheduling delay, and by more under load. :func:`sleep_until` sleeps to just before the
 deadline and spins the rest, so the deadline is met to a few microseconds whenever the thread
-is running (:func:`dam_hand_driver.realtime.set_thread_priority` sees to that on a busy
+is running (:func:`dam_common.realtime.set_thread_priority` sees to that on a busy
 machine).
 """
 

@@ -50,10 +50,10 @@ from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
-from dam_analysis.config import load_config
-from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
-from dam_hand_driver.realtime import SWITCH_INTERVAL_S, set_thread_priority
+from dam_common.clock import create_steady_timer
+from dam_common.config import load_config
+from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -114,7 +114,7 @@ class SimBridgeNode(Node):
         self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose', 10)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if self._publish_clock else None)
-        self._timer = self.create_timer(1.0 / self._pose_rate_hz, self._on_timer)
+        self._timer = create_steady_timer(self, 1.0 / self._pose_rate_hz, self._on_timer)
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self._friction_srv = self.create_service(
             SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
@@ -156,7 +156,7 @@ class SimBridgeNode(Node):
                 self._pose_rate_hz = float(param.value)
                 self._timer.cancel()
                 self.destroy_timer(self._timer)
-                self._timer = self.create_timer(1.0 / self._pose_rate_hz, self._on_timer)
+                self._timer = create_steady_timer(self, 1.0 / self._pose_rate_hz, self._on_timer)
         return SetParametersResult(successful=True)
 
     def _on_timer(self) -> None:
@@ -223,5 +223,5 @@ def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
     gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
-             startup_errors=(SimBridgeError, DamAnalysisError, OSError),
+             startup_errors=(SimBridgeError, OSError),
              switch_interval_s=SWITCH_INTERVAL_S)

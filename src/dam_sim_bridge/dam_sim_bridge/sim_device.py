@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dam_common.realtime import reduce_timer_slack
 from dam_hand_driver.protocol import (
     Calibration,
     DeviceStatus,
@@ -42,13 +43,12 @@ from dam_hand_driver.protocol import (
     JointFault,
     encode_state,
 )
-from dam_hand_driver.realtime import reduce_timer_slack
 from dam_sim_bridge.errors import WorldConfigError
 from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.world import HandWorld
 
 if TYPE_CHECKING:
-    from dam_analysis.config import DamConfig
+    from dam_common.config import DamConfig
 
 _MAX_DATAGRAM = 2048
 #: In real time, the physics of the next cycle starts this fraction of a period after a state

@@ -8,7 +8,7 @@ Model
 -----
 * The palm is fixed in the world (fixed base, no collision shape). Each finger is a chain of
   three revolute joints (compliant, locked, position) about the finger's
-  :attr:`~dam_analysis.config.FingerConfig.joint_axis`; a positive angle flexes the finger
+  :attr:`~dam_common.config.FingerConfig.joint_axis`; a positive angle flexes the finger
   inward, all angles zero hang it straight down from its base.
 * Link ``i`` is a capsule of radius ``hand.link_radius_m`` whose segment runs from joint ``i``
   to joint ``i + 1`` (``hand.link_lengths_m``); the last segment ends at the fingertip centre.
@@ -82,7 +82,7 @@ from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 
 if TYPE_CHECKING:
-    from dam_analysis.config import DamConfig
+    from dam_common.config import DamConfig
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
@@ -322,7 +322,7 @@ class HandWorld:
     Parameters
     ----------
     config
-        A ``DamConfig`` (``dam_analysis.config.load_config()``).
+        A ``DamConfig`` (``dam_common.config.load_config()``).
     options
         Simulation settings; defaults to :meth:`WorldOptions.from_config` of ``config``.
 

@@ -51,7 +51,7 @@ from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from dam_analysis.config import DamConfig
+    from dam_common.config import DamConfig
 
 
 class Outcome(enum.Enum):
@@ -115,7 +115,7 @@ class HandGeometry:
 
     @classmethod
     def from_config(cls, config: DamConfig) -> HandGeometry:
-        """Geometry of a validated ``dam_analysis.config.DamConfig``.
+        """Geometry of a validated ``dam_common.config.DamConfig``.
 
         Raises
         ------

@@ -1,7 +1,7 @@
 """Joint commands produced by the controller and the joint layout of the hand.
 
 Joints are ordered finger by finger, base to tip, exactly as
-``dam_analysis.config.HandConfig.joint_names``: ``finger1_compliant_joint``,
+``dam_common.config.HandConfig.joint_names``: ``finger1_compliant_joint``,
 ``finger1_locked_joint``, ``finger1_position_joint``, ``finger2_compliant_joint``, ...
 """
 
@@ -18,7 +18,7 @@ from dam_spcm_controller._validate import finite_vector
 from dam_spcm_controller.errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
-    from dam_analysis.config import HandConfig
+    from dam_common.config import HandConfig
 
 #: Joint roles of every finger, base to tip (paper Fig. 6).
 JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
@@ -123,7 +123,7 @@ class HandLayout:
 
     @classmethod
     def from_hand_config(cls, hand: HandConfig) -> HandLayout:
-        """Layout of a validated ``dam_analysis.config.HandConfig``."""
+        """Layout of a validated ``dam_common.config.HandConfig``."""
         n = hand.n_fingers
         lower = np.tile([hand.joint_limits_rad[r][0] for r in JOINT_ROLES], n)
         upper = np.tile([hand.joint_limits_rad[r][1] for r in JOINT_ROLES], n)

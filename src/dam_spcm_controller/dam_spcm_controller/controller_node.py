@@ -53,10 +53,11 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
-from dam_analysis.config import load_config
+from dam_common.config import load_config
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.ros_node import declare_config_file, declare_thread_priority, run_node
-from dam_hand_driver.realtime import set_process_priority
+from dam_common.clock import create_steady_timer
+from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
@@ -192,9 +193,9 @@ class SpcmControllerNode(Node):
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
         self._state_sub = self.create_subscription(
             JointState, '/joint_states', self._on_joint_state, 10)
-        self._watchdog = self.create_timer(0.01, self._on_watchdog)
-        self._status_timer = self.create_timer(1.0 / self._values['status_rate'],
-                                               self._on_status_timer)
+        self._watchdog = create_steady_timer(self, 0.01, self._on_watchdog)
+        self._status_timer = create_steady_timer(self, 1.0 / self._values['status_rate'],
+                                                 self._on_status_timer)
         self._check_lift = self.create_client(CheckLift, '/check_lift')
         self._action = ActionServer(
             self, DamGrasp, '/dam_grasp', execute_callback=self._execute,
@@ -485,7 +486,7 @@ class SpcmControllerNode(Node):
             if time.monotonic() >= deadline and not answer.done():
                 answer.set_result(None)
 
-        timer = self.create_timer(0.02, poll)
+        timer = create_steady_timer(self, 0.02, poll)
         try:
             poll()
             return await answer
@@ -507,7 +508,7 @@ class SpcmControllerNode(Node):
             elif now >= deadline:
                 fresh.set_result(False)
 
-        timer = self.create_timer(0.01, poll)
+        timer = create_steady_timer(self, 0.01, poll)
         try:
             poll()
             return bool(await fresh)

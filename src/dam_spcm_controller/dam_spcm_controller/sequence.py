@@ -73,7 +73,7 @@ from dam_spcm_controller.impedance import _impedance_unchecked, finger_stiffness
 from dam_spcm_controller.trajectory import MinimumJerkTrajectory
 
 if TYPE_CHECKING:  # pragma: no cover
-    from dam_analysis.config import DamConfig
+    from dam_common.config import DamConfig
 
 
 class Phase(enum.Enum):
@@ -206,7 +206,7 @@ class SequenceParams:
 
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: float) -> SequenceParams:
-        """Parameters from a validated ``dam_analysis.config.DamConfig``.
+        """Parameters from a validated ``dam_common.config.DamConfig``.
 
         ``overrides`` replace individual attributes (e.g. ``settle_time=0.5``).
         """

@@ -3,7 +3,7 @@
 The YAML file is the single source of truth for the hand geometry, the object, friction, the
 controller gains and the device link. :func:`load_config` reads it, checks every value and
 returns frozen dataclasses in SI units (angles in radians). A bad file raises
-:class:`~dam_analysis.errors.ConfigError` whose message names the key and the value.
+:class:`~dam_common.errors.ConfigError` whose message names the key and the value.
 
 This module is pure Python (numpy and PyYAML); it does not import rclpy.
 """
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from dam_analysis.errors import ConfigError
+from dam_common.errors import ConfigError
 
 #: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).
 JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
@@ -222,8 +222,8 @@ class DamConfig:
 def default_config_path() -> Path:
     """Return the configuration file used when none is given.
 
-    Order: the ``DAM_CONFIG`` environment variable; the copy installed in the ``dam_analysis``
-    share directory (``share/dam_analysis/config/dam.yaml``); ``config/dam.yaml`` of the source
+    Order: the ``DAM_CONFIG`` environment variable; the copy installed in the ``dam_common``
+    share directory (``share/dam_common/config/dam.yaml``); ``config/dam.yaml`` of the source
     tree this module lives in.
     """
     env = os.environ.get(CONFIG_ENV_VAR)
@@ -232,7 +232,7 @@ def default_config_path() -> Path:
     try:
         from ament_index_python.packages import get_package_share_directory
 
-        installed = Path(get_package_share_directory('dam_analysis')) / 'config' / 'dam.yaml'
+        installed = Path(get_package_share_directory('dam_common')) / 'config' / 'dam.yaml'
         if installed.is_file():
             return installed
     except Exception:  # noqa: BLE001 - ament index absent or package not installed
@@ -242,7 +242,7 @@ def default_config_path() -> Path:
         if candidate.is_file():
             return candidate
     raise ConfigError(
-        f'no configuration file found: set {CONFIG_ENV_VAR} or install dam_analysis'
+        f'no configuration file found: set {CONFIG_ENV_VAR} or install dam_common'
     )
 
 

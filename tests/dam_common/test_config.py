@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import yaml
 
-from dam_analysis.config import (
+from dam_common.config import (
     JOINT_ROLES,
     config_from_dict,
     default_config_path,
     load_config,
 )
-from dam_analysis.errors import ConfigError
+from dam_common.errors import ConfigError
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CONFIG_FILE = REPO_ROOT / 'config' / 'dam.yaml'

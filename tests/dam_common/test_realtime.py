@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from dam_hand_driver.realtime import reduce_timer_slack, set_thread_priority
+from dam_common.realtime import reduce_timer_slack, set_thread_priority
 
 _RESET_ON_FORK = getattr(os, 'SCHED_RESET_ON_FORK', 0)
 pytestmark = pytest.mark.skipif(not hasattr(os, 'sched_getscheduler'),
@@ -79,7 +79,7 @@ def test_timer_slack_is_set_on_linux() -> None:
 
 _PROCESS_PROBE = """
 import os, threading, time
-from dam_hand_driver.realtime import set_process_priority
+from dam_common.realtime import set_process_priority
 stop = threading.Event()
 workers = [threading.Thread(target=stop.wait) for _ in range(2)]
 for w in workers:

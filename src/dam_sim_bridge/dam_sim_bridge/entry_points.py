@@ -1,0 +1,18 @@
+"""Entry points of executables that must stop cleanly on SIGINT and SIGTERM.
+
+Each catches both signals before it imports anything heavy (rclpy, numpy, the node itself), so
+that a signal during start-up is a request to stop like any other
+(:mod:`dam_common.shutdown`).
+"""
+
+from __future__ import annotations
+
+from dam_common.shutdown import catch_signals
+
+
+def sim_bridge() -> None:
+    """``ros2 run dam_sim_bridge sim_bridge``: the PyBullet stand-in node."""
+    catch_signals()
+    from dam_sim_bridge.sim_bridge_node import main
+
+    main()
