@@ -58,7 +58,7 @@ class Harness:
     def _on_command(self, msg) -> None:
         self.commands.append((time.monotonic(), msg))
 
-    def wait_ready(self) -> None:
+    def wait_ready(self, check_lift: bool = True) -> None:
         assert self.action.wait_for_server(timeout_sec=30.0), '/dam_grasp did not appear'
         assert self.ros.spin_until(lambda: len(self.statuses) > 0, 30.0), 'no /dam/status'
         from sensor_msgs.msg import JointState
@@ -67,19 +67,24 @@ class Harness:
         sub = self.node.create_subscription(JointState, '/joint_states', states.append, 10)
         assert self.ros.spin_until(lambda: len(states) > 0, 30.0), 'no /joint_states'
         self.node.destroy_subscription(sub)
+        if not check_lift:
+            return
         from dam_interfaces.srv import CheckLift
 
         client = self.node.create_client(CheckLift, '/check_lift')
         assert client.wait_for_service(timeout_sec=30.0), '/check_lift did not appear'
         self.node.destroy_client(client)
 
-    def send(self, k: list[float], dp: list[float]):
-        """Send a goal; return the goal handle (accepted or not)."""
+    def send(self, k: list[float] | None, dp: list[float] | None):
+        """Send a goal (``None``: the field left as default-constructed); return the goal
+        handle (accepted or not)."""
         from dam_interfaces.action import DamGrasp
 
         goal = DamGrasp.Goal()
-        goal.k_theta = k
-        goal.delta_theta_p = dp
+        if k is not None:
+            goal.k_theta = k
+        if dp is not None:
+            goal.delta_theta_p = dp
         future = self.action.send_goal_async(goal, feedback_callback=self.feedback.append)
         assert self.ros.spin_until(future.done, 15.0), 'no goal response'
         return future.result()
@@ -118,19 +123,28 @@ class Harness:
         self.ros.close()
 
 
+#: A stack parameter that starts no check_lift_server (the controller waits for it in vain).
+NO_CHECK_LIFT = '--no-check-lift-server'
+
+
 @pytest.fixture
 def stack(request) -> Iterator[tuple[Harness, object, object]]:
-    extra = getattr(request, 'param', [])
+    """Plant, check_lift_server and controller; ``request.param``: the controller's extra ROS
+    arguments, and :data:`NO_CHECK_LIFT` to leave the analysis server out."""
+    extra = list(getattr(request, 'param', []))
+    with_check_lift = NO_CHECK_LIFT not in extra
+    extra = [a for a in extra if a != NO_CHECK_LIFT]
     env = {'PYTHONPATH': os.pathsep.join([str(REPO / 'src' / 'dam_analysis'),
                                           os.environ.get('PYTHONPATH', '')])}
     with ExitStack() as es:
         plant = es.enter_context(node_process(fixture_command('spcm_plant_node.py'), env))
-        es.enter_context(node_process(
-            [str(installed_executable('dam_analysis', 'check_lift_server'))]))
+        if with_check_lift:
+            es.enter_context(node_process(
+                [str(installed_executable('dam_analysis', 'check_lift_server'))]))
         ctl = es.enter_context(node_process(controller_command(*extra)))
         harness = Harness()
         es.callback(harness.close)
-        harness.wait_ready()
+        harness.wait_ready(with_check_lift)
         yield harness, ctl, plant
         assert ctl.alive(), ctl.output()
 
@@ -161,13 +175,22 @@ def test_full_grasp_second_goal_and_parameters(stack) -> None:
     handle = h.send([INSIDE[0]], [INSIDE[1]])
     assert handle.accepted
     h.wait_phase(handle, 'APPROACH', 10.0)
-    # A second goal while one runs is rejected, and so is a parameter change.
+    # A second goal while one runs ends at once, ABORTED with OUTCOME_REJECTED and the
+    # reason in its result (what `ros2 action send_goal` prints); a parameter change is refused.
     second = h.send([INSIDE[0]], [INSIDE[1]])
-    assert not second.accepted
+    assert second.accepted
+    refused_goal = h.result(second, 5.0)
+    assert refused_goal.status == GoalStatus.STATUS_ABORTED
+    assert refused_goal.result.outcome == DamGrasp.Result.OUTCOME_REJECTED
+    assert refused_goal.result.outcome_name == 'REJECTED'
+    assert 'already running' in refused_goal.result.message
     refused = h.set_parameter('envelope_torque', 0.1)
     assert not refused.successful and 'grasp is running' in refused.reason
     res = h.result(handle, 40.0)
-    assert res.status == GoalStatus.STATUS_SUCCEEDED, (res.result.message, h.phases())
+    # SUCCEEDED exactly when the outcome is SUCCESS; any other outcome ends ABORTED.
+    success = res.result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
+    expected_status = GoalStatus.STATUS_SUCCEEDED if success else GoalStatus.STATUS_ABORTED
+    assert res.status == expected_status, (res.result.outcome_name, res.result.message)
     phases = h.phases()
     for phase in ('APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'):
         assert phase in phases, phases
@@ -203,17 +226,25 @@ BAD_GOALS = [
 ]
 
 
-def test_bad_goals_rejected_with_reason(stack) -> None:
+def test_bad_goals_end_with_their_reason(stack) -> None:
+    """A malformed goal is accepted and ends at once: ABORTED, OUTCOME_REJECTED, the field and
+    the value in the result's message (a plain rejection could not carry the reason)."""
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
     h, ctl, _plant = stack
+    n_commands = len(h.commands)
     for k, dp, words in BAD_GOALS:
-        h.statuses.clear()
         handle = h.send(k, dp)
-        assert not handle.accepted, (k, dp)
-        assert h.ros.spin_until(
-            lambda w=words: any('goal rejected' in s.message and w in s.message
-                                for s in h.statuses), 10.0), (k, dp, [s.message for s in
-                                                                      h.statuses])
+        assert handle.accepted, (k, dp)
+        res = h.result(handle, 5.0)
+        assert res.status == GoalStatus.STATUS_ABORTED, (k, dp)
+        assert res.result.outcome == DamGrasp.Result.OUTCOME_REJECTED, (k, dp)
+        assert res.result.message.startswith('goal refused') and words in res.result.message, \
+            (k, dp, res.result.message)
         assert ctl.alive()
+    assert len(h.commands) == n_commands  # the hand was never commanded
     # Bad joint states (unknown names, NaN) are dropped with a log; the node stays up.
     from sensor_msgs.msg import JointState
 
@@ -355,7 +386,11 @@ def test_envelope_constant_torque_closes_with_the_paper_torque(stack) -> None:
     assert h.set_parameter('envelope_constant_torque', False).successful
 
 
+@pytest.mark.parametrize('stack', [[], ['-p', 'use_sim_time:=true']], indirect=True,
+                         ids=['wall_clock', 'use_sim_time_without_clock'])
 def test_plant_silence_aborts_with_zero_torque(stack) -> None:
+    """The state timeout runs on a steady clock: with use_sim_time and no /clock at all the
+    silence is caught as fast as with the wall clock."""
     from action_msgs.msg import GoalStatus
     from std_srvs.srv import Trigger
 
@@ -366,6 +401,7 @@ def test_plant_silence_aborts_with_zero_torque(stack) -> None:
     assert h.ros.call(Trigger, '/plant/stop', Trigger.Request()).success
     t_stop = time.monotonic()
     res = h.result(handle, 10.0)
+    assert time.monotonic() - t_stop < 1.0  # state_timeout 0.1 s, plus DDS and polling
     assert res.status == GoalStatus.STATUS_ABORTED
     assert 'joint_states silent' in res.result.message
     h.ros.spin_until(lambda: False, 0.3)
@@ -373,6 +409,143 @@ def test_plant_silence_aborts_with_zero_torque(stack) -> None:
     assert last_t > t_stop  # the zero-torque command came after the plant went silent
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
     assert any(s.phase == 'FAILED' for s in h.statuses)
+
+
+def test_default_goal_grasps_with_the_configured_pair(stack) -> None:
+    """A default-constructed goal (`ros2 action send_goal /dam_grasp ... "{}"`) grasps with
+    the configured task pair: the stiffness sent to the hand is k_theta_i of the config."""
+    from dam_common.config import load_config
+    from dam_interfaces.msg import HandCommand
+
+    cfg = load_config()
+    ratios = np.asarray(cfg.hand.stiffness_ratios, dtype=float)
+    h, _ctl, _plant = stack
+    handle = h.send(None, None)
+    assert handle.accepted
+    h.wait_phase(handle, 'APPROACH', 10.0)
+    assert h.ros.spin_until(
+        lambda: any(m == HandCommand.MODE_IMPEDANCE for _, c in h.commands[-1:]
+                    for m, *_ in _compliant(c)), 5.0)
+    stiffness = [k for _, c in h.commands[-1:] for _m, _s, k, _d in _compliant(c)]
+    np.testing.assert_allclose(stiffness, cfg.task.k_theta_nm_per_rad * ratios, rtol=1e-12)
+    checked = [f.feedback for f in h.feedback if f.feedback.lift_checked]
+    assert checked, 'the configured pair was checked with /check_lift'
+    handle.cancel_goal_async()
+    h.result(handle, 20.0)
+
+
+@pytest.mark.parametrize('stack', [[NO_CHECK_LIFT]], indirect=True)
+def test_cancel_before_the_hand_moved_is_immediate_and_silent(stack) -> None:
+    """/check_lift absent: the goal waits for it (check_lift_timeout 2 s). A cancel meanwhile
+    ends the goal CANCELED at once, and not a single command reaches the hand."""
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    h, _ctl, _plant = stack
+    # the controller's one start-up command (hold the measured posture) has come
+    assert h.ros.spin_until(lambda: len(h.commands) > 0, 10.0)
+    h.ros.spin_until(lambda: False, 0.2)
+    n_commands = len(h.commands)
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.ros.spin_until(lambda: False, 0.1)
+    result = handle.get_result_async()
+    t_cancel = time.monotonic()
+    cancel = handle.cancel_goal_async()
+    assert h.ros.spin_until(result.done, 5.0)
+    elapsed = time.monotonic() - t_cancel
+    assert cancel.done() and len(cancel.result().goals_canceling) == 1
+    res = result.result()
+    assert res.status == GoalStatus.STATUS_CANCELED
+    assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
+    assert 'before the hand moved' in res.result.message
+    # the controller polls every 20 ms; the rest is two DDS round trips on this machine
+    assert elapsed < 0.1, f'CANCELED {elapsed:.3f} s after the cancel request'
+    h.ros.spin_until(lambda: False, 2.5)  # past the check_lift timeout
+    assert len(h.commands) == n_commands, 'a command was sent for a cancelled goal'
+
+
+def test_release_lets_go_and_stops_commanding(stack) -> None:
+    """~/release after DONE: compliant torques ramp to zero, the position joints open back to
+    the pre-shape angle, every joint ends in HOLD and no command follows."""
+    from action_msgs.msg import GoalStatus
+    from std_srvs.srv import Trigger
+
+    from dam_common.config import load_config
+    from dam_interfaces.msg import HandCommand
+
+    cfg = load_config()
+    h, ctl, _plant = stack
+    # Refused while nothing has been grasped? No: an idle hand may be opened too. Refused while
+    # a grasp runs.
+    handle = h.send([INSIDE[0]], [INSIDE[1]])
+    assert handle.accepted
+    h.wait_phase(handle, 'APPROACH', 10.0)
+    busy = h.ros.call(Trigger, '/spcm_controller/release', Trigger.Request())
+    assert not busy.success and 'cancel its goal first' in busy.message
+    res = h.result(handle, 40.0)
+    assert 'DONE' in h.phases(), (res.result.message, h.phases())
+    h.ros.spin_until(lambda: False, 0.3)
+    held = h.commands[-1][1]
+    assert any(m == HandCommand.MODE_IMPEDANCE for m, *_ in _compliant(held))  # still holding
+    t_release = time.monotonic()
+    answer = h.ros.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
+    assert answer.success, answer.message
+    during = [m for t, m in h.commands if t >= t_release]
+    assert during, 'no release command'
+    torques = [_torques(m) for m in during if len(_torques(m)) == 3]
+    assert torques, 'the compliant joints did not go to torque mode to unload'
+    peak = [max(abs(v) for v in t) for t in torques]
+    assert peak[-1] == 0.0 and all(np.diff(peak) <= 1e-12), peak
+    position = [i for i, n in enumerate(during[-1].name) if n.endswith('_position_joint')]
+    opening = [m for m in during if all(m.mode[i] == HandCommand.MODE_POSITION
+                                        for i in position)]
+    assert opening, 'the position joints were not moved'
+    goal = cfg.hand.initial_position_angle_rad
+    assert all(abs(opening[-1].setpoint[i] - goal) < 0.01 for i in position)
+    last = during[-1]
+    assert all(m == HandCommand.MODE_HOLD for m in last.mode), list(last.mode)
+    n_after = len(h.commands)
+    h.ros.spin_until(lambda: False, 0.5)
+    assert len(h.commands) == n_after, 'commands after the release'
+    assert any(s.phase == 'RELEASING' for s in h.statuses)
+    assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'IDLE', 2.0)
+    # A new grasp starts from there.
+    again = h.send([INSIDE[0]], [INSIDE[1]])
+    assert again.accepted
+    h.wait_phase(again, 'APPROACH', 10.0)
+    again.cancel_goal_async()
+    assert h.result(again, 20.0).status == GoalStatus.STATUS_CANCELED
+    assert ctl.alive()
+
+
+def test_grasp_client_cancels_its_goal_on_sigint(stack) -> None:
+    """Ctrl-C on dam_grasp cancels the goal, waits for the confirmation and exits 3."""
+    import signal
+    import subprocess
+
+    h, ctl, _plant = stack
+    client = subprocess.Popen(
+        [str(installed_executable('dam_spcm_controller', 'dam_grasp')), '--k-theta',
+         str(INSIDE[0]), '--delta-theta-p', f'{INSIDE[1]}rad'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        stdin=subprocess.DEVNULL)
+    try:
+        assert h.ros.spin_until(lambda: any(s.phase == 'ROLLING_UP' for s in h.statuses),
+                                20.0), [s.phase for s in h.statuses]
+        client.send_signal(signal.SIGINT)
+        out, _ = client.communicate(timeout=10.0)
+    finally:
+        if client.poll() is None:
+            client.kill()
+            client.wait()
+    assert client.returncode == 3, out
+    assert 'cancelling' in out and 'CANCELED' in out, out
+    assert 'Traceback' not in out, out
+    assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'ABORTED', 5.0), \
+        [s.phase for s in h.statuses[-5:]]
+    assert ctl.alive()
 
 
 if __name__ == '__main__':  # pragma: no cover

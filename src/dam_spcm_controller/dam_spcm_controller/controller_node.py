@@ -47,15 +47,17 @@ import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.task import Future
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
-from dam_common.config import load_config
 from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
+from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
@@ -69,6 +71,7 @@ from dam_spcm_controller.classification import (
 )
 from dam_spcm_controller.commands import JointCommand, JointMode
 from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.release import ReleaseMotion
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 
 #: JointMode of the core -> HandCommand.mode on the wire.
@@ -84,7 +87,8 @@ _OUTCOME_NAME = {DamGrasp.Result.OUTCOME_UNKNOWN: 'UNKNOWN',
                  DamGrasp.Result.OUTCOME_SUCCESS: 'SUCCESS',
                  DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED: 'LIFTED_DAM_FAILED',
                  DamGrasp.Result.OUTCOME_FAILURE: 'FAILURE',
-                 DamGrasp.Result.OUTCOME_ABORTED: 'ABORTED'}
+                 DamGrasp.Result.OUTCOME_ABORTED: 'ABORTED',
+                 DamGrasp.Result.OUTCOME_REJECTED: 'REJECTED'}
 
 #: name -> (SequenceParams attribute or None, description, lower, upper). Defaults come
 #: from the configuration file.
@@ -188,6 +192,8 @@ class SpcmControllerNode(Node):
         self._run_done: Future | None = None  # resolved when the running grasp has ended
         self._cancel_sent = False
         self._feedback = DamGrasp.Feedback()
+        self._release: ReleaseMotion | None = None  # letting go (~/release) when set
+        self._release_done: Future | None = None
 
         self._command_pub = self.create_publisher(HandCommand, '/hand/command', 10)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
@@ -200,6 +206,10 @@ class SpcmControllerNode(Node):
         self._action = ActionServer(
             self, DamGrasp, '/dam_grasp', execute_callback=self._execute,
             goal_callback=self._on_goal, cancel_callback=self._on_cancel)
+        # A callback group of its own: the release awaits the motion, and an awaiting callback
+        # holds its group (the default one would starve /joint_states meanwhile).
+        self._release_srv = self.create_service(Trigger, '~/release', self._on_release,
+                                                callback_group=MutuallyExclusiveCallbackGroup())
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # The control loop is this process's middleware threads plus its executor: all of
         # them real-time where permitted, below the driver's device thread (50).
@@ -286,6 +296,9 @@ class SpcmControllerNode(Node):
             self._last_state_time = now
             self._last_pos = pos
             self._last_eff = eff
+            if self._release is not None:
+                self._step_release(now, pos, msg)
+                return
             if self._state_timed_out:
                 return  # the grasp already failed; the zero-torque command stands
             try:
@@ -306,6 +319,89 @@ class SpcmControllerNode(Node):
         if phase_changed:
             self._publish_status()
         self._advance(feedback=phase_changed)
+
+    # ------------------------------------------------------------------------------------
+    # Release (~/release): let go of the object and open the hand
+
+    async def _on_release(self, _request: Trigger.Request, response: Trigger.Response
+                          ) -> Trigger.Response:
+        with self._lock:
+            if self._busy:
+                response.success = False
+                response.message = ('the hand is being released already'
+                                    if self._release is not None else
+                                    f'a grasp is running (phase {_phase_name(self._seq.phase)}):'
+                                    ' cancel its goal first')
+                return response
+            last = self._last_state_time
+            if last is None or time.monotonic() - last > self._values['state_timeout']:
+                response.success = False
+                response.message = 'no recent /joint_states: cannot release'
+                return response
+            held = self._last_cmd if self._publishing or self._seq.phase is Phase.DONE \
+                else None
+            self._release = ReleaseMotion(self._params, held, time.monotonic(),
+                                          self._last_pos)
+            self._release_done = Future()
+            self._busy = True
+            self._publishing = True
+            self._state_timed_out = False
+            done = self._release_done
+        self.get_logger().info('releasing: torques to zero, then opening the hand')
+        self._publish_status()
+        deadline = time.monotonic() + self._release_timeout()
+
+        def poll() -> None:
+            if done.done():
+                return
+            last_state = self._last_state_time or 0.0
+            if time.monotonic() > deadline or \
+                    time.monotonic() - last_state > self._values['state_timeout']:
+                self._end_release(False)
+
+        timer = create_steady_timer(self, 0.01, poll)
+        try:
+            ok = bool(await done)
+        finally:
+            self.destroy_timer(timer)
+        response.success = ok
+        response.message = ('released: every joint holds the open posture; the controller '
+                            'sends no command until the next goal' if ok else
+                            '/joint_states went silent during the release: it stopped, the '
+                            'hand keeps its last command')
+        (self.get_logger().info if ok else self.get_logger().error)(response.message)
+        return response
+
+    def _release_timeout(self) -> float:
+        """Longest time a release may take [s]: ramp, the widest opening, a margin."""
+        lay = self._layout
+        widest = float(lay.upper[lay.position].max() - lay.lower[lay.position].min())
+        return self._values['torque_ramp_time'] + 2.0 * widest / \
+            self._values['approach_speed'] + 2.0
+
+    def _step_release(self, now: float, pos: np.ndarray, msg: JointState) -> None:
+        """One step of the release; called with the lock held."""
+        release = self._release
+        assert release is not None
+        cmd = release.step(now, pos)
+        self._last_cmd = cmd
+        self._publish_command(cmd, msg.header.stamp)
+        if release.done:
+            self._end_release(True)
+
+    def _end_release(self, ok: bool) -> None:
+        with self._lock:
+            done = self._release_done
+            self._release = None
+            self._release_done = None
+            self._publishing = False  # the last command (all HOLD) stands at the driver
+            self._busy = False
+            if self._seq.phase.terminal:
+                self._seq.reset()
+            self._status_message = 'released' if ok else 'release stopped'
+        if done is not None and not done.done():
+            done.set_result(ok)
+        self._publish_status()
 
     def _publish_command(self, cmd: JointCommand, stamp=None) -> None:
         """Publish ``cmd``; ``stamp`` is that of the joint state it answers (now if None)."""
@@ -395,7 +491,7 @@ class SpcmControllerNode(Node):
             seq = self._seq
             msg = DamStatus()
             msg.header.stamp = self.get_clock().now().to_msg()
-            msg.phase = _phase_name(seq.phase)
+            msg.phase = 'RELEASING' if self._release is not None else _phase_name(seq.phase)
             msg.progress = float(seq.progress)
             msg.finger_names = [self._layout.finger_name(i)
                                 for i in range(self._layout.n_fingers)]
@@ -409,13 +505,17 @@ class SpcmControllerNode(Node):
     # Action
 
     def _validate_goal(self, goal: DamGrasp.Goal) -> tuple[float, float]:
-        """(k_theta of finger 1 [N*m/rad], delta_theta_p [rad]) or raise InputError."""
+        """(k_theta of finger 1 [N*m/rad], delta_theta_p [rad]) or raise InputError.
+
+        An empty ``k_theta`` or ``delta_theta_p`` means the configured one (``task:``).
+        """
         ratios = self._layout.stiffness_ratios
         n = self._layout.n_fingers
+        task = self._config.task
         try:
-            k = check_k_theta(list(goal.k_theta), ratios)
-            dp = check_delta_theta_p(list(goal.delta_theta_p), n,
-                                     self._config.task.delta_theta_p_max_rad)
+            k = check_k_theta(list(goal.k_theta) or [task.k_theta_nm_per_rad], ratios)
+            dp = check_delta_theta_p(list(goal.delta_theta_p) or [task.delta_theta_p_rad], n,
+                                     task.delta_theta_p_max_rad)
         except DamAnalysisError as exc:
             raise InputError(str(exc)) from exc
         expected = k[0] * ratios / ratios[0]
@@ -435,35 +535,26 @@ class SpcmControllerNode(Node):
                              'N*m/rad')
         return float(k[0]), float(dp[0])
 
-    def _on_goal(self, goal: DamGrasp.Goal) -> GoalResponse:
-        try:
-            self._validate_goal(goal)
-        except InputError as exc:
-            self._reject(f'goal rejected: {exc}')
-            return GoalResponse.REJECT
-        with self._lock:
-            if self._busy:
-                phase = _phase_name(self._seq.phase)
-                busy = True
-            else:
-                self._busy = True
-                busy = False
-        if busy:
-            self._reject(f'goal rejected: a grasp is already running (phase {phase})')
-            return GoalResponse.REJECT
+    def _on_goal(self, _goal: DamGrasp.Goal) -> GoalResponse:
+        # Every goal is accepted: one that cannot run is aborted at once with
+        # OUTCOME_REJECTED and the reason in its result, which every action client shows
+        # (a rejection carries no reason in ROS 2 actions).
         return GoalResponse.ACCEPT
 
-    def _reject(self, message: str) -> None:
-        self.get_logger().warning(message)
-        with self._lock:
-            self._status_message = message
-        self._publish_status()
+    def _refuse(self, goal_handle: ServerGoalHandle, reason: str, t0: float
+                ) -> DamGrasp.Result:
+        """End a goal that cannot run: ABORTED, OUTCOME_REJECTED, ``reason`` in the result."""
+        self.get_logger().warning(f'goal refused: {reason}')
+        return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_REJECTED,
+                            f'goal refused: {reason}', t0, owns_run=False)
 
     def _on_cancel(self, _goal_handle: ServerGoalHandle) -> CancelResponse:
         return CancelResponse.ACCEPT
 
-    async def _ask_check_lift(self, k: float, dp: float) -> CheckLift.Response | None:
-        """The /check_lift answer for the pair, or ``None`` if none came within the timeout."""
+    async def _ask_check_lift(self, k: float, dp: float, goal_handle: ServerGoalHandle
+                              ) -> CheckLift.Response | None:
+        """The /check_lift answer for the pair, or ``None`` if none came within the timeout
+        or the goal was cancelled meanwhile."""
         request = CheckLift.Request()
         request.k_theta = [k]
         request.delta_theta_p = [dp]
@@ -483,7 +574,8 @@ class SpcmControllerNode(Node):
                 call = self._check_lift.call_async(request)
                 sent.append(call)
                 call.add_done_callback(on_answer)
-            if time.monotonic() >= deadline and not answer.done():
+            if (time.monotonic() >= deadline or goal_handle.is_cancel_requested) \
+                    and not answer.done():
                 answer.set_result(None)
 
         timer = create_steady_timer(self, 0.02, poll)
@@ -493,8 +585,9 @@ class SpcmControllerNode(Node):
         finally:
             self.destroy_timer(timer)
 
-    async def _fresh_state(self, wait_s: float) -> bool:
-        """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``."""
+    async def _fresh_state(self, wait_s: float, goal_handle: ServerGoalHandle) -> bool:
+        """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``; ``False``
+        also when the goal is cancelled meanwhile."""
         fresh: Future = Future()
         deadline = time.monotonic() + wait_s
 
@@ -505,7 +598,7 @@ class SpcmControllerNode(Node):
             now = time.monotonic()
             if last is not None and now - last <= self._values['state_timeout']:
                 fresh.set_result(True)
-            elif now >= deadline:
+            elif now >= deadline or goal_handle.is_cancel_requested:
                 fresh.set_result(False)
 
         timer = create_steady_timer(self, 0.01, poll)
@@ -516,16 +609,17 @@ class SpcmControllerNode(Node):
             self.destroy_timer(timer)
 
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
-                t0: float) -> DamGrasp.Result:
+                t0: float, owns_run: bool = True) -> DamGrasp.Result:
         result = DamGrasp.Result()
         result.outcome = outcome
         result.outcome_name = _OUTCOME_NAME[outcome]
         result.message = message
         result.duration = time.monotonic() - t0
         with self._lock:
-            self._outcome = outcome
             self._status_message = message
-            self._busy = False
+            if owns_run:
+                self._outcome = outcome
+                self._busy = False
         if status == 'succeed':
             goal_handle.succeed()
         elif status == 'canceled':
@@ -545,7 +639,20 @@ class SpcmControllerNode(Node):
     async def _execute(self, goal_handle: ServerGoalHandle) -> DamGrasp.Result:
         t0 = time.monotonic()
         try:
-            return await self._run_goal(goal_handle, t0)
+            k, dp = self._validate_goal(goal_handle.request)
+        except InputError as exc:
+            return self._refuse(goal_handle, str(exc), t0)
+        with self._lock:
+            busy = self._busy
+            if busy:
+                activity = ('the hand is being released' if self._release is not None
+                            else f'a grasp is already running (phase '
+                                 f'{_phase_name(self._seq.phase)})')
+            self._busy = True
+        if busy:
+            return self._refuse(goal_handle, activity, t0)
+        try:
+            return await self._run_goal(goal_handle, k, dp, t0)
         except Exception as exc:  # noqa: BLE001 - the node must stay up and accept goals
             self.get_logger().error(f'internal error during the grasp: {exc!r}')
             with self._lock:
@@ -555,19 +662,19 @@ class SpcmControllerNode(Node):
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_ABORTED,
                                 f'internal error: {exc!r}', t0)
 
-    async def _run_goal(self, goal_handle: ServerGoalHandle, t0: float) -> DamGrasp.Result:
+    async def _run_goal(self, goal_handle: ServerGoalHandle, k: float, dp: float, t0: float
+                        ) -> DamGrasp.Result:
         aborted = DamGrasp.Result.OUTCOME_ABORTED
-        try:
-            k, dp = self._validate_goal(goal_handle.request)
-        except InputError as exc:  # validated on arrival; kept as a guard
-            return self._finish(goal_handle, 'abort', aborted, str(exc), t0)
         with self._lock:
             self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN
             self._status_message = (f'grasp k_theta {k:g} N*m/rad, delta_theta_p '
                                     f'{math.degrees(dp):.4g} deg')
         feedback = DamGrasp.Feedback()
         feedback.phase = 'CHECK_LIFT'
-        answer = await self._ask_check_lift(k, dp)
+        answer = await self._ask_check_lift(k, dp, goal_handle)
+        if goal_handle.is_cancel_requested:
+            return self._finish(goal_handle, 'canceled', aborted,
+                                'cancelled before the hand moved', t0)
         if answer is not None and answer.ok:
             feedback.lift_checked = True
             feedback.lift_guaranteed = bool(answer.lift_guaranteed)
@@ -590,7 +697,11 @@ class SpcmControllerNode(Node):
                     f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
                     f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
                     f'(worst-case margin {answer.worst_case_margin:.4g} N)', t0)
-        if not await self._fresh_state(_START_STATE_WAIT_S):
+        fresh = await self._fresh_state(_START_STATE_WAIT_S, goal_handle)
+        if goal_handle.is_cancel_requested:
+            return self._finish(goal_handle, 'canceled', aborted,
+                                'cancelled before the hand moved', t0)
+        if not fresh:
             return self._finish(goal_handle, 'abort', aborted,
                                 f'no /joint_states within {_START_STATE_WAIT_S:g} s: '
                                 'cannot start the grasp', t0)
@@ -630,10 +741,12 @@ class SpcmControllerNode(Node):
             c = classify_from_joints(self._geometry, self._layout.lower, self._layout.upper,
                                      pos, eff, self._classifier, self._layout.joint_names)
         except Exception as exc:  # noqa: BLE001 - the node must stay up whatever happens
-            return self._finish(goal_handle, 'succeed', DamGrasp.Result.OUTCOME_UNKNOWN,
+            return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
                                 f'grasp done, classification failed: {exc!r}', t0)
-        return self._finish(goal_handle, 'succeed', _OUTCOME[c.outcome],
-                            f'grasp done: {c.reason}', t0)
+        outcome = _OUTCOME[c.outcome]
+        # Goal status SUCCEEDED means the outcome SUCCESS, for every generic action client.
+        status = 'succeed' if outcome == DamGrasp.Result.OUTCOME_SUCCESS else 'abort'
+        return self._finish(goal_handle, status, outcome, f'grasp done: {c.reason}', t0)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -6,7 +6,12 @@
 
 Prints the feedback phases as they change (with the ``/check_lift`` answer) and the result.
 Exit codes: 0 the outcome is SUCCESS; 3 any other outcome (not lifted, lifted but not
-enveloped, aborted, cancelled); 2 the goal was rejected (or bad arguments); 1 no action server.
+enveloped, aborted, cancelled, or stopped by SIGINT/SIGTERM); 2 the goal was refused (its
+reason is printed) or bad arguments; 1 no action server.
+
+SIGINT (Ctrl-C) or SIGTERM while the goal runs cancels it: the client waits up to
+``--cancel-timeout`` seconds for the controller to confirm, prints how the goal ended, and
+exits with 3.
 """
 
 from __future__ import annotations
@@ -66,29 +71,55 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
                    help='how long to wait for the action server [s] (default 10)')
     p.add_argument('--timeout', type=_positive, default=120.0, metavar='S',
                    help='how long to wait for the result [s] (default 120)')
+    p.add_argument('--cancel-timeout', type=_positive, default=5.0, metavar='S',
+                   help='on SIGINT/SIGTERM, how long to wait for the cancel to be confirmed '
+                        '[s] (default 5)')
     return p.parse_args(list(argv))
 
 
 def run(args: argparse.Namespace) -> int:
     """Send the goal described by ``args``; return the exit code."""
     import rclpy
+    from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
+    from dam_common.shutdown import catch_signals
     from dam_interfaces.action import DamGrasp
 
+    _STATUS = {GoalStatus.STATUS_SUCCEEDED: 'SUCCEEDED', GoalStatus.STATUS_ABORTED: 'ABORTED',
+               GoalStatus.STATUS_CANCELED: 'CANCELED'}
+    shutdown = catch_signals()
     context = rclpy.Context()
-    rclpy.init(args=[], context=context)
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('dam_grasp_client', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     client = ActionClient(node, DamGrasp, '/dam_grasp')
 
-    def spin_until(future, timeout: float) -> bool:
+    def spin_until(future, timeout: float, interruptible: bool = True) -> bool:
+        """Spin until ``future`` is done, ``timeout`` [s] passed or (if ``interruptible``) a
+        stop was requested."""
         deadline = time.monotonic() + timeout
         while not future.done() and time.monotonic() < deadline:
+            if interruptible and shutdown.requested:
+                break
             executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
         return future.done()
+
+    def cancel_on_signal(handle, result_future) -> int:
+        print(f'[{time.monotonic() - t0:7.2f} s] {shutdown.signal_name or "stop"}: cancelling '
+              f'the goal', flush=True)
+        spin_until(handle.cancel_goal_async(), args.cancel_timeout, interruptible=False)
+        if spin_until(result_future, args.cancel_timeout, interruptible=False):
+            wrapped = result_future.result()
+            print(f'result: {_STATUS.get(wrapped.status, wrapped.status)}, '
+                  f'{wrapped.result.outcome_name} ({wrapped.result.message})', flush=True)
+        else:
+            print(f'dam_grasp: the cancel was not confirmed within {args.cancel_timeout:g} s',
+                  file=sys.stderr)
+        return EXIT_OTHER_OUTCOME
 
     last = {'phase': None}
 
@@ -106,7 +137,9 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.monotonic()
     try:
-        if not client.wait_for_server(timeout_sec=args.server_timeout):
+        if not spin_until_server(client, executor, args.server_timeout, shutdown):
+            if shutdown.requested:
+                return EXIT_OTHER_OUTCOME
             print(f'dam_grasp: no action server /dam_grasp within {args.server_timeout:g} s',
                   file=sys.stderr)
             return EXIT_NO_SERVER
@@ -116,27 +149,35 @@ def run(args: argparse.Namespace) -> int:
               f'{math.degrees(args.delta_theta_p):.4g} deg', flush=True)
         t0 = time.monotonic()
         send = client.send_goal_async(goal, feedback_callback=on_feedback)
-        if not spin_until(send, 10.0):
+        # The answer to the goal is waited for even after a signal: the goal must be known
+        # to be cancelled.
+        if not spin_until(send, 10.0, interruptible=False):
             print('dam_grasp: the server did not answer the goal within 10 s', file=sys.stderr)
             return EXIT_NO_SERVER
         handle = send.result()
         if not handle.accepted:
-            print('dam_grasp: goal rejected (see /dam/status or the controller log for why)',
-                  file=sys.stderr)
+            print('dam_grasp: goal rejected by the server', file=sys.stderr)
             return EXIT_REJECTED
         result_future = handle.get_result_async()
         if args.cancel_after is not None:
             spin_until(result_future, args.cancel_after)
-            if not result_future.done():
+            if not result_future.done() and not shutdown.requested:
                 print(f'[{time.monotonic() - t0:7.2f} s] cancelling', flush=True)
-                spin_until(handle.cancel_goal_async(), 5.0)
+                spin_until(handle.cancel_goal_async(), 5.0, interruptible=False)
         if not spin_until(result_future, args.timeout):
+            if shutdown.requested:
+                return cancel_on_signal(handle, result_future)
             print(f'dam_grasp: no result within {args.timeout:g} s; cancelling',
                   file=sys.stderr)
-            spin_until(handle.cancel_goal_async(), 5.0)
+            spin_until(handle.cancel_goal_async(), 5.0, interruptible=False)
             return EXIT_OTHER_OUTCOME
-        result = result_future.result().result
-        print(f'result: {result.outcome_name} ({result.message}); duration '
+        wrapped = result_future.result()
+        result = wrapped.result
+        if result.outcome == DamGrasp.Result.OUTCOME_REJECTED:
+            print(f'dam_grasp: {result.message}', file=sys.stderr)
+            return EXIT_REJECTED
+        print(f'result: {result.outcome_name} ({result.message}); status '
+              f'{_STATUS.get(wrapped.status, wrapped.status)}; duration '
               f'{result.duration:.2f} s', flush=True)
         ok = result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
         return EXIT_SUCCESS if ok else EXIT_OTHER_OUTCOME
@@ -145,6 +186,16 @@ def run(args: argparse.Namespace) -> int:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def spin_until_server(client, executor, timeout_s: float, shutdown) -> bool:
+    """Wait for the action server (spinning ``executor``) up to ``timeout_s`` [s] or a stop."""
+    deadline = time.monotonic() + timeout_s
+    while not client.server_is_ready():
+        if shutdown.requested or time.monotonic() >= deadline:
+            return False
+        executor.spin_once(timeout_sec=0.05)
+    return True
 
 
 def main(argv: Sequence[str] | None = None) -> None:
