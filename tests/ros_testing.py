@@ -105,6 +105,38 @@ def free_udp_ports(n: int) -> list[int]:
             sock.close()
 
 
+def config_with_free_ports(directory: str | os.PathLike[str]) -> Path:
+    """The repository's config/dam.yaml with a device link on free UDP ports, written into
+    ``directory``: a driver or stand-in started with it meets no other run's device."""
+    import yaml
+
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
+    path = Path(directory) / 'dam.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return path
+
+
+def caught_signals(pid: int) -> set[int]:
+    """Signal numbers process ``pid`` has handlers for (``SigCgt`` of /proc/PID/status)."""
+    for line in Path(f'/proc/{pid}/status').read_text(encoding='ascii').splitlines():
+        if line.startswith('SigCgt:'):
+            mask = int(line.split()[1], 16)
+            return {n for n in range(1, 65) if mask & (1 << (n - 1))}
+    return set()
+
+
+def child_pids(pid: int) -> list[int]:
+    """PIDs of the direct children of process ``pid`` (from /proc; empty once it is gone)."""
+    out: list[int] = []
+    try:
+        for task in Path(f'/proc/{pid}/task').iterdir():
+            out += [int(c) for c in (task / 'children').read_text().split()]
+    except (FileNotFoundError, ProcessLookupError):
+        pass
+    return out
+
+
 def _proc_stat(path: str | os.PathLike[str]) -> list[str]:
     """The fields of a /proc ``stat`` file after the command name (field 3 onwards)."""
     return Path(path).read_text(encoding='ascii').rsplit(')', 1)[1].split()

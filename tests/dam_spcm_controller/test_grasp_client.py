@@ -31,10 +31,16 @@ def test_arguments() -> None:
     assert args.cancel_after == 2.0
 
 
+def test_the_pair_defaults_to_the_configured_one() -> None:
+    args = _parse(['--k-theta', '7'])
+    assert args.k_theta == 7.0 and args.delta_theta_p is None
+    args = _parse([])
+    assert args.k_theta is None and args.delta_theta_p is None
+
+
 @pytest.mark.parametrize('argv', [
     ['--k-theta', '0', '--delta-theta-p', '40deg'],
     ['--k-theta', '-1', '--delta-theta-p', '40deg'],
-    ['--k-theta', '7'],
     ['--k-theta', '7', '--delta-theta-p', 'x'],
     ['--k-theta', '7', '--delta-theta-p', '40deg', '--cancel-after', '-1']])
 def test_bad_arguments_exit_2(argv: list[str]) -> None:

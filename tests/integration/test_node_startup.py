@@ -4,6 +4,7 @@ validate, a parameter override of the wrong type or out of its range."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 from pathlib import Path
 
@@ -65,3 +66,46 @@ def test_a_bad_parameter_override_is_refused_by_name(package: str, executable: s
                                                       override: str, word: str) -> None:
     proc = _start(package, executable, '-p', override)
     _assert_refused(proc, 1, word)
+
+
+@pytest.mark.parametrize(('package', 'executable', 'status'), NODES)
+def test_a_malformed_params_file_is_one_line_naming_it(tmp_path: Path, package: str,
+                                                       executable: str, status: int) -> None:
+    bad = tmp_path / 'params.yaml'
+    bad.write_text(f'{executable}:\n  ros__parameters:\n    config_file: [unclosed\n',
+                   encoding='utf-8')
+    proc = _start(package, executable, '--params-file', str(bad))
+    _assert_refused(proc, status, str(bad))
+    fatal = [line for line in (proc.stdout + proc.stderr).splitlines() if 'FATAL' in line]
+    assert len(fatal) == 1, proc.stdout + proc.stderr
+
+
+def test_an_override_that_matches_no_parameter_is_warned_about(tmp_path: Path) -> None:
+    """A misspelled name in a params file or a -p override: the node starts and says which."""
+    params = tmp_path / 'params.yaml'
+    params.write_text('check_lift_server:\n  ros__parameters:\n    default_fiction_angle: 0.1\n',
+                      encoding='utf-8')
+    cmd = [str(installed_executable('dam_analysis', 'check_lift_server')), '--ros-args',
+           '--params-file', str(params), '-p', 'defualt_friction_angle:=0.2',
+           '-p', 'default_friction_angle:=0.1']
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            stdin=subprocess.DEVNULL)
+    lines: list[str] = []
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            if 'serving' in line:
+                break
+        proc.send_signal(signal.SIGINT)
+        rest, _ = proc.communicate(timeout=10.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    output = ''.join(lines) + rest
+    assert proc.returncode == 0, output
+    warnings = [line for line in output.splitlines() if 'matches no parameter' in line]
+    assert len(warnings) == 2, output
+    assert any("'default_fiction_angle'" in w for w in warnings)
+    assert any("'defualt_friction_angle'" in w for w in warnings)

@@ -46,7 +46,6 @@ from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.utilities import remove_ros_args
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
@@ -219,9 +218,27 @@ class SimBridgeNode(Node):
         super().destroy_node()
 
 
+def non_ros_args(argv: list[str]) -> list[str]:
+    """The arguments of ``argv`` (program name first) outside ``--ros-args ... [--]``.
+
+    Parsed here rather than by rclpy, so that a malformed ROS argument is reported once, by
+    :func:`~dam_common.node.run_node`, as one line.
+    """
+    out: list[str] = []
+    in_ros = False
+    for arg in argv[1:]:
+        if arg == '--ros-args':
+            in_ros = True
+        elif arg == '--' and in_ros:
+            in_ros = False
+        elif not in_ros:
+            out.append(arg)
+    return out
+
+
 def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
-    gui_flag = '--gui' in remove_ros_args(args=argv)[1:]
+    gui_flag = '--gui' in non_ros_args(argv)
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
              startup_errors=(SimBridgeError, OSError),
              switch_interval_s=SWITCH_INTERVAL_S)

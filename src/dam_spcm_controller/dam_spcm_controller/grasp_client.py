@@ -2,7 +2,7 @@
 
 ::
 
-    ros2 run dam_spcm_controller dam_grasp --k-theta 7 --delta-theta-p 40deg [--cancel-after S]
+    ros2 run dam_spcm_controller dam_grasp [--k-theta 7] [--delta-theta-p 40deg] [--cancel-after S]
 
 Prints the feedback phases as they change (with the ``/check_lift`` answer) and the result.
 Exit codes: 0 the outcome is SUCCESS; 3 any other outcome (not lifted, lifted but not
@@ -61,10 +61,12 @@ def _positive(text: str) -> float:
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog='dam_grasp', description='Run one DAM grasp on /dam_grasp and print the result.')
-    p.add_argument('--k-theta', type=_positive, required=True,
-                   help='finger-1 compliant-joint stiffness [N*m/rad]')
-    p.add_argument('--delta-theta-p', type=parse_angle, required=True,
-                   help='position-joint displacement, e.g. 40deg or 0.7rad (plain: rad)')
+    p.add_argument('--k-theta', type=_positive, default=None,
+                   help='finger-1 compliant-joint stiffness [N*m/rad] (default: the '
+                        "controller's configured one)")
+    p.add_argument('--delta-theta-p', type=parse_angle, default=None,
+                   help='position-joint displacement, e.g. 40deg or 0.7rad (plain: rad; '
+                        "default: the controller's configured one)")
     p.add_argument('--cancel-after', type=_positive, default=None, metavar='S',
                    help='cancel the goal this many seconds after it was accepted')
     p.add_argument('--server-timeout', type=_positive, default=10.0, metavar='S',
@@ -143,10 +145,15 @@ def run(args: argparse.Namespace) -> int:
             print(f'dam_grasp: no action server /dam_grasp within {args.server_timeout:g} s',
                   file=sys.stderr)
             return EXIT_NO_SERVER
-        goal = DamGrasp.Goal(k_theta=[float(args.k_theta)],
-                             delta_theta_p=[float(args.delta_theta_p)])
-        print(f'goal: k_theta {args.k_theta:g} N*m/rad, delta_theta_p '
-              f'{math.degrees(args.delta_theta_p):.4g} deg', flush=True)
+        goal = DamGrasp.Goal()  # a field left empty: the controller's configured value
+        if args.k_theta is not None:
+            goal.k_theta = [float(args.k_theta)]
+        if args.delta_theta_p is not None:
+            goal.delta_theta_p = [float(args.delta_theta_p)]
+        k_text = 'configured' if args.k_theta is None else f'{args.k_theta:g} N*m/rad'
+        dp_text = ('configured' if args.delta_theta_p is None else
+                   f'{math.degrees(args.delta_theta_p):.4g} deg')
+        print(f'goal: k_theta {k_text}, delta_theta_p {dp_text}', flush=True)
         t0 = time.monotonic()
         send = client.send_goal_async(goal, feedback_callback=on_feedback)
         # The answer to the goal is waited for even after a signal: the goal must be known
