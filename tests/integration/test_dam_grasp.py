@@ -62,7 +62,6 @@ class _Grasper:
                                  lambda m: setattr(self, 'command', m), 10)
         node.create_subscription(JointState, '/joint_states',
                                  lambda m: setattr(self, 'joint_state', m), 10)
-        self.hold_pub = node.create_publisher(HandCommand, '/hand/command', 10)
         self.action = ActionClient(node, DamGrasp, '/dam_grasp')
         self.goal_type = DamGrasp.Goal
 
@@ -175,32 +174,32 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper) -> None:
     held = stack.z_between(t_end, math.inf)
     assert len(held) > 50
     assert min(held) - z_table > LIFT_M, f'dropped to {(min(held) - z_table) * 1e3:.2f} mm'
+    # Let go with the one documented call; a world reset afterwards stays as reset (before,
+    # the held grasp re-grasped the reset object at once).
+    from std_srvs.srv import Trigger
+
+    released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
+                                 timeout=30.0)
+    assert released.success, released.message
+    assert stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request()).success
+    stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
+    t_reset = time.monotonic()
+    stack.client.spin_until(lambda: False, 2.0)
+    after = stack.z_between(t_reset + 0.5, math.inf)
+    assert after and max(abs(z - z_table) for z in after) < 0.001, \
+        f'object at {max(after) * 1e3:.2f} mm after the reset (table {z_table * 1e3:.2f} mm)'
 
 
 def _reset_world(stack: _Grasper) -> None:
-    """Relax the hand, hold it, put the object back on the table and open the hand. The
-    reset can stall the stand-in for longer than the driver's state timeout; then the driver
-    is in ERROR and is brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
+    """Let go (the controller's ~/release: every joint ends in HOLD and the controller stops
+    commanding), put the object back on the table and open the hand. The reset can stall the
+    stand-in for longer than the driver's state timeout; then the driver is in ERROR and is
+    brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
     from std_srvs.srv import Trigger
 
-    from dam_interfaces.msg import HandCommand
-
-    # The controller keeps commanding the last grasp's hold (DONE); a reset world would be hit
-    # by it. A goal cancelled at once relaxes the hand, and the controller stops publishing.
-    handle = stack.send(0.5, math.radians(1.0))
-    assert stack.client.wait_future(handle.cancel_goal_async(), 5.0)
-    stack.result(handle, 10.0)
-    stack.client.spin_until(lambda: False, 0.2)
-    # A relaxed (zero-torque) compliant joint of the frictionless simulator swings like a
-    # pendulum: after the reset it would swing from -10 deg through the contact angle (about
-    # +5 deg) and knock the object away within a second. Every joint HOLDs instead, so the
-    # reset world keeps its open posture until the next grasp begins.
-    hold = HandCommand(name=list(stack.joint_state.name),
-                       mode=[HandCommand.MODE_HOLD] * len(stack.joint_state.name),
-                       setpoint=[0.0] * len(stack.joint_state.name))
-    for _ in range(3):
-        stack.hold_pub.publish(hold)
-        stack.client.spin_until(lambda: False, 0.05)
+    released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
+                                 timeout=30.0)
+    assert released.success, released.message
     reset = stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
     assert reset.success, reset.message
     stack.client.spin_until(lambda: False, 0.3)
@@ -253,7 +252,7 @@ def test_dam_grasp_executable_exit_codes(stack: _Grasper) -> None:
     SUCCESS is checked by hand: see docs/simulation_grasp.md)."""
     rejected = _dam_grasp('--k-theta', '7', '--delta-theta-p', '100deg')
     assert rejected.returncode == 2, rejected.stdout + rejected.stderr
-    assert 'rejected' in rejected.stderr
+    assert 'goal refused' in rejected.stderr and 'delta_theta_p' in rejected.stderr
 
     _reset_world(stack)
     cancelled = _dam_grasp('--k-theta', '10', '--delta-theta-p', '10deg', '--cancel-after',

@@ -7,12 +7,9 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import catch_signals
+from dam_common.shutdown import run_node_entry
 
 
 def check_lift_server() -> None:
     """``ros2 run dam_analysis check_lift_server``: the /check_lift server."""
-    catch_signals()
-    from dam_analysis.check_lift_server import main
-
-    main()
+    run_node_entry('dam_analysis.check_lift_server')

@@ -154,8 +154,8 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
 
     - SIGINT and SIGTERM at any moment, from the entry point's first line on (see
       :mod:`dam_common.shutdown`), end the process with status 0 and no traceback: during
-      start-up once the step under way is done (long waits check for it), while running
-      between two callbacks. ``node.destroy_node()`` (which stops the node's own threads and
+      start-up at once (what the node built so far is destroyed), while running between two
+      callbacks. ``node.destroy_node()`` (which stops the node's own threads and
       child processes) runs before the ROS context is shut down, so no thread ever publishes
       on a context that is gone.
     - A bad configuration (:class:`~dam_common.errors.DamCommonError`, or one of
@@ -175,36 +175,42 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     """
     shutdown = catch_signals()
     logger = rclpy.logging.get_logger(name)
-    if shutdown.requested:
-        return
-    try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except _rclpy.RCLError as exc:
-        logger.fatal(f'cannot start: {_rcl_error_text(exc, args)}')
-        raise SystemExit(startup_exit_code) from None
     node = None
     try:
         try:
-            node = make_node()
-        except StartupInterrupted:
-            return
-        except (*startup_errors, DamCommonError, ParameterException) as exc:
-            logger.fatal(f'cannot start: {exc}')
-            raise SystemExit(startup_exit_code) from None
-        except _rclpy.RCLError as exc:
-            logger.fatal(f'cannot start: {_rcl_error_text(exc, args)}')
-            raise SystemExit(startup_exit_code) from None
-        harden_parameter_services(node)
-        guard_service_callbacks(node)
-        for override in unmatched_overrides(node):
-            node.get_logger().warning(
-                f'parameter override {override!r} matches no parameter of this node: ignored '
-                f'(misspelled? `ros2 param list {node.get_fully_qualified_name()}` lists them)')
+            shutdown.raise_if_requested()
+            try:
+                rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+                node = make_node()
+            except (*startup_errors, DamCommonError, ParameterException) as exc:
+                logger.fatal(f'cannot start: {exc}')
+                raise SystemExit(startup_exit_code) from None
+            except _rclpy.RCLError as exc:
+                if shutdown.requested:
+                    raise StartupInterrupted(shutdown.signal_name) from None
+                logger.fatal(f'cannot start: {_rcl_error_text(exc, args)}')
+                raise SystemExit(startup_exit_code) from None
+            except Exception:
+                if shutdown.requested:  # the interrupt surfaced as another error
+                    raise StartupInterrupted(shutdown.signal_name) from None
+                raise
+            harden_parameter_services(node)
+            guard_service_callbacks(node)
+            for override in unmatched_overrides(node):
+                node.get_logger().warning(
+                    f'parameter override {override!r} matches no parameter of this node: '
+                    f'ignored (misspelled? `ros2 param list {node.get_fully_qualified_name()}` '
+                    'lists them)')
+        finally:
+            shutdown.started()  # from here on a signal asks; it never interrupts
         if switch_interval_s is not None:
             sys.setswitchinterval(switch_interval_s)
         gc.freeze()  # no gc.collect() first: a full collection could stall a running thread
         spin_until_shutdown(node, shutdown)
+    except StartupInterrupted:
+        pass  # stopped while starting: what was built is torn down below, status 0
     finally:
+        shutdown.started()
         if node is not None:
             node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.try_shutdown()  # a no-op where init never ran

@@ -1,17 +1,25 @@
 """SIGINT and SIGTERM as a request to stop, honoured at any moment of a node's life (no rclpy).
 
-An executable catches both signals from its first line (:func:`catch_signals`, called by the
-package's entry point before the heavy imports). A signal then only records the request; the
-node's code looks at it where it can stop cleanly: :func:`~dam_common.node.run_node` between
-callbacks, long start-up waits through :meth:`ShutdownRequest.raise_if_requested`. Nothing is
-interrupted half-way, so nothing is left half-done: no traceback, no thread publishing on a
-context that is gone.
+A node's executable catches both signals from its first line (:func:`run_node_entry`, the
+package's entry point, before the heavy imports). What a signal does then depends on the
+moment:
+
+- while the node starts (imports, building the node: seconds on a loaded machine), the first
+  signal raises :class:`StartupInterrupted` wherever the interpreter is, like
+  ``KeyboardInterrupt``; :func:`~dam_common.node.run_node` and the node's own constructor clean
+  up what was started and the process exits with status 0;
+- once it runs, a signal only records the request; :func:`~dam_common.node.run_node` looks at
+  it between two callbacks, so no callback is interrupted half-way and no thread publishes on a
+  context that is gone.
 """
 
 from __future__ import annotations
 
+import importlib
 import signal
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import FrameType
 
 #: The signals that ask a node to stop.
@@ -31,6 +39,7 @@ class ShutdownRequest:
         self._event = threading.Event()
         self._signal: signal.Signals | None = None
         self._installed = False
+        self._interrupt = False  # a signal raises StartupInterrupted (once)
 
     @property
     def requested(self) -> bool:
@@ -58,8 +67,33 @@ class ShutdownRequest:
         if self._event.is_set():
             raise StartupInterrupted(self.signal_name)
 
-    def install(self) -> bool:
-        """Handle SIGINT and SIGTERM by recording the request (idempotent).
+    @property
+    def interrupting(self) -> bool:
+        """True while a signal raises :class:`StartupInterrupted` (the node is starting)."""
+        return self._interrupt
+
+    @contextmanager
+    def uninterrupted(self) -> Iterator[None]:
+        """A start-up step that must not be cut in two (e.g. creating an object whose
+        destructor cannot cope with a half-built one): a signal meanwhile only records the
+        request, and :class:`StartupInterrupted` is raised once the step is done."""
+        interrupting = self._interrupt
+        self._interrupt = False
+        try:
+            yield
+        finally:
+            self._interrupt = interrupting and not self._event.is_set()
+        if interrupting and self._event.is_set():
+            raise StartupInterrupted(self.signal_name)
+
+    def started(self) -> None:
+        """From now on a signal only records the request (the node runs)."""
+        self._interrupt = False
+
+    def install(self, interrupt_startup: bool = False) -> bool:
+        """Handle SIGINT and SIGTERM by recording the request (idempotent); with
+        ``interrupt_startup`` the first signal also raises :class:`StartupInterrupted` until
+        :meth:`started`.
 
         Returns
         -------
@@ -67,24 +101,46 @@ class ShutdownRequest:
             ``False`` where handlers cannot be installed (not the main thread of the main
             interpreter): the signals keep their previous handling.
         """
-        if self._installed:
-            return True
         if threading.current_thread() is not threading.main_thread():
             return False
+        if interrupt_startup and not self._event.is_set():
+            self._interrupt = True
+        if self._installed:
+            return True
         for sig in STOP_SIGNALS:
             signal.signal(sig, self._on_signal)
         self._installed = True
         return True
 
     def _on_signal(self, signum: int, _frame: FrameType | None) -> None:
+        first = not self._event.is_set()
         self.request(signum)
+        if first and self._interrupt:
+            self._interrupt = False
+            raise StartupInterrupted(self.signal_name)
 
 
 #: The one request of this process.
 SHUTDOWN = ShutdownRequest()
 
 
-def catch_signals() -> ShutdownRequest:
+def catch_signals(interrupt_startup: bool = False) -> ShutdownRequest:
     """Install the handlers of :data:`SHUTDOWN` (from the main thread) and return it."""
-    SHUTDOWN.install()
+    SHUTDOWN.install(interrupt_startup)
     return SHUTDOWN
+
+
+def run_node_entry(module: str) -> None:
+    """Entry point of a node executable: catch SIGINT and SIGTERM, then import ``module`` and
+    call its ``main()`` (which runs :func:`~dam_common.node.run_node`). A signal during the
+    import ends the process quietly with status 0."""
+    catch_signals(interrupt_startup=True)
+    try:
+        main = importlib.import_module(module).main
+    except StartupInterrupted:
+        return
+    except Exception:
+        if SHUTDOWN.requested:
+            return  # the interrupt surfaced as another error (a C extension's init wraps it)
+        raise
+    main()

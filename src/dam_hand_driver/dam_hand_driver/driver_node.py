@@ -319,8 +319,11 @@ class HandDriverNode(Node):
                f'thread_priority:={self.thread_priority}']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
+        # A session of its own: Ctrl-C in the terminal reaches the driver only, which stops the
+        # stand-in itself (a signal in the stand-in's first milliseconds, before it handles
+        # signals, would end it with a traceback); it dies with the driver however that dies.
         self._child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,
-                                       preexec_fn=die_with_parent)
+                                       preexec_fn=die_with_parent, start_new_session=True)
         self.get_logger().warning(
             f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
             f'(PID {self._child.pid})')
@@ -350,7 +353,8 @@ class HandDriverNode(Node):
         child, self._child = self._child, None
         if child is None or child.poll() is not None:
             return
-        child.send_signal(signal.SIGINT)
+        # SIGTERM: a clean stop once the stand-in handles it, a silent end before that.
+        child.send_signal(signal.SIGTERM)
         try:
             child.wait(timeout=5.0)
         except subprocess.TimeoutExpired:

@@ -7,12 +7,9 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import catch_signals
+from dam_common.shutdown import run_node_entry
 
 
 def hand_driver() -> None:
     """``ros2 run dam_hand_driver hand_driver``: the driver node."""
-    catch_signals()
-    from dam_hand_driver.driver_node import main
-
-    main()
+    run_node_entry('dam_hand_driver.driver_node')

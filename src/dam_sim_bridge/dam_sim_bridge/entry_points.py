@@ -7,12 +7,9 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import catch_signals
+from dam_common.shutdown import run_node_entry
 
 
 def sim_bridge() -> None:
     """``ros2 run dam_sim_bridge sim_bridge``: the PyBullet stand-in node."""
-    catch_signals()
-    from dam_sim_bridge.sim_bridge_node import main
-
-    main()
+    run_node_entry('dam_sim_bridge.sim_bridge_node')

@@ -53,6 +53,7 @@ from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
+from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -102,12 +103,13 @@ class SimBridgeNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._config = load_config(config_file or None)
-        world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
-        try:
-            self._device = SimDevice(self._config, world)
-        except BaseException:
-            world.close()
-            raise
+        with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
+            world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
+            try:
+                self._device = SimDevice(self._config, world)
+            except BaseException:
+                world.close()
+                raise
         self._thread = threading.Thread(target=self._run_device, name='sim_device',
                                         daemon=True)
         self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose', 10)

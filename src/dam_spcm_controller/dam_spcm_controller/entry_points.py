@@ -7,15 +7,12 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import catch_signals
+from dam_common.shutdown import catch_signals, run_node_entry
 
 
 def spcm_controller() -> None:
     """``ros2 run dam_spcm_controller spcm_controller``: the controller node."""
-    catch_signals()
-    from dam_spcm_controller.controller_node import main
-
-    main()
+    run_node_entry('dam_spcm_controller.controller_node')
 
 
 def dam_grasp() -> None:

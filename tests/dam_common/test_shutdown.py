@@ -1,0 +1,101 @@
+"""ShutdownRequest: a signal interrupts a start-up once, and only records a stop request later."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+from collections.abc import Iterator
+
+import pytest
+
+from dam_common.shutdown import STOP_SIGNALS, ShutdownRequest, StartupInterrupted
+
+
+@pytest.fixture
+def restore_handlers() -> Iterator[None]:
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
+
+
+@pytest.mark.parametrize('signum', STOP_SIGNALS)
+def test_a_signal_while_running_only_records_the_request(restore_handlers, signum) -> None:
+    request = ShutdownRequest()
+    assert request.install()
+    assert not request.requested and request.signal_name == ''
+    signal.raise_signal(signum)  # no exception
+    assert request.requested and request.signal_name == signum.name
+    assert request.wait(0.0)
+
+
+def test_the_first_signal_interrupts_a_start_up_and_only_the_first(restore_handlers) -> None:
+    request = ShutdownRequest()
+    request.install(interrupt_startup=True)
+    assert request.interrupting
+    with pytest.raises(StartupInterrupted, match='SIGTERM'):
+        signal.raise_signal(signal.SIGTERM)
+    assert request.requested and not request.interrupting
+    signal.raise_signal(signal.SIGINT)  # a second signal: recorded, never raised
+    assert request.signal_name == 'SIGTERM'  # the first one is reported
+    with pytest.raises(StartupInterrupted):
+        request.raise_if_requested()
+
+
+def test_started_ends_the_interrupting(restore_handlers) -> None:
+    request = ShutdownRequest()
+    request.install(interrupt_startup=True)
+    request.started()
+    signal.raise_signal(signal.SIGINT)
+    assert request.requested
+
+
+def test_an_uninterrupted_step_finishes_then_raises(restore_handlers) -> None:
+    request = ShutdownRequest()
+    request.install(interrupt_startup=True)
+    done = []
+    with pytest.raises(StartupInterrupted):
+        with request.uninterrupted():
+            signal.raise_signal(signal.SIGINT)
+            done.append('the step ran to its end')
+    assert done == ['the step ran to its end']
+    # without a signal the step is transparent and the start-up stays interruptible
+    quiet = ShutdownRequest()
+    quiet.install(interrupt_startup=True)
+    with quiet.uninterrupted():
+        pass
+    assert quiet.interrupting and not quiet.requested
+
+
+def test_handlers_are_only_installed_from_the_main_thread() -> None:
+    import threading
+
+    results = []
+    thread = threading.Thread(target=lambda: results.append(ShutdownRequest().install()))
+    thread.start()
+    thread.join()
+    assert results == [False]
+
+
+def test_a_signal_during_the_import_of_a_node_module_exits_quietly(tmp_path) -> None:
+    """run_node_entry: a module whose import is interrupted (here: it signals itself) ends the
+    process with status 0 and prints nothing."""
+    module = tmp_path / 'slow_node.py'
+    module.write_text(textwrap.dedent('''
+        import os
+        import signal
+        os.kill(os.getpid(), signal.SIGTERM)
+        import time
+        time.sleep(5)  # never reached: the signal interrupts the import
+
+        def main():
+            raise AssertionError('main must not run')
+    '''))
+    code = ('import sys; sys.path.insert(0, sys.argv[1]); '
+            'from dam_common.shutdown import run_node_entry; run_node_entry("slow_node")')
+    proc = subprocess.run([sys.executable, '-c', code, str(tmp_path)], capture_output=True,
+                          text=True, timeout=30)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == '' and proc.stderr == ''
