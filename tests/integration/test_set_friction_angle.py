@@ -71,7 +71,8 @@ def test_default_constructed_and_negative_requests_restore_the_configured_angle(
                                   .FRICTION_ANGLE_FROM_CONFIG))):
         changed = _set(client, SetFrictionAngle.Request(friction_angle=explicit))
         assert changed.success is True, changed.message
-        assert _coefficient(changed.message) == pytest.approx(math.tan(explicit), rel=1e-6, abs=1e-9)
+        assert _coefficient(changed.message) == pytest.approx(math.tan(explicit), rel=1e-6,
+                                                              abs=1e-9)
         back = _set(client, restore)
         assert back.success is True, back.message
         assert _coefficient(back.message) == pytest.approx(configured, rel=1e-6)

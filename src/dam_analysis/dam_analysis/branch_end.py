@@ -268,7 +268,7 @@ def fold_reason(geometry: FingerGeometry, theta_l: float, theta_p0: float, theta
     where = 'fingertip' if t >= 1.0 - 1e-12 else 'inner side of the distal link'
     beyond = ('the distal link passes over the object and loses contact' if g_p > 0.0 else
               'the distal link would have to pass into the object')
-    return (f'fold of the SPCM closure (d gap/d theta_s = 0 at theta_s = '
-            f'{math.degrees(theta_s):.4f} deg, the compliant joint can no longer keep the '
-            f'distal link on the object; contact on the {where}, {elevation:.1f} deg above '
+    return (f'fold of the SPCM closure: d gap/d theta_s = 0 at theta_s = '
+            f'{math.degrees(theta_s):.4f} deg, so the compliant joint can no longer keep the '
+            f'distal link on the object (contact on the {where}, {elevation:.1f} deg above '
             f'the object\'s equator); beyond it {beyond}')

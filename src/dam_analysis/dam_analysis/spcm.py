@@ -255,7 +255,7 @@ class SpcmPath:
         """Why there is no SPCM state at ``delta_theta_p`` [rad] beyond the branch end."""
         return (f'finger {self.index + 1}: no SPCM solution at delta_theta_p = '
                 f'{math.degrees(delta_theta_p):.5f} deg: the SPCM branch ends at '
-                f'{math.degrees(self.valid_until):.5f} deg ({self.end.reason})')
+                f'{math.degrees(self.valid_until):.5f} deg: {self.end.reason}')
 
     def solve(self, delta_theta_p: float) -> FingerContact:
         """SPCM state at one ``delta_theta_p`` [rad] (see :meth:`solve_theta_s`)."""
