@@ -65,9 +65,11 @@ class BranchEnd:
 
 def theta_p_on_curve(geometry: FingerGeometry, theta_l: float, theta_s: float,
                      theta_p_start: float) -> float | None:
-    """``theta_p`` [rad] with ``gap(theta_s, theta_p) = 0``, Newton's method in ``theta_p``.
+    """``theta_p`` [rad] with ``gap(theta_s, theta_p) = 0`` (eqs. 2-4), Newton's method in
+    ``theta_p`` from ``theta_p_start``.
 
-    Returns None when it does not converge (``|gap| <= 1e-16 m`` or a step below 1e-16 rad).
+    Converged when ``|gap| <= 1e-16 m`` or a step is below 1e-16 rad; None when ``g_p = 0`` or
+    it has not converged after 60 steps.
     """
     theta_p = theta_p_start
     for _ in range(_NEWTON_MAX_ITER):
@@ -173,6 +175,8 @@ def locate_fold(geometry: FingerGeometry, theta_l: float, theta_p0: float,
 
 def _newton_theta_s(geometry: FingerGeometry, theta_l: float, theta_p: float,
                     start: float) -> float | None:
+    """``theta_s`` [rad] with ``gap(theta_s, theta_p) = 0`` near ``start`` (Newton's method,
+    ``|gap| < 1e-13 m``); None when it does not converge or steps more than 0.05 rad away."""
     theta = start
     for _ in range(_NEWTON_MAX_ITER):
         gap, g_s, _ = distal_gap_partials(geometry, theta, theta_l, theta_p)
