@@ -84,11 +84,40 @@ def test_check_lift_result_equals_independent_recomputation(analyzer):
                                          - analyzer.model.object_weight, rel=1e-12)
 
 
-def test_no_solution_beyond_the_spcm_branch(analyzer):
+def test_beyond_the_spcm_branch_is_no_lift_not_an_error(analyzer):
+    """DP_MAX is a well-formed request beyond the end of the branch (61.7 deg on the default
+    hand): "no lift", NaN margins and per-finger values, and a message with the end and why."""
     path = analyzer.table.paths[0]
-    if path.valid_until < DP_MAX:
-        with pytest.raises(NoSolutionError, match='delta_theta_p'):
-            analyzer.check_lift(1.0, DP_MAX)
+    assert path.valid_until < DP_MAX
+    r = analyzer.check_lift(1.0, DP_MAX)
+    assert r.lift_guaranteed is False and r.csm_lift is False
+    assert math.isnan(r.worst_case_margin) and math.isnan(r.csm_margin)
+    assert r.beyond_branch.tolist() == [True, True, True]
+    assert r.sufficient_status == ('no_spcm',) * 3
+    assert np.all(np.isnan(r.delta_theta_s)) and np.all(np.isnan(r.compliant_torque))
+    assert np.all(np.isnan(r.contact_points)) and np.all(np.isnan(r.csm_forces))
+    end_deg = f'{math.degrees(path.valid_until):.5f} deg'
+    assert r.branch_message.startswith('no lift: finger 1: no SPCM solution at delta_theta_p '
+                                       '= 65.00000 deg')
+    assert end_deg in r.branch_message and 'fold' in r.branch_message
+    # the SPCM states themselves still do not exist there
+    with pytest.raises(NoSolutionError, match=f'delta_theta_p = 65.00000 deg.*{end_deg}'):
+        analyzer.spcm(DP_MAX)
+
+
+def test_one_finger_beyond_its_branch_keeps_the_others(analyzer):
+    dp = [math.radians(20.0), math.radians(30.0), DP_MAX]
+    r = analyzer.check_lift([2.0, 1.0, 1.0], dp)
+    assert r.beyond_branch.tolist() == [False, False, True]
+    assert math.isnan(r.worst_case_margin) and not r.lift_guaranteed and not r.csm_lift
+    within = analyzer.spcm([dp[0], dp[1], dp[1]])
+    np.testing.assert_allclose(r.delta_theta_s[:2], [within[0].delta_theta_s,
+                                                     within[1].delta_theta_s], atol=1e-12)
+    np.testing.assert_allclose(r.compliant_torque[:2], -np.array([2.0, 1.0])
+                               * r.delta_theta_s[:2])
+    assert math.isnan(r.delta_theta_s[2])
+    assert r.sufficient_status[2] == 'no_spcm' and r.sufficient_status[0] != 'no_spcm'
+    assert 'finger 3' in r.branch_message
 
 
 def test_check_lift_speed(analyzer):

@@ -15,6 +15,7 @@ import pickle
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
 from dam_analysis.analysis import LiftResult, check_delta_theta_p, check_k_theta
 from dam_analysis.errors import InputError, NoSolutionError
@@ -24,6 +25,7 @@ from dam_analysis.lift import (
     worst_case_cone,
     worst_case_vertical_force,
 )
+from dam_analysis.model import distal_gap
 from dam_analysis.regions import csm_evaluate, finger_table
 from dam_analysis.spcm import (
     SpcmPath,
@@ -37,9 +39,13 @@ THETA_TOL = 1e-10  # [rad]; the Newton tolerance |gap| < 1e-13 m allows ~1e-11 r
 
 
 def _reference_theta_s(model, path, dp: float) -> float | None:
-    """theta_s by damped Newton from the linearly interpolated branch (None: no solution)."""
-    if dp > path.valid_until + 1e-12:
+    """theta_s by damped Newton from the linearly interpolated branch (None: no solution);
+    between the last valid grid node and the branch end by Brent's method on the gap."""
+    if dp > path.valid_until:
         return None
+    last = path.last_node
+    if dp > path.delta_theta_p[last]:
+        return _reference_tail_theta_s(model, path, dp)
     grid, nodes, step = path.delta_theta_p, path.theta_s, path.step
     j = min(int(dp / step), len(grid) - 2)
     frac = (dp - grid[j]) / step
@@ -53,6 +59,23 @@ def _reference_theta_s(model, path, dp: float) -> float | None:
     sol = path.theta_s0 if dp == 0.0 else min(sol, path.theta_s0)
     if posture_problem(path.geometry, sol, model.theta_l0, theta_p, path.theta_s0,
                        model.limits_s, model.limits_p) is not None:
+        return None
+    return sol
+
+
+def _reference_tail_theta_s(model, path, dp: float) -> float | None:
+    theta_p = model.theta_p0 + dp
+
+    def gap(theta_s: float) -> float:
+        return distal_gap(path.geometry, theta_s, model.theta_l0, theta_p)[0]
+
+    lo, hi = float(path.theta_s[path.last_node]), path.end.theta_s
+    if gap(lo) * gap(hi) > 0.0:  # at the fold itself the root is double
+        sol = hi if abs(gap(hi)) < 1e-13 else None
+    else:
+        sol = brentq(gap, lo, hi, xtol=1e-16, rtol=1e-15)
+    if sol is None or posture_problem(path.geometry, sol, model.theta_l0, theta_p,
+                                      path.theta_s0, model.limits_s, model.limits_p):
         return None
     return sol
 
@@ -224,12 +247,21 @@ def test_check_lift_equals_numpy_reference_on_random_requests(analyzer):
         dp = check_delta_theta_p(dp_in, n, dp_max)
         alpha = model.friction_angle if alpha_in < 0.0 else alpha_in
         ref = _reference_check_lift(analyzer, k, dp.tolist(), alpha)
-        if ref is None:
-            with pytest.raises(NoSolutionError):
-                analyzer.check_lift(k_in, dp_in, alpha_in)
+        if ref is None:  # beyond the end of a branch: a "no lift" answer, not an error
+            r = analyzer.check_lift(k_in, dp_in, alpha_in)
+            assert not r.lift_guaranteed and not r.csm_lift, trial
+            assert math.isnan(r.worst_case_margin) and math.isnan(r.csm_margin), trial
+            beyond = np.array([d > p.valid_until for p, d in zip(analyzer.table.paths, dp,
+                                                                    strict=True)])
+            np.testing.assert_array_equal(r.beyond_branch, beyond)
+            assert np.all(np.isnan(r.delta_theta_s[beyond]))
+            assert np.all(np.isfinite(r.delta_theta_s[~beyond]))
+            first = int(np.argmax(beyond))
+            assert f'finger {first + 1}: no SPCM solution' in r.branch_message
             counts['no_solution'] += 1
             continue
         r = analyzer.check_lift(k_in, dp_in, alpha_in)
+        assert not r.beyond_branch.any() and r.branch_message == '', trial
         assert r.sufficient_status == ref['status'], trial
         assert _close(r.worst_case_margin, ref['worst']), (trial, r.worst_case_margin, ref)
         assert _close(r.csm_margin, ref['csm']), (trial, r.csm_margin, ref['csm'])

@@ -9,10 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 
 from dam_analysis.analysis import LiftAnalyzer
 from dam_common.config import load_config
 from ros_testing import RosClient, installed_executable, node_process
+from spcm_reference import PlanarFinger, ReferenceBranch, follow_branch, theta_s_near_fold
 
 pytestmark = pytest.mark.integration
 
@@ -25,6 +27,13 @@ CLIENT = installed_executable('dam_analysis', 'check_lift')
 @pytest.fixture(scope='module')
 def analyzer() -> LiftAnalyzer:
     return LiftAnalyzer(CONFIG)
+
+
+@pytest.fixture(scope='module')
+def references() -> list[ReferenceBranch]:
+    """Each finger's SPCM branch and fold, solved independently of dam_analysis."""
+    return [follow_branch(PlanarFinger.from_config(CONFIG, i))
+            for i in range(CONFIG.hand.n_fingers)]
 
 
 @pytest.fixture(scope='module')
@@ -54,6 +63,57 @@ def _call(client: RosClient, req):
     from dam_interfaces.srv import CheckLift
 
     return client.call(CheckLift, '/check_lift', req)
+
+
+def _finger_forces_problem(analyzer: LiftAnalyzer, k_theta: float, delta_theta_p: float):
+    """Per finger: compliant-joint Jacobian J_i = a x (p_C - p_s) (3,), torque
+    tau_i = -k_i delta_theta_si [N*m] and the inward normal n_in = -n_CB (3,), from the SPCM
+    states of the core (eqs. 1-4) and the configuration."""
+    ratios = CONFIG.hand.stiffness_ratios
+    out = []
+    for fc, finger, ratio in zip(analyzer.spcm(delta_theta_p), CONFIG.hand.fingers, ratios,
+                                 strict=True):
+        axis = np.asarray(finger.joint_axis, dtype=float)
+        jac = np.cross(axis, fc.contact_point - np.asarray(finger.base_position_m))
+        tau = -k_theta * ratio / ratios[0] * fc.delta_theta_s
+        out.append((axis, jac, tau, -fc.normal_object))
+    return out
+
+
+def _lp_worst_case_margin(analyzer: LiftAnalyzer, k_theta: float, delta_theta_p: float,
+                          alpha: float) -> float:
+    """Eq. 18's worst case as one linear program (HiGHS): min c_z^T sum f_i subject to
+    J_i^T f_i = tau_i and f_i inside the L-faced cone of eq. 7, written by its faces
+    m_k = v^k x v^(k+1) (f^T m_k >= 0), minus m_B g [N]."""
+    parts = _finger_forces_problem(analyzer, k_theta, delta_theta_p)
+    n, faces = len(parts), CONFIG.contact.cone_faces
+    a_eq, b_eq, a_ub = np.zeros((n, 3 * n)), np.zeros(n), []
+    for i, (axis, jac, tau, n_in) in enumerate(parts):
+        a_eq[i, 3 * i:3 * i + 3], b_eq[i] = jac, tau
+        tangent = np.cross(axis, -n_in)
+        span = [math.cos(alpha) * n_in + math.sin(alpha) * (
+            math.cos(phi) * tangent + math.sin(phi) * axis)
+            for phi in 2.0 * math.pi * np.arange(faces) / faces]
+        for k in range(faces):
+            m = np.cross(span[k], span[(k + 1) % faces])
+            row = np.zeros(3 * n)
+            row[3 * i:3 * i + 3] = -m if m @ n_in > 0.0 else m
+            a_ub.append(row)
+    cost = np.zeros(3 * n)
+    cost[2::3] = 1.0
+    res = linprog(cost, A_ub=np.array(a_ub), b_ub=np.zeros(len(a_ub)), A_eq=a_eq, b_eq=b_eq,
+                  bounds=[(None, None)] * (3 * n), method='highs')
+    assert res.status == 0, res.message
+    return float(res.fun) - CONFIG.object_weight_n
+
+
+def _frictionless_margin(analyzer: LiftAnalyzer, k_theta: float, delta_theta_p: float
+                         ) -> float:
+    """alpha = 0: each force lies along n_in, so f_i = tau_i / (J_i^T n_in) n_in [N]."""
+    total = sum(tau / float(jac @ n_in) * n_in[2]
+                for _, jac, tau, n_in in _finger_forces_problem(analyzer, k_theta,
+                                                                 delta_theta_p))
+    return total - CONFIG.object_weight_n
 
 
 @pytest.mark.parametrize(('k_theta', 'dp_deg', 'alpha_deg'), [
@@ -99,14 +159,109 @@ def test_negative_friction_angle_means_the_configured_one(client: RosClient) -> 
     assert configured.csm_margin == pytest.approx(explicit.csm_margin)
 
 
+def test_the_request_defaults_are_the_idl_defaults() -> None:
+    from dam_interfaces.srv import CheckLift
+
+    req = CheckLift.Request()
+    assert list(req.k_theta) == [] and list(req.delta_theta_p) == []
+    assert req.friction_angle == CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG == -1.0
+
+
+def test_default_constructed_request_answers_for_the_configured_task_pair(
+        client: RosClient, analyzer: LiftAnalyzer) -> None:
+    from dam_interfaces.srv import CheckLift
+
+    task, alpha = CONFIG.task, CONFIG.contact.friction_angle_rad
+    response = _call(client, CheckLift.Request())
+    assert response.ok, response.message
+    expected = _lp_worst_case_margin(analyzer, task.k_theta_nm_per_rad, task.delta_theta_p_rad,
+                                     alpha)
+    assert response.worst_case_margin == pytest.approx(expected, abs=1e-9)
+    assert response.lift_guaranteed is True  # documented: the configured pair lifts at 5 deg
+    explicit = _call(client, _request([task.k_theta_nm_per_rad], [task.delta_theta_p_rad],
+                                      alpha))
+    assert explicit.ok
+    assert response.worst_case_margin == explicit.worst_case_margin
+    assert response.csm_margin == explicit.csm_margin
+    assert list(response.delta_theta_s) == list(explicit.delta_theta_s)
+    assert len(response.delta_theta_s) == CONFIG.hand.n_fingers
+    assert ('from the configuration: k_theta = 10 N*m/rad, delta_theta_p = 10 deg, '
+            'friction_angle = 5 deg') in response.message
+
+
+def test_yaml_request_with_only_k_theta_and_delta_theta_p_uses_the_configured_angle(
+        client: RosClient, analyzer: LiftAnalyzer) -> None:
+    """``{k_theta: [7.0], delta_theta_p: [0.1745]}``: friction_angle is left out."""
+    from dam_interfaces.srv import CheckLift
+
+    response = _call(client, CheckLift.Request(k_theta=[7.0], delta_theta_p=[0.1745]))
+    assert response.ok, response.message
+    configured = _lp_worst_case_margin(analyzer, 7.0, 0.1745, CONFIG.contact.friction_angle_rad)
+    frictionless = _frictionless_margin(analyzer, 7.0, 0.1745)
+    assert configured == pytest.approx(0.040, abs=1e-3)  # the issue's numbers
+    assert frictionless == pytest.approx(0.693, abs=1e-3)
+    assert response.worst_case_margin == pytest.approx(configured, abs=1e-9)
+    assert response.lift_guaranteed is True
+    assert 'friction_angle = 5 deg' in response.message
+
+
+@pytest.mark.parametrize('left_out', ['k_theta', 'delta_theta_p'])
+def test_a_field_left_out_takes_its_configured_value(client: RosClient, left_out: str) -> None:
+    from dam_interfaces.srv import CheckLift
+
+    task = CONFIG.task
+    given = {'k_theta': [3.0], 'delta_theta_p': [math.radians(14.0)]}
+    configured = {'k_theta': [task.k_theta_nm_per_rad],
+                  'delta_theta_p': [task.delta_theta_p_rad]}
+    assert given[left_out] != configured[left_out]
+    partial = _call(client, CheckLift.Request(
+        **{name: value for name, value in given.items() if name != left_out}))
+    full = _call(client, CheckLift.Request(**{**given, left_out: configured[left_out]}))
+    assert partial.ok and full.ok, (partial.message, full.message)
+    assert partial.worst_case_margin == full.worst_case_margin
+    assert partial.csm_margin == full.csm_margin
+    assert list(partial.compliant_torque) == list(full.compliant_torque)
+    assert f'{left_out} = ' in partial.message
+
+
+def test_just_below_the_branch_end_is_answered_with_a_solution(
+        client: RosClient, references: list[ReferenceBranch]) -> None:
+    dp = references[0].fold_delta_theta_p - math.radians(1e-3)
+    response = _call(client, _request([7.0], [dp], -1.0))
+    assert response.ok, response.message
+    expected = [theta_s_near_fold(ref, dp)[0] - ref.states[0][0] for ref in references]
+    np.testing.assert_allclose(response.delta_theta_s, expected, rtol=0.0, atol=1e-9)
+    assert math.isfinite(response.csm_margin)
+    assert 'branch ends' not in response.message
+
+
+@pytest.mark.parametrize('beyond', ['end + 1e-3 deg', '65 deg'])
+def test_beyond_the_branch_end_is_ok_and_no_lift(client: RosClient, server,
+                                                 references: list[ReferenceBranch],
+                                                 beyond: str) -> None:
+    end = references[0].fold_delta_theta_p
+    dp = end + math.radians(1e-3) if beyond == 'end + 1e-3 deg' else math.radians(65.0)
+    response = _call(client, _request([7.0], [dp], -1.0))
+    assert response.ok is True, response.message
+    assert response.lift_guaranteed is False and response.csm_lift is False
+    assert math.isnan(response.worst_case_margin) and math.isnan(response.csm_margin)
+    assert len(response.delta_theta_s) == CONFIG.hand.n_fingers
+    assert np.all(np.isnan(response.delta_theta_s))
+    assert np.all(np.isnan(response.compliant_torque))
+    assert f'delta_theta_p = {math.degrees(dp):.5f} deg' in response.message
+    assert f'branch ends at {math.degrees(end):.5f} deg' in response.message
+    assert 'fold' in response.message
+    assert server.alive()
+
+
 @pytest.mark.parametrize(('k_theta', 'dp', 'alpha', 'pattern'), [
     ([float('nan')], [0.3], 0.1, r'k_theta.*nan'),
     ([float('inf')], [0.3], 0.1, r'k_theta.*inf'),
     ([0.0], [0.3], 0.1, r'k_theta.*positive.*0\.0'),
     ([-2.0], [0.3], 0.1, r'k_theta.*positive.*-2\.0'),
     ([1.0, 2.0], [0.3], 0.1, r'k_theta.*1 or 3 values.*2'),
-    ([], [0.3], 0.1, r'k_theta.*empty'),
-    ([1.0], [], 0.1, r'delta_theta_p.*empty'),
+    ([-2.0], [], 0.1, r'k_theta.*positive.*-2\.0'),  # dp from the configuration, k bad
+    ([1.0], [-0.1], -1.0, r'delta_theta_p.*>= 0.*-0\.1'),
     ([1.0], [0.1, 0.2], 0.1, r'delta_theta_p.*1 or 3 values'),
     ([1.0], [-0.1], 0.1, r'delta_theta_p.*>= 0.*-0\.1'),
     ([1.0], [math.radians(80.0)], 0.1, r'delta_theta_p.*exceeds'),
@@ -115,7 +270,6 @@ def test_negative_friction_angle_means_the_configured_one(client: RosClient) -> 
     ([1.0], [0.3], 2.0, r'friction_angle.*2\.0'),
     ([1.0], [0.3], float('nan'), r'friction_angle.*nan'),
     ([1.0], [0.3], float('-inf'), r'friction_angle.*inf'),
-    ([1.0], [math.radians(63.0)], 0.1, r'no SPCM solution.*63'),
 ])
 def test_bad_requests_are_rejected_with_the_field_and_value(
         client: RosClient, server, k_theta: list[float], dp: list[float], alpha: float,
@@ -239,3 +393,18 @@ def test_command_line_client(server: object) -> None:
                           '/nobody/here', '--timeout', '1')
     assert missing.returncode == 1
     assert 'not available' in missing.stderr
+
+
+def test_command_line_client_defaults_and_beyond_the_branch(
+        server: object, references: list[ReferenceBranch]) -> None:
+    default = _run_client()
+    assert default.returncode == 0, default.stderr
+    assert 'k_theta         [N*m/rad]: configured on the server' in default.stdout
+    assert 'lift guaranteed (eq. 18) : yes' in default.stdout
+    assert ('from the configuration: k_theta = 10 N*m/rad, delta_theta_p = 10 deg, '
+            'friction_angle = 5 deg') in default.stdout
+    beyond = _run_client('--k-theta', '7', '--delta-theta-p', '65deg')
+    assert beyond.returncode == 0, beyond.stderr
+    assert 'lift guaranteed (eq. 18) : no   worst-case margin none' in beyond.stdout
+    end = math.degrees(references[0].fold_delta_theta_p)
+    assert f'branch ends at {end:.5f} deg' in beyond.stdout

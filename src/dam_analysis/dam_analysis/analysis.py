@@ -10,8 +10,10 @@ Input conventions (those of the ``/check_lift`` service):
 
 The ``check_*`` functions return clean float64 values or raise
 :class:`~dam_analysis.errors.InputError` naming the field and the value.
-``LiftAnalyzer.check_lift`` raises :class:`~dam_analysis.errors.NoSolutionError` when the SPCM
-has no valid posture for the request (contact lost, table, joint limit, end of the branch).
+A well-formed request beyond the end of a finger's SPCM branch (a fold of the closure, contact
+lost, table, joint limit: :mod:`dam_analysis.branch_end`) is not an error: ``check_lift``
+answers "no lift" (``lift_guaranteed`` and ``csm_lift`` False, both margins NaN) and says in
+``LiftResult.branch_message`` where and why the branch ends.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dam_analysis.errors import InputError
-from dam_analysis.lift import STATUS_BOUNDED, worst_case_cone
+from dam_analysis.lift import STATUS_BOUNDED, STATUS_NO_SPCM, worst_case_cone
 from dam_analysis.model import HandModel, build_hand_model
 from dam_analysis.regions import (
     Boundaries,
@@ -156,10 +158,13 @@ class LiftResult:
     ----------
     lift_guaranteed : eq. (18) holds for every admissible contact force.
     worst_case_margin : ``min c_z^T f_o - m_B g`` [N]; -inf when the worst case is unbounded,
-        +inf when no admissible force exists (then lift_guaranteed is False).
-    sufficient_status : (n,) per-finger ``'bounded' | 'unbounded' | 'infeasible'``.
+        +inf when no admissible force exists (then lift_guaranteed is False); NaN when a
+        finger is beyond the end of its SPCM branch.
+    sufficient_status : (n,) per-finger ``'bounded' | 'unbounded' | 'infeasible'``, or
+        ``'no_spcm'`` for a finger beyond the end of its SPCM branch.
     csm_lift : the contact stiffness model lifts the object (margin > 0, no separation).
-    csm_margin : ``c_z^T f_o - m_B g`` with the CSM forces [N] (NaN on separation).
+    csm_margin : ``c_z^T f_o - m_B g`` with the CSM forces [N] (NaN on separation and beyond
+        the end of the SPCM branch).
     csm_separation : (n,) bool, the CSM normal force would be negative.
     csm_forces : (n, 3) CSM force of each finger on the object [N].
     delta_theta_s : (n,) compliant displacement [rad].
@@ -167,6 +172,12 @@ class LiftResult:
     contact_points : (n, 3) [m]; normals : (n, 3) outward object normals n_CB.
     on_fingertip : (n,) bool.
     k_theta : (n,) [N m/rad]; delta_theta_p : (n,) [rad]; friction_angle [rad].
+    beyond_branch : (n,) bool, the finger's ``delta_theta_p`` lies beyond the end of its SPCM
+        branch (eqs. 1-4 have no solution there). The per-finger values of such a finger
+        (``delta_theta_s``, ``compliant_torque``, forces, contacts, normals) are NaN; the other
+        fingers keep theirs.
+    branch_message : where and why the branch ends, for the first finger beyond it (its
+        ``delta_theta_p`` and the end in degrees, and the reason); empty when no finger is.
 
     In an answer of ``check_lift`` the per-contact arrays (``csm_separation``, ``csm_forces``,
     ``contact_points``, ``normals``, ``on_fingertip``) are built on first access.
@@ -187,6 +198,8 @@ class LiftResult:
     k_theta: np.ndarray
     delta_theta_p: np.ndarray
     friction_angle: float
+    beyond_branch: np.ndarray
+    branch_message: str
 
     def __getattr__(self, name: str) -> np.ndarray:
         """Build the per-contact arrays of a :meth:`LiftAnalyzer.check_lift` answer on first use.
@@ -227,7 +240,7 @@ def _contact_arrays(frames: list[tuple[list[float], list[float]]],
     ----------
     frames : per finger (base position (3,) [m], inward direction (3,)).
     states : per finger ``(theta_s, p_u, p_z, n_u, n_z, on_fingertip)``
-        (:meth:`SpcmPath.plane_state`).
+        (:meth:`SpcmPath.plane_state`), None for a finger beyond its branch end (NaN rows).
     f_n, f_t : per finger CSM normal (pressing) and tangential force [N].
 
     Returns
@@ -236,8 +249,9 @@ def _contact_arrays(frames: list[tuple[list[float], list[float]]],
     ``contact_points`` (n, 3) [m]; ``normals`` (n, 3) n_CB; ``on_fingertip`` (n,).
     """
     points, normals, forces = [], [], []
-    for frame, (_, p_u, p_z, n_u, n_z, _), fn, ft in zip(frames, states, f_n, f_t,
-                                                         strict=True):
+    nan = math.nan
+    for frame, state, fn, ft in zip(frames, states, f_n, f_t, strict=True):
+        _, p_u, p_z, n_u, n_z, _ = state if state is not None else (nan,) * 6
         points.append(_world(frame, p_u, p_z, True))
         nrm = _world(frame, n_u, n_z, False)
         tan = _world(frame, -n_z, n_u, False)  # t = b x n_CB
@@ -245,7 +259,8 @@ def _contact_arrays(frames: list[tuple[list[float], list[float]]],
         forces.append([-fn * a + ft * b for a, b in zip(nrm, tan, strict=True)])
     return {'csm_separation': np.array([v < 0.0 for v in f_n]),
             'csm_forces': np.array(forces), 'contact_points': np.array(points),
-            'normals': np.array(normals), 'on_fingertip': np.array([st[5] for st in states])}
+            'normals': np.array(normals),
+            'on_fingertip': np.array([st is not None and st[5] for st in states])}
 
 
 class LiftAnalyzer:
@@ -277,6 +292,7 @@ class LiftAnalyzer:
         self._frames = [(g.base_position.tolist(), g.inward_direction.tolist())
                         for g in self.model.fingers]
         self._csm_data: tuple | None = None
+        self._branch_ends = [path.valid_until for path in self.table.paths]
 
     @property
     def n_fingers(self) -> int:
@@ -305,6 +321,12 @@ class LiftAnalyzer:
         with the slip history cached per friction angle. The vectorised map functions of
         :mod:`dam_analysis.regions` compute the same quantities (tests compare both).
 
+        A finger whose ``delta_theta_p`` lies beyond the end of its SPCM branch
+        (``SpcmPath.valid_until``, located exactly by :mod:`dam_analysis.branch_end`) has no
+        SPCM state, so no contact force: the answer is "no lift" (``lift_guaranteed`` and
+        ``csm_lift`` False, both margins NaN, ``beyond_branch`` set, NaN per-finger values for
+        that finger) with ``branch_message`` naming the end in degrees and the reason.
+
         Parameters
         ----------
         k_theta : (n,) or scalar [N m/rad]; delta_theta_p : (n,) or scalar [rad];
@@ -315,21 +337,28 @@ class LiftAnalyzer:
         InputError
             Malformed input (see the ``check_*`` functions).
         NoSolutionError
-            No valid SPCM posture for this ``delta_theta_p``.
+            The SPCM solver failed inside the branch (not expected; the message says where).
         """
         k, dp, alpha = self._validate_floats(k_theta, delta_theta_p, friction_angle)
         paths = self.table.paths
-        states = [path.plane_state(d) for path, d in zip(paths, dp, strict=True)]
+        states = [path.plane_state(d) if d <= end else None
+                  for path, d, end in zip(paths, dp, self._branch_ends, strict=True)]
         mu = math.tan(alpha)
         ca, sa = math.cos(alpha), math.sin(alpha)
         k_t = self._k_t
         cos_phi = self._cos_phi_list
         cache = self._csm_cache(alpha)
-        inf = math.inf
+        inf, nan = math.inf, math.nan
         d_theta_s, taus, statuses, f_ns, f_ts = [], [], [], [], []
         worst_total = csm_total = 0.0
         separated = False
-        for i, (theta_s, p_u, p_z, n_u, n_z, _) in enumerate(states):
+        for i, state in enumerate(states):
+            if state is None:  # beyond the end of the branch: no SPCM state, no force
+                for out in (d_theta_s, taus, f_ns, f_ts):
+                    out.append(nan)
+                statuses.append(STATUS_NO_SPCM)
+                continue
+            theta_s, p_u, p_z, n_u, n_z, _ = state
             d_s = theta_s - paths[i].theta_s0
             tau = -k[i] * d_s  # tau_s = -K_theta delta_theta_s
             # plane forms of J^T n_in, J^T t and the vertical components (module regions/docs)
@@ -348,7 +377,8 @@ class LiftAnalyzer:
                 grid, gamma, s_arr, s_grid, sign = entry
                 cnt = bisect.bisect_left(grid, dp[i])
                 prev = float((k[i] * gamma[:cnt] - s_arr[:cnt]).min()) if cnt else inf
-                s_end = _interp(dp[i], grid, s_grid)
+                s_end = (_interp(dp[i], grid, s_grid) if dp[i] <= grid[-1]
+                         else sign * self.table.tail_slip(i, dp[i]))
                 denom = h_n + sign * mu * h_t
                 cap = mu * tau / (k_t * denom) if denom > 0.0 else inf
                 delta = s_end + min(prev, cap - s_end)
@@ -366,16 +396,24 @@ class LiftAnalyzer:
             f_ns.append(f_n)
             f_ts.append(f_t)
         weight = self.model.object_weight
-        margin = worst_total - weight
+        beyond = [state is None for state in states]
+        message = ''
+        if any(beyond):
+            first = beyond.index(True)
+            message = 'no lift: ' + paths[first].beyond_message(dp[first])
+            margin = csm_margin = nan
+        else:
+            margin = worst_total - weight
+            csm_margin = nan if separated else csm_total - weight
         guaranteed = margin > 0.0 and all(st == STATUS_BOUNDED for st in statuses)
-        csm_margin = math.nan if separated else csm_total - weight
         return LiftResult._with_lazy_contacts(
             (self._frames, states, f_ns, f_ts),
             lift_guaranteed=guaranteed, worst_case_margin=margin,
             sufficient_status=tuple(statuses),
             csm_lift=not separated and csm_margin > 0.0, csm_margin=csm_margin,
             delta_theta_s=np.array(d_theta_s), compliant_torque=np.array(taus),
-            k_theta=np.array(k), delta_theta_p=np.array(dp), friction_angle=alpha)
+            k_theta=np.array(k), delta_theta_p=np.array(dp), friction_angle=alpha,
+            beyond_branch=np.array(beyond), branch_message=message)
 
     def _validate_floats(self, k_theta: ArrayLike, delta_theta_p: ArrayLike,
                          friction_angle: float) -> tuple[list[float], list[float], float]:

@@ -5,9 +5,12 @@ Examples::
     ros2 run dam_analysis check_lift --k-theta 0.5 --delta-theta-p 40deg
     ros2 run dam_analysis check_lift --k-theta 0.5 0.25 0.25 --delta-theta-p 0.7 \\
         --friction-angle 5deg
+    ros2 run dam_analysis check_lift        # the server's configured task pair
 
-Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). Exit status: 0 when
-the server answered ``ok``, 2 when it rejected the request, 1 when no answer came.
+Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). An option left out
+is left out of the request, so the server uses its configuration for it (``CheckLift.srv``).
+Exit status: 0 when the server answered ``ok`` (also "no lift" beyond the end of the SPCM
+branch), 2 when it rejected the request, 1 when no answer came.
 """
 
 from __future__ import annotations
@@ -41,12 +44,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='check_lift',
         description='Ask /check_lift whether a (k_theta, delta_theta_p) pair lifts the object.')
-    parser.add_argument('--k-theta', type=float, nargs='+', required=True, metavar='N*m/rad',
+    parser.add_argument('--k-theta', type=float, nargs='+', default=[], metavar='N*m/rad',
                         help='compliant-joint stiffness: one value (finger 1, the others from '
-                             'the configured ratios) or one per finger')
-    parser.add_argument('--delta-theta-p', type=parse_angle, nargs='+', required=True,
+                             'the configured ratios) or one per finger (default: the server\'s '
+                             'configured task.k_theta_nm_per_rad)')
+    parser.add_argument('--delta-theta-p', type=parse_angle, nargs='+', default=[],
                         metavar='ANGLE',
-                        help='position-joint displacement: one for all fingers or one per finger')
+                        help='position-joint displacement: one for all fingers or one per finger '
+                             '(default: the server\'s configured task.delta_theta_p_deg)')
     parser.add_argument('--friction-angle', type=parse_angle, default=None, metavar='ANGLE',
                         help='friction angle alpha (default: the server\'s configured value)')
     parser.add_argument('--service', default='/check_lift', help='service name')
@@ -55,19 +60,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _newtons(value: float) -> str:
+    """A margin [N]; NaN (no contact state, or a contact that opens) as 'none'."""
+    return 'none (see below)' if math.isnan(value) else f'{value:+.4g} N'
+
+
 def format_response(request: CheckLift.Request, response: CheckLift.Response) -> str:
     """Human-readable rendering of a CheckLift answer."""
     if not response.ok:
         return f'REJECTED: {response.message}'
     yes_no = {True: 'yes', False: 'no'}
+    configured = 'configured on the server'
+    k_text = ', '.join(f'{v:g}' for v in request.k_theta) or configured
+    dp_text = ', '.join(f'{math.degrees(v):.4g}' for v in request.delta_theta_p) or configured
     lines = [
-        f'k_theta         [N*m/rad]: {", ".join(f"{v:g}" for v in request.k_theta)}',
-        f'delta_theta_p   [deg]    : '
-        f'{", ".join(f"{math.degrees(v):.4g}" for v in request.delta_theta_p)}',
+        f'k_theta         [N*m/rad]: {k_text}',
+        f'delta_theta_p   [deg]    : {dp_text}',
         f'lift guaranteed (eq. 18) : {yes_no[bool(response.lift_guaranteed)]}'
-        f'   worst-case margin {response.worst_case_margin:+.4g} N',
+        f'   worst-case margin {_newtons(response.worst_case_margin)}',
         f'contact stiffness model  : {yes_no[bool(response.csm_lift)]}'
-        f'   margin {response.csm_margin:+.4g} N',
+        f'   margin {_newtons(response.csm_margin)}',
         'finger  delta_theta_s [deg]  tau_s [N*m]',
     ]
     for i, (ds, tau) in enumerate(zip(response.delta_theta_s, response.compliant_torque,
@@ -91,9 +103,8 @@ def main(args: Sequence[str] | None = None) -> int:
         request = CheckLift.Request()
         request.k_theta = [float(v) for v in options.k_theta]
         request.delta_theta_p = [float(v) for v in options.delta_theta_p]
-        request.friction_angle = (CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG
-                                  if options.friction_angle is None
-                                  else float(options.friction_angle))
+        if options.friction_angle is not None:  # otherwise the default: the configured one
+            request.friction_angle = float(options.friction_angle)
         future = client.call_async(request)
         rclpy.spin_until_future_complete(node, future, timeout_sec=options.timeout)
         if not future.done() or future.result() is None:

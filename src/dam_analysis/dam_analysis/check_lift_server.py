@@ -10,8 +10,18 @@ default_friction_angle : double [rad], in [0, pi/2)
     Friction angle used when a request's ``friction_angle`` is negative. Defaults to the
     configured ``contact.friction_angle_deg``. May be changed at run time.
 
-Every bad request gets ``ok = false`` and a message that names the field and the value; the
-server never dies on input.
+Request fields left out mean "use the configuration" (``dam_interfaces/srv/CheckLift``):
+an empty ``k_theta`` is the configured ``task.k_theta_nm_per_rad`` (finger 1, the others from
+the ratios), an empty ``delta_theta_p`` the configured ``task.delta_theta_p_deg`` for every
+finger, a negative ``friction_angle`` (the default, -1) ``default_friction_angle``. So a
+default-constructed request asks about the configured task pair at the configured friction
+angle; the answer's message says which values came from the configuration.
+
+Only a malformed request gets ``ok = false``, with a message that names the field and the
+value; the server never dies on input. A well-formed pair beyond the end of the SPCM branch
+(eqs. 1-4 have no solution there) is answered ``ok = true`` with "no lift": both lift flags
+false, both margins NaN, NaN per-finger values for the fingers beyond, and a message naming
+where (deg) and why the branch ends.
 """
 
 from __future__ import annotations
@@ -70,12 +80,22 @@ class CheckLiftServer(Node):
 
     def _on_request(self, request: CheckLift.Request,
                     response: CheckLift.Response) -> CheckLift.Response:
+        task = self._config.task
+        k_theta = list(request.k_theta)
+        delta_theta_p = list(request.delta_theta_p)
         friction_angle = float(request.friction_angle)
+        defaults = []
+        if not k_theta:
+            k_theta = [task.k_theta_nm_per_rad]
+            defaults.append(f'k_theta = {task.k_theta_nm_per_rad:g} N*m/rad')
+        if not delta_theta_p:
+            delta_theta_p = [task.delta_theta_p_rad]
+            defaults.append(f'delta_theta_p = {math.degrees(task.delta_theta_p_rad):g} deg')
         if math.isfinite(friction_angle) and friction_angle < 0.0:
             friction_angle = self._default_friction_angle  # NaN/inf: rejected by the core
+            defaults.append(f'friction_angle = {math.degrees(friction_angle):.4g} deg')
         try:
-            result = self._analyzer.check_lift(
-                list(request.k_theta), list(request.delta_theta_p), friction_angle)
+            result = self._analyzer.check_lift(k_theta, delta_theta_p, friction_angle)
         except DamAnalysisError as exc:
             response.ok = False
             response.message = str(exc)
@@ -93,9 +113,15 @@ class CheckLiftServer(Node):
         response.csm_margin = float(result.csm_margin)
         response.delta_theta_s = [float(v) for v in result.delta_theta_s]
         response.compliant_torque = [float(v) for v in result.compliant_torque]
-        response.message = (
-            'lift guaranteed (eq. 18)' if result.lift_guaranteed else
-            'lift not guaranteed for every admissible contact force')
+        if result.branch_message:
+            message = result.branch_message
+        elif result.lift_guaranteed:
+            message = 'lift guaranteed (eq. 18)'
+        else:
+            message = 'lift not guaranteed for every admissible contact force'
+        if defaults:
+            message += f' [from the configuration: {", ".join(defaults)}]'
+        response.message = message
         return response
 
 

@@ -49,6 +49,8 @@ TORQUE_ZERO_TOL = 1e-12
 STATUS_BOUNDED = 'bounded'
 STATUS_UNBOUNDED = 'unbounded'
 STATUS_INFEASIBLE = 'infeasible'
+#: Status of a finger without an SPCM state (beyond the end of its branch): not evaluated.
+STATUS_NO_SPCM = 'no_spcm'
 
 
 def span_vectors(normal_object: np.ndarray, axis: np.ndarray, friction_angle: float,

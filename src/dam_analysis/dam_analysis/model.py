@@ -140,6 +140,44 @@ def distal_gap(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p
     return gap, deriv
 
 
+def distal_gap_partials(geometry: FingerGeometry, theta_s: float, theta_l: float,
+                        theta_p: float) -> tuple[float, float, float]:
+    """Gap of :func:`distal_gap` with both partial derivatives (the SPCM closure, eqs. 2-4).
+
+    Parameters
+    ----------
+    geometry : the finger.
+    theta_s, theta_l, theta_p : compliant, locked and position joint angles [rad].
+
+    Returns
+    -------
+    gap : distance(disc centre, distal segment) - (R + r) [m].
+    g_s : d gap / d theta_s [m/rad], rotation of the whole finger about the compliant joint.
+    g_p : d gap / d theta_p [m/rad], rotation of the distal link about the position joint
+        ``q``: a point ``p`` moves with ``(-(p_z - q_z), p_u - q_u)`` per radian, and by the
+        envelope theorem the gap changes at the normal component of the closest point's
+        velocity. The Jacobian of the closure in ``(theta_s, theta_p)`` is ``(g_s, g_p)``;
+        a fold of the SPCM branch is a point of ``gap = 0`` where ``g_s = 0``.
+    """
+    phi12 = theta_s + theta_l
+    phi3 = phi12 + theta_p
+    l1, l2, l3 = (float(v) for v in geometry.link_lengths)
+    qu = l1 * math.sin(theta_s) + l2 * math.sin(phi12)
+    qz = -l1 * math.cos(theta_s) - l2 * math.cos(phi12)
+    tu = qu + l3 * math.sin(phi3)
+    tz = qz - l3 * math.cos(phi3)
+    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+    abu, abz = tu - qu, tz - qz
+    t = min(1.0, max(0.0, ((cu - qu) * abu + (cz - qz) * abz) / (abu * abu + abz * abz)))
+    pu, pz = qu + t * abu, qz + t * abz
+    du, dz = pu - cu, pz - cz
+    dist = math.hypot(du, dz)
+    gap = dist - (geometry.object_radius + geometry.link_radius)
+    g_s = (du * (-pz) + dz * pu) / dist
+    g_p = (du * (-(pz - qz)) + dz * (pu - qu)) / dist
+    return gap, g_s, g_p
+
+
 @dataclass(frozen=True)
 class HandModel:
     """The hand at first contact and everything the analysis needs from the configuration.

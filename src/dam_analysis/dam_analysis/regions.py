@@ -25,8 +25,13 @@ import numpy as np
 from dam_analysis.csm import CsmPath, csm_forces_sequential
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.lift import worst_case_coefficients
-from dam_analysis.model import HandModel
-from dam_analysis.spcm import FingerContact, SpcmPath, build_paths, contact_state
+from dam_analysis.model import HandModel, distal_gap_partials
+from dam_analysis.spcm import FingerContact, SpcmPath, build_paths, contact_state, plane_joints
+
+#: Gauss-Legendre points of :meth:`PathTable.tail_slip`.
+TAIL_QUADRATURE_NODES = 12
+_GAUSS_LEGENDRE = tuple(v.tolist() for v in np.polynomial.legendre.leggauss(
+    TAIL_QUADRATURE_NODES))
 
 
 def cone_arrays(normal_object: np.ndarray, axis: np.ndarray, friction_angle: float,
@@ -131,8 +136,65 @@ class PathTable:
             self.slip.append(np.concatenate([[0.0], np.cumsum(inc)]))
 
     def slip_at(self, index: int, delta_theta_p: np.ndarray) -> np.ndarray:
-        """Accumulated slip [m] of a finger at arbitrary displacements (linear interpolation)."""
-        return np.interp(delta_theta_p, self.grid[index].delta_theta_p, self.slip[index])
+        """Accumulated slip [m] of a finger at arbitrary displacements.
+
+        Linear interpolation of the grid values up to the last valid node,
+        :meth:`tail_slip` between it and the branch end, NaN beyond the end.
+        """
+        dp = np.asarray(delta_theta_p, dtype=np.float64)
+        out = np.array(np.interp(dp, self.grid[index].delta_theta_p, self.slip[index]),
+                       dtype=np.float64)
+        path = self.paths[index]
+        tail = (dp > path.delta_theta_p[path.last_node]) & (dp <= path.valid_until)
+        out[dp > path.valid_until] = np.nan
+        if np.any(tail):
+            flat, where = out.reshape(-1), np.flatnonzero(tail)
+            for j, d in zip(where, dp.reshape(-1)[where], strict=True):
+                flat[j] = self.tail_slip(index, float(d))
+        return out
+
+    def tail_slip(self, index: int, delta_theta_p: float) -> float:
+        """Accumulated slip [m] between the last valid grid node and the branch end.
+
+        The slip rate ``t^T v_C`` contains ``d theta_s / d theta_p``, which grows like
+        ``(end - delta_theta_p)^(-1/2)`` towards a fold, so the trapezoidal rule of the grid
+        cannot reach the end. The increment from the last node is integrated with the
+        substitution ``delta_theta_p = end - u^2`` (a smooth integrand ``2 u t^T v_C``) by
+        Gauss-Legendre quadrature of :data:`TAIL_QUADRATURE_NODES` points on the exact SPCM
+        states. In the finger plane ``(a x x)^T (a x n_CB) = x^T n_CB``, so the rate of
+        :func:`finger_table` is ``(d theta_s/d theta_p) (p_C - p_s)^T n_CB
+        + (p_C - p_p)^T n_CB`` with ``d theta_s/d theta_p = -g_p / g_s``.
+
+        Parameters
+        ----------
+        index : finger; delta_theta_p : displacement [rad], at most the branch end.
+
+        Returns
+        -------
+        The slip along ``t`` [m].
+        """
+        path = self.paths[index]
+        node = path.last_node
+        dp_a = float(path.delta_theta_p[node])
+        if delta_theta_p <= dp_a:
+            return float(np.interp(delta_theta_p, self.grid[index].delta_theta_p,
+                                   self.slip[index]))
+        end = path.valid_until
+        model, geometry = self.model, path.geometry
+        u_a, u_b = math.sqrt(end - dp_a), math.sqrt(max(end - delta_theta_p, 0.0))
+        half, mid = 0.5 * (u_a - u_b), 0.5 * (u_a + u_b)
+        total = 0.0
+        for x, w in zip(*_GAUSS_LEGENDRE, strict=True):
+            u = mid + half * x
+            dp = end - u * u
+            theta_s, p_u, p_z, n_u, n_z, _ = path.plane_state(dp)
+            theta_p = model.theta_p0 + dp
+            _, g_s, g_p = distal_gap_partials(geometry, theta_s, model.theta_l0, theta_p)
+            _, _, q_u, q_z, _, _ = plane_joints(geometry, theta_s, model.theta_l0, theta_p)
+            rate = (-g_p / g_s) * (p_u * n_u + p_z * n_z) + ((p_u - q_u) * n_u
+                                                             + (p_z - q_z) * n_z)
+            total += w * 2.0 * u * rate
+        return float(self.slip[index][node]) + half * total
 
     def csm_path(self, index: int, upto: float | None = None,
                  end: FingerTable | None = None) -> CsmPath:

@@ -10,6 +10,9 @@ and a cylinder with parallel axes these three conditions reduce to one scalar eq
 The physical solution branch is followed by continuation from the first contact
 (``delta_theta_p = 0``, ``delta_theta_s = 0``) on a fine grid (:class:`SpcmPath`, built once);
 a request at an arbitrary ``delta_theta_p`` starts Newton from the interpolated grid value.
+Where the branch ends (a fold of the closure or an invalid posture) is located exactly inside
+the last grid cell (:mod:`dam_analysis.branch_end`); requests between the last valid node and
+that end are solved by a bracketed root search.
 
 Failure policy: the solver never returns a posture that is not a valid SPCM state. It raises
 :class:`~dam_analysis.errors.NoSolutionError` naming the finger, ``delta_theta_p`` and the
@@ -25,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dam_analysis.branch_end import END_RANGE, BranchEnd, locate_branch_end, solve_bracketed
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.model import FingerGeometry, HandModel, distal_gap, joint_positions
 
@@ -171,14 +175,19 @@ def plane_contact(geometry: FingerGeometry, theta_s: float, theta_l: float, thet
 
 
 class SpcmPath:
-    """Cached SPCM continuation of one finger on a fine ``delta_theta_p`` grid.
+    """Cached SPCM continuation of one finger on a fine ``delta_theta_p`` grid, with the exact
+    end of the branch.
 
     Attributes
     ----------
     delta_theta_p : (m,) grid [rad], from 0 to ``delta_theta_p_max``.
     theta_s : (m,) compliant angle on the branch [rad]; NaN from the first invalid node on.
-    valid_until : largest valid ``delta_theta_p`` on the grid [rad].
-    failure : reason of the first invalid node, or None if the whole grid is valid.
+    last_node : index of the last valid grid node.
+    end : :class:`~dam_analysis.branch_end.BranchEnd`, where and why the branch ends, located
+        exactly inside the cell after ``last_node`` (``kind == 'range'``: it reaches
+        ``delta_theta_p_max``).
+    valid_until : largest ``delta_theta_p`` with an SPCM state [rad] (``end.delta_theta_p``).
+    failure : why the branch ends before ``delta_theta_p_max`` (``end.reason``), or None.
     """
 
     def __init__(self, model: HandModel, index: int, step: float = PATH_STEP_RAD) -> None:
@@ -190,8 +199,8 @@ class SpcmPath:
         self.delta_theta_p = np.linspace(0.0, model.delta_theta_p_max, n_steps + 1)
         self.theta_s = np.full(n_steps + 1, np.nan)
         self.theta_s[0] = self.theta_s0
-        self.failure: str | None = None
-        self.valid_until = 0.0
+        last = 0
+        failed: tuple[float, float | None] | None = None
         theta = self.theta_s0
         for j in range(1, n_steps + 1):
             theta_p = model.theta_p0 + float(self.delta_theta_p[j])
@@ -201,20 +210,26 @@ class SpcmPath:
                              if math.isfinite(rate) else 0.0)
             sol = newton_theta_s(self.geometry, model.theta_l0, theta_p, guess)
             if sol is None or abs(sol - theta) > 0.2:
-                _, g_s = distal_gap(self.geometry, theta, model.theta_l0, theta_p)
-                self.failure = ('the SPCM branch ends (fold: turning the compliant joint no '
-                                'longer moves the distal link towards the object, '
-                                f'd gap/d theta_s = {g_s * 1e3:.3f} mm/rad); beyond it the '
-                                'distal link loses contact')
+                failed = (float(self.delta_theta_p[j]), None)
                 break
-            problem = posture_problem(self.geometry, sol, model.theta_l0, theta_p,
-                                      self.theta_s0, model.limits_s, model.limits_p)
-            if problem is not None:
-                self.failure = problem
+            if self._problem(sol, float(self.delta_theta_p[j])) is not None:
+                failed = (float(self.delta_theta_p[j]), sol)
                 break
             theta = sol
             self.theta_s[j] = sol
-            self.valid_until = float(self.delta_theta_p[j])
+            last = j
+        self.last_node = last
+        grid_end = (float(self.delta_theta_p[last]), float(self.theta_s[last]))
+        if failed is None:
+            self.end = BranchEnd(*grid_end, END_RANGE, '')
+        else:
+            before = ((float(self.delta_theta_p[last - 1]), float(self.theta_s[last - 1]))
+                      if last > 0 else None)
+            self.end = locate_branch_end(self.geometry, model.theta_l0, model.theta_p0,
+                                         (grid_end, before), failed, self._problem)
+        self.valid_until = self.end.delta_theta_p
+        self.failure: str | None = None if failed is None else self.end.reason
+        self._tail = (grid_end[0], grid_end[1], self.end.theta_s)
         self.step = float(self.delta_theta_p[1] - self.delta_theta_p[0])
         # plain-float copies for the scalar solver (plane_state)
         g = self.geometry
@@ -228,6 +243,19 @@ class SpcmPath:
                         float(model.limits_p[0]), float(model.limits_p[1]),
                         float(g.base_height), float(g.link_radius),
                         float(g.object_radius + g.link_radius))
+
+    def _problem(self, theta_s: float, delta_theta_p: float) -> str | None:
+        """:func:`posture_problem` of this finger at ``delta_theta_p`` [rad]."""
+        model = self.model
+        return posture_problem(self.geometry, theta_s, model.theta_l0,
+                               model.theta_p0 + delta_theta_p, self.theta_s0, model.limits_s,
+                               model.limits_p)
+
+    def beyond_message(self, delta_theta_p: float) -> str:
+        """Why there is no SPCM state at ``delta_theta_p`` [rad] beyond the branch end."""
+        return (f'finger {self.index + 1}: no SPCM solution at delta_theta_p = '
+                f'{math.degrees(delta_theta_p):.5f} deg: the SPCM branch ends at '
+                f'{math.degrees(self.valid_until):.5f} deg: {self.end.reason}')
 
     def solve(self, delta_theta_p: float) -> FingerContact:
         """SPCM state at one ``delta_theta_p`` [rad] (see :meth:`solve_theta_s`)."""
@@ -255,7 +283,9 @@ class SpcmPath:
         the contact is evaluated as :func:`plane_contact` does, on the same trigonometry.
         Every expression is the scalar twin of :func:`~dam_analysis.model.distal_gap`,
         :func:`newton_theta_s`, :func:`posture_problem` and :func:`plane_contact`, in the same
-        floating-point order, so the result equals theirs to the last bit.
+        floating-point order, so the result equals theirs to the last bit. Between the last
+        valid grid node and the exact branch end the root is bracketed instead
+        (:meth:`_tail_state`).
 
         Returns
         -------
@@ -268,11 +298,10 @@ class SpcmPath:
             Beyond the valid part of the branch, Newton failed, or an invalid posture (the
             message is the one of :func:`posture_problem`).
         """
-        if delta_theta_p > self.valid_until + 1e-12:
-            raise NoSolutionError(
-                f'finger {self.index + 1}: no SPCM solution at delta_theta_p = '
-                f'{math.degrees(delta_theta_p):.4f} deg: {self.failure} (valid up to '
-                f'{math.degrees(self.valid_until):.4f} deg)')
+        if not delta_theta_p <= self.valid_until:
+            raise NoSolutionError(self.beyond_message(delta_theta_p))
+        if delta_theta_p > self._tail[0]:
+            return self._tail_state(delta_theta_p)
         grid, nodes, step = self._grid, self._nodes, self.step
         j = min(int(delta_theta_p / step), len(grid) - 2)
         frac = (delta_theta_p - grid[j]) / step
@@ -331,6 +360,34 @@ class SpcmPath:
                 problem = 'invalid posture'
             raise NoSolutionError(f'finger {self.index + 1} at delta_theta_p = '
                                   f'{math.degrees(delta_theta_p):.4f} deg: {problem}')
+        return (sol, *state)
+
+    def _tail_state(self, delta_theta_p: float
+                    ) -> tuple[float, float, float, float, float, bool]:
+        """:meth:`plane_state` between the last valid grid node and the branch end.
+
+        Near a fold ``theta_s(theta_p)`` behaves like a square root and Newton's method from
+        an interpolated start may jump to the other half of the fold; here the root is
+        bracketed by the compliant angles at the last node and at the end
+        (:func:`~dam_analysis.branch_end.solve_bracketed`).
+        """
+        model = self.model
+        theta_p = model.theta_p0 + delta_theta_p
+        dp_node, s_node, s_end = self._tail
+        sol = solve_bracketed(self.geometry, model.theta_l0, theta_p, s_node, s_end)
+        if sol is None:
+            frac = (delta_theta_p - dp_node) / (self.valid_until - dp_node)
+            sol = newton_theta_s(self.geometry, model.theta_l0, theta_p,
+                                 s_node + frac * (s_end - s_node))
+        if sol is None:
+            raise NoSolutionError(f'finger {self.index + 1}: Newton failed at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.5f} deg')
+        sol = min(sol, self.theta_s0)
+        state = self._checked_contact(sol, theta_p)
+        if state is None:
+            raise NoSolutionError(f'finger {self.index + 1} at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.5f} deg: '
+                                  f'{self._problem(sol, delta_theta_p)}')
         return (sol, *state)
 
     def _posture_ok(self, theta_s: float, theta_p: float, u1: float, z1: float, u2: float,

@@ -284,8 +284,8 @@ def save_signals(result: ExperimentResult, path: str | Path) -> Path:
 
 
 def _analysis_region(analyzer, k: float, dp: float, alpha: float) -> tuple[str, str]:
-    """'yes'/'no' of the sufficient condition and of the CSM; '-' where the analysis has no
-    answer (e.g. beyond the end of the SPCM path)."""
+    """'yes'/'no' of the sufficient condition and of the CSM ('no' beyond the end of the SPCM
+    path, where the analysis answers "no lift"); '-' where the analysis raises."""
     try:
         r = analyzer.check_lift([k], [dp], friction_angle=alpha)
     except Exception:  # noqa: BLE001 - the table still prints without the analysis

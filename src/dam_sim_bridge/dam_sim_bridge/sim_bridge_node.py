@@ -18,7 +18,10 @@ Services
 ~/reset : std_srvs/Trigger
     Put the world back in its initial state (hand open, all joints HOLD, object at rest).
 ~/set_friction_angle : dam_interfaces/SetFrictionAngle
-    Finger-object friction angle [rad]; the coefficient becomes ``tan(alpha)``.
+    Finger-object friction angle [rad]; the coefficient becomes ``tan(alpha)``. A negative
+    angle (the request's default, ``FRICTION_ANGLE_FROM_CONFIG``) puts back the configured
+    ``contact.friction_angle_deg``; NaN, inf and angles from pi/2 on are rejected. The answer
+    gives the angle in force and the coefficient read back from the simulator.
 
 Parameters
 ----------
@@ -195,17 +198,24 @@ class SimBridgeNode(Node):
                                response: SetFrictionAngle.Response
                                ) -> SetFrictionAngle.Response:
         alpha = float(request.friction_angle)
+        configured = math.isfinite(alpha) and alpha < 0.0  # the default: back to the config
+        if configured:
+            alpha = self._config.contact.friction_angle_rad
         try:
+            if not math.isfinite(alpha):
+                raise ValueError(f'friction_angle: {alpha!r} rad is not a finite angle')
             with self._device.lock:
                 self._device.world.set_friction_angle(alpha)
+                coefficient = self._device.world.pair_friction()['finger_object']
         except (SimBridgeError, ValueError) as exc:
             response.success = False
             response.message = str(exc)
             self.get_logger().warning(f'rejected friction angle: {exc}')
             return response
         response.success = True
-        response.message = (f'friction angle {alpha!r} rad ({math.degrees(alpha):.3g} deg), '
-                            f'finger-object coefficient {math.tan(alpha):.4g}')
+        response.message = (f'friction angle {alpha!r} rad ({math.degrees(alpha):.4g} deg'
+                            f'{", the configured one" if configured else ""}), '
+                            f'finger-object coefficient {coefficient:.9g}')
         self.get_logger().info(response.message)
         return response
 
