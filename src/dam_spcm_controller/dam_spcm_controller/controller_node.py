@@ -696,7 +696,8 @@ class SpcmControllerNode(Node):
                     goal_handle, 'abort', aborted,
                     f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
                     f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
-                    f'(worst-case margin {answer.worst_case_margin:.4g} N)', t0)
+                    f'(worst-case margin {answer.worst_case_margin:.4g} N): {answer.message}',
+                    t0)
         fresh = await self._fresh_state(_START_STATE_WAIT_S, goal_handle)
         if goal_handle.is_cancel_requested:
             return self._finish(goal_handle, 'canceled', aborted,
