@@ -149,7 +149,7 @@ def test_too_little_stiffness_does_not_lift(stack: _Grasper) -> None:
 
     result, z0, z_end, _ = _done_result(stack, 0.5)
     phases = stack.feedback_phases
-    assert phases[:3] == ['CHECK_LIFT', 'APPROACH', 'ROLLING_UP'], phases
+    assert phases[:3] == ["CHECK_LIFT", "APPROACH", "ROLLING_UP"], (phases, result.message)
     assert 'IDLE' not in phases, phases
     assert z_end - z0 < 0.002, f'object rose by {(z_end - z0) * 1e3:.2f} mm'
     assert max(stack.z_between(0.0, math.inf)) - z0 < 0.002
@@ -197,6 +197,9 @@ def _reset_world(stack: _Grasper) -> None:
     brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
     from std_srvs.srv import Trigger
 
+    # joint states flowing (a previous reset may have left the driver in ERROR)
+    assert stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request()).success
+    stack.client.spin_until(lambda: False, 0.2)
     released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
                                  timeout=30.0)
     assert released.success, released.message

@@ -520,6 +520,23 @@ def test_release_lets_go_and_stops_commanding(stack) -> None:
     assert ctl.alive()
 
 
+def test_release_answers_failure_when_joint_states_go_silent(stack) -> None:
+    """The plant stops publishing while the hand opens: the release ends with success false
+    and the reason, within a bounded time; the controller takes new goals afterwards."""
+    from std_srvs.srv import Trigger
+
+    h, ctl, _plant = stack
+    client = h.node.create_client(Trigger, '/spcm_controller/release')
+    assert client.wait_for_service(timeout_sec=10.0)
+    release = client.call_async(Trigger.Request())
+    assert h.ros.call(Trigger, '/plant/stop', Trigger.Request()).success
+    assert h.ros.wait_future(release, 5.0), 'the release did not answer'
+    answer = release.result()
+    assert not answer.success and 'went silent' in answer.message, answer.message
+    assert h.ros.spin_until(lambda: h.statuses[-1].phase != 'RELEASING', 2.0)
+    assert ctl.alive()
+
+
 def test_grasp_client_cancels_its_goal_on_sigint(stack) -> None:
     """Ctrl-C on dam_grasp cancels the goal, waits for the confirmation and exits 3."""
     import signal
@@ -546,6 +563,45 @@ def test_grasp_client_cancels_its_goal_on_sigint(stack) -> None:
     assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'ABORTED', 5.0), \
         [s.phase for s in h.statuses[-5:]]
     assert ctl.alive()
+
+
+@pytest.mark.parametrize('signum', ['SIGINT', 'SIGTERM'])
+def test_a_controller_stopped_mid_grasp_aborts_the_goal_for_its_client(signum: str) -> None:
+    """Ctrl-C on the controller during a grasp: the client gets ABORTED with the reason, the
+    compliant torques ramp to zero, and the controller exits with status 0."""
+    import signal
+
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    env = {'PYTHONPATH': os.pathsep.join([str(REPO / 'src' / 'dam_analysis'),
+                                          os.environ.get('PYTHONPATH', '')])}
+    with ExitStack() as es:
+        es.enter_context(node_process(fixture_command('spcm_plant_node.py'), env))
+        es.enter_context(node_process(
+            [str(installed_executable('dam_analysis', 'check_lift_server'))]))
+        ctl = es.enter_context(node_process(controller_command()))
+        h = Harness()
+        es.callback(h.close)
+        h.wait_ready()
+        handle = h.send([INSIDE[0]], [INSIDE[1]])
+        assert handle.accepted
+        h.wait_phase(handle, 'ROLLING_UP', 15.0)
+        result = handle.get_result_async()
+        t_signal = time.monotonic()
+        ctl.process.send_signal(getattr(signal, signum))
+        assert h.ros.spin_until(result.done, 5.0), ctl.output()[-2000:]
+        res = result.result()
+        assert res.status == GoalStatus.STATUS_ABORTED
+        assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
+        assert 'shutting down' in res.result.message
+        assert ctl.process.wait(timeout=5.0) == 0
+        assert time.monotonic() - t_signal < 2.0
+        h.ros.spin_until(lambda: False, 0.3)  # take the commands still queued here
+        last = h.commands[-1][1]
+        assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
+        assert 'Traceback' not in ctl.output()
 
 
 if __name__ == '__main__':  # pragma: no cover

@@ -11,6 +11,7 @@ import gc
 import inspect
 import re
 import sys
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -30,6 +31,8 @@ CONFIG_FILE_DESCRIPTION = ('DAM configuration file (YAML); empty: DAM_CONFIG or 
                            'config/dam.yaml')
 #: Longest time a stop request waits for the executor loop [s].
 SPIN_PERIOD_S = 0.05
+#: Longest time a node may finish its work after a stop request (``begin_shutdown``) [s].
+FINISH_TIMEOUT_S = 1.0
 #: Fields that say whether a service call succeeded, and the ones that say why not.
 _OK_FIELDS = ('ok', 'success', 'successful')
 _REASON_FIELDS = ('message', 'reason')
@@ -129,20 +132,39 @@ def spin_until_shutdown(node: Node, shutdown: ShutdownRequest) -> None:
     """Run ``node``'s callbacks until a stop request or an external shutdown.
 
     A callback that raises is reported in the log and the node goes on serving: one bad
-    message, request or timer tick does not end it.
+    message, request or timer tick does not end it. On a stop request a node with a
+    ``begin_shutdown()`` method (returning a future, or ``None``) is given up to
+    :data:`FINISH_TIMEOUT_S` of further spinning to finish what it owes its clients (e.g.
+    the result of an action goal).
     """
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
+
+    def spin_once() -> bool:
+        try:
+            executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+        except ExternalShutdownException:
+            return False
+        except Exception as exc:  # noqa: BLE001 - the node stays up
+            if not node.context.ok():
+                return False
+            node.get_logger().error(f'a callback raised {exc!r}; the node goes on')
+        return True
+
     try:
         while not shutdown.requested and node.context.ok():
-            try:
-                executor.spin_once(timeout_sec=SPIN_PERIOD_S)
-            except ExternalShutdownException:
-                break
-            except Exception as exc:  # noqa: BLE001 - the node stays up
-                if shutdown.requested or not node.context.ok():
-                    break
-                node.get_logger().error(f'a callback raised {exc!r}; the node goes on')
+            if not spin_once():
+                return
+        begin = getattr(node, 'begin_shutdown', None)
+        pending = begin() if callable(begin) and node.context.ok() else None
+        if pending is None:
+            return
+        deadline = time.monotonic() + FINISH_TIMEOUT_S
+        while not pending.done() and time.monotonic() < deadline and spin_once():
+            pass
+        flush = time.monotonic() + 0.1  # the answers that follow from it go out
+        while time.monotonic() < flush and spin_once():
+            pass
     finally:
         executor.remove_node(node)
 

@@ -90,6 +90,8 @@ MSG_TO_WIRE_MODE: dict[int, JointMode] = {
     HandCommand.MODE_IMPEDANCE: JointMode.IMPEDANCE,
 }
 _STANDIN_START_TIMEOUT_S = 20.0
+#: How long the stand-in may take to stop cleanly before it is killed [s].
+_STANDIN_STOP_TIMEOUT_S = 1.5
 _LOG_THROTTLE_S = 1.0
 
 
@@ -349,15 +351,25 @@ class HandDriverNode(Node):
             if frame is not None or left <= 0.05:
                 return frame
 
+    def _signal_standin(self) -> None:
+        """Ask the stand-in to stop (it tears down while the driver does)."""
+        child = self._child
+        if child is not None and child.poll() is None:
+            # SIGTERM: a clean stop once the stand-in handles it, a silent end before that.
+            child.send_signal(signal.SIGTERM)
+
     def _stop_standin(self) -> None:
+        """Stop the stand-in and wait for it: SIGTERM, SIGKILL after
+        :data:`_STANDIN_STOP_TIMEOUT_S`."""
+        self._signal_standin()
         child, self._child = self._child, None
-        if child is None or child.poll() is not None:
+        if child is None:
             return
-        # SIGTERM: a clean stop once the stand-in handles it, a silent end before that.
-        child.send_signal(signal.SIGTERM)
         try:
-            child.wait(timeout=5.0)
+            child.wait(timeout=_STANDIN_STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
+            self.get_logger().warning(f'the stand-in (PID {child.pid}) did not stop within '
+                                      f'{_STANDIN_STOP_TIMEOUT_S:g} s: killed')
             child.kill()
             child.wait(timeout=5.0)
 
@@ -566,6 +578,7 @@ class HandDriverNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the link thread, the stand-in (by PID) and close the socket."""
+        self._signal_standin()  # first: both shut down at the same time
         self._running = False
         thread = getattr(self, '_thread', None)
         if thread is not None and thread.is_alive():

@@ -187,6 +187,7 @@ class SpcmControllerNode(Node):
         self._status_message = ''
         self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN
         self._state_timed_out = False
+        self._shutting_down = False
         self._bad_state_count = 0
         self._goal_handle: ServerGoalHandle | None = None  # the running goal
         self._run_done: Future | None = None  # resolved when the running grasp has ended
@@ -320,6 +321,20 @@ class SpcmControllerNode(Node):
             self._publish_status()
         self._advance(feedback=phase_changed)
 
+    def begin_shutdown(self) -> Future | None:
+        """Called by ``run_node`` on SIGINT/SIGTERM before the node is destroyed: a grasp in
+        progress is aborted (its torques ramp to zero, as on a cancel) so that its client gets
+        the result ABORTED, 'the controller is shutting down'. Returns the future that resolves
+        when the goal has ended (``None``: nothing to finish)."""
+        with self._lock:
+            done = self._run_done
+            if done is None or done.done():
+                return None
+            self._shutting_down = True
+            self._seq.fail('the controller is shutting down')
+        self.get_logger().warning('shutting down during a grasp: aborting it')
+        return done
+
     # ------------------------------------------------------------------------------------
     # Release (~/release): let go of the object and open the hand
 
@@ -369,7 +384,10 @@ class SpcmControllerNode(Node):
                             'sends no command until the next goal' if ok else
                             '/joint_states went silent during the release: it stopped, the '
                             'hand keeps its last command')
-        (self.get_logger().info if ok else self.get_logger().error)(response.message)
+        if ok:  # one call site per severity (rclpy refuses a change at one site)
+            self.get_logger().info(response.message)
+        else:
+            self.get_logger().error(response.message)
         return response
 
     def _release_timeout(self) -> float:
@@ -727,7 +745,7 @@ class SpcmControllerNode(Node):
             pos = self._last_pos.copy()
             eff = self._last_eff.copy()
             reason = self._seq.failure_reason
-            timed_out = self._state_timed_out
+            timed_out = self._state_timed_out or self._shutting_down
         if phase is Phase.DONE:
             return self._classify_and_finish(goal_handle, pos, eff, t0)
         if phase is Phase.ABORTED:
