@@ -124,30 +124,8 @@ if [ "$MODE" = wheels ]; then
   if [ ! -f "$VENV/.dam-cmake-repaired" ]; then
     # The wheels' exported CMake files name the wheel build machine's Python and numpy
     # include directories; point them at this venv's.
-    "$VPY" - "$VENV" <<'PYEOF' || die "could not repair the CMake files under $VENV/share"
-import pathlib
-import re
-import sys
-import sysconfig
-
-import numpy
-
-venv = pathlib.Path(sys.argv[1])
-py_include = sysconfig.get_paths()['include']
-np_include = numpy.get_include()
-numpy_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/_core/include')
-include_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/include/python3\.\d+')
-changed = 0
-for path in (venv / 'share').glob('*/cmake/*.cmake'):
-    text = path.read_text(encoding='utf-8', errors='surrogateescape')
-    if '/opt/python/' not in text:
-        continue
-    new = include_re.sub(py_include, numpy_re.sub(np_include, text))
-    if new != text:
-        path.write_text(new, encoding='utf-8', errors='surrogateescape')
-        changed += 1
-print(f'    rewrote {changed} CMake file(s) to {py_include} and {np_include}')
-PYEOF
+    "$VPY" "$REPO_ROOT/scripts/lib/repair_wheel_cmake.py" "$VENV" ||
+      die "could not repair the CMake files under $VENV/share"
     touch "$VENV/.dam-cmake-repaired"
   else
     info "already repaired"
