@@ -6,12 +6,14 @@
 # repository's virtual environment, sources the workspace overlay ros2_ws/install and limits
 # DDS discovery to this machine unless ROS_AUTOMATIC_DISCOVERY_RANGE is already set.
 # Run scripts/setup.sh first.
+# DAM_SYSTEM_ROS_PREFIX names the system ROS 2 install (default /opt/ros/jazzy), as in setup.sh.
 
 _dam_root=$(cd "$(dirname "${BASH_SOURCE[0]:-$0}")/.." && pwd)
 
-if [ -f /opt/ros/jazzy/setup.bash ] && [ "${DAM_ROS:-auto}" != wheels ]; then
+if [ -f "${DAM_SYSTEM_ROS_PREFIX:-/opt/ros/jazzy}/setup.bash" ] &&
+  [ "${DAM_ROS:-auto}" != wheels ]; then
   # shellcheck disable=SC1091
-  source /opt/ros/jazzy/setup.bash
+  source "${DAM_SYSTEM_ROS_PREFIX:-/opt/ros/jazzy}/setup.bash"
 fi
 if [ -f "$_dam_root/.venv/bin/activate" ]; then
   # shellcheck disable=SC1091

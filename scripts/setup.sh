@@ -5,16 +5,22 @@
 #   bash scripts/setup.sh            # use /opt/ros/jazzy if present, else ROS 2 wheels from PyPI
 #   DAM_ROS=wheels bash scripts/setup.sh   # force the PyPI wheels even where /opt/ros/jazzy exists
 #   DAM_FORCE_BUILD=1 bash scripts/setup.sh  # rebuild even if no source changed
+#   DAM_SYSTEM_ROS_PREFIX=/path/to/jazzy bash scripts/setup.sh  # a system ROS 2 Jazzy elsewhere
 #
 # Every other script calls this first. It installs what is missing (apt as root, pip into a
 # virtual environment inside the repository), then runs `colcon build` into ros2_ws/install.
+# With a system ROS 2 Jazzy (DAM_SYSTEM_ROS_PREFIX, default /opt/ros/jazzy, holds setup.bash)
+# it sources that setup.bash first, creates the venv with --system-site-packages and installs
+# only the extra Python packages into it. Setting DAM_SYSTEM_ROS_PREFIX to a directory without
+# setup.bash is an error (unless DAM_ROS=wheels).
 set -euo pipefail
 
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 VENV="$REPO_ROOT/.venv"
 WS="$REPO_ROOT/ros2_ws"
 REQ_DIR="$REPO_ROOT/scripts/requirements"
-SYSTEM_ROS_SETUP=/opt/ros/jazzy/setup.bash
+SYSTEM_ROS_PREFIX=${DAM_SYSTEM_ROS_PREFIX:-/opt/ros/jazzy}
+SYSTEM_ROS_SETUP="$SYSTEM_ROS_PREFIX/setup.bash"
 
 step() { printf '==> %s\n' "$*"; }
 info() { printf '    %s\n' "$*"; }
@@ -38,7 +44,17 @@ info "$("$PYTHON" --version 2>&1)"
 
 if [ -f "$SYSTEM_ROS_SETUP" ] && [ "${DAM_ROS:-auto}" != wheels ]; then
   MODE=system
-  info "ROS 2: system install at /opt/ros/jazzy"
+  info "ROS 2: system install at $SYSTEM_ROS_PREFIX"
+  # Everything below (the Python package checks, pip, colcon) sees the system ROS 2, as in a
+  # shell where its setup.bash is sourced. It may read unset variables.
+  set +u
+  # shellcheck disable=SC1090
+  source "$SYSTEM_ROS_SETUP" || die "sourcing $SYSTEM_ROS_SETUP failed" \
+    "check that it is a ROS 2 Jazzy install, or set DAM_ROS=wheels to use the PyPI wheels"
+  set -u
+elif [ -n "${DAM_SYSTEM_ROS_PREFIX:-}" ] && [ "${DAM_ROS:-auto}" != wheels ]; then
+  die "DAM_SYSTEM_ROS_PREFIX=$DAM_SYSTEM_ROS_PREFIX has no setup.bash" \
+    "point it at a ROS 2 Jazzy install (the directory holding setup.bash), or unset it"
 else
   MODE=wheels
   info "ROS 2: Jazzy wheels from PyPI into $VENV"
@@ -124,30 +140,8 @@ if [ "$MODE" = wheels ]; then
   if [ ! -f "$VENV/.dam-cmake-repaired" ]; then
     # The wheels' exported CMake files name the wheel build machine's Python and numpy
     # include directories; point them at this venv's.
-    "$VPY" - "$VENV" <<'PYEOF' || die "could not repair the CMake files under $VENV/share"
-import pathlib
-import re
-import sys
-import sysconfig
-
-import numpy
-
-venv = pathlib.Path(sys.argv[1])
-py_include = sysconfig.get_paths()['include']
-np_include = numpy.get_include()
-numpy_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/_core/include')
-include_re = re.compile(r'/opt/python/cp3\d+-cp3\d+/include/python3\.\d+')
-changed = 0
-for path in (venv / 'share').glob('*/cmake/*.cmake'):
-    text = path.read_text(encoding='utf-8', errors='surrogateescape')
-    if '/opt/python/' not in text:
-        continue
-    new = include_re.sub(py_include, numpy_re.sub(np_include, text))
-    if new != text:
-        path.write_text(new, encoding='utf-8', errors='surrogateescape')
-        changed += 1
-print(f'    rewrote {changed} CMake file(s) to {py_include} and {np_include}')
-PYEOF
+    "$VPY" "$REPO_ROOT/scripts/lib/repair_wheel_cmake.py" "$VENV" ||
+      die "could not repair the CMake files under $VENV/share"
     touch "$VENV/.dam-cmake-repaired"
   else
     info "already repaired"
@@ -156,21 +150,19 @@ fi
 
 # ------------------------------------------------------------------------------------------
 step "Building the workspace ($WS)"
-# Rebuild only when a source, the config or the environment changed.
+# Rebuild only when a source, the config or the environment (which ROS 2) changed.
+ros_source=$MODE
+if [ "$MODE" = system ]; then ros_source="system $SYSTEM_ROS_PREFIX"; fi
 src_hash=$(
   cd "$REPO_ROOT" &&
     { find src config -type f ! -name '*.pyc' ! -path '*/__pycache__/*' -printf '%p %s %T@\n' |
-      sort; echo "$MODE $req_hash"; } | sha1sum | cut -d' ' -f1
+      sort; echo "$ros_source $req_hash"; } | sha1sum | cut -d' ' -f1
 )
 build_stamp="$WS/install/.dam-source-hash"
 if [ "${DAM_FORCE_BUILD:-0}" != 1 ] && [ "$(cat "$build_stamp" 2>/dev/null)" = "$src_hash" ]; then
   info "up to date (no change in src/ or config/)"
 else
   set +u
-  if [ "$MODE" = system ]; then
-    # shellcheck disable=SC1090
-    source "$SYSTEM_ROS_SETUP"
-  fi
   # shellcheck disable=SC1091
   source "$VENV/bin/activate"
   set -u
