@@ -53,9 +53,9 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
-from dam_common.config import load_config
 from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
+from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
