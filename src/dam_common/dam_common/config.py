@@ -29,6 +29,9 @@ JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
 CONFIG_ENV_VAR = 'DAM_CONFIG'
 
 _FORMAT_VERSION = 1
+#: Longest the device's slew-limited safe stop may take from the actuator limit to zero [s]
+#: (``device.torque_limit_nm / device.torque_rate_limit_nm_per_s``).
+_SAFE_STOP_RAMP_MAX_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -505,6 +508,15 @@ def _device(node: _Node) -> DeviceConfig:
     command_port = command.integer(minimum=1, maximum=65535)
     if command_port == state_port:
         raise command.error(f'{command_port} is also the state_port')
+    torque_limit = node.child('torque_limit_nm').number(positive=True)
+    rate_node = node.child('torque_rate_limit_nm_per_s')
+    rate = rate_node.number(positive=True)
+    if torque_limit / rate > _SAFE_STOP_RAMP_MAX_S:
+        raise rate_node.error(
+            f'{rate!r} N*m/s would take {torque_limit / rate:.3g} s to bring torque_limit_nm '
+            f'({torque_limit!r} N*m) to zero after a watchdog trip; at most '
+            f'{_SAFE_STOP_RAMP_MAX_S} s is allowed (a rate of at least '
+            f'{torque_limit / _SAFE_STOP_RAMP_MAX_S:.6g} N*m/s)')
     cal_node = node.child('calibration')
     cal_node.only_keys(set(JOINT_ROLES))
     calibration: dict[str, Calibration] = {}
@@ -532,9 +544,8 @@ def _device(node: _Node) -> DeviceConfig:
         watchdog_s=watchdog_s,
         probe_timeout_s=node.child('probe_timeout_s').number(positive=True),
         state_timeout_s=node.child('state_timeout_s').number(positive=True),
-        torque_rate_limit_nm_per_s=node.child('torque_rate_limit_nm_per_s').number(
-            positive=True),
-        torque_limit_nm=node.child('torque_limit_nm').number(positive=True),
+        torque_rate_limit_nm_per_s=rate,
+        torque_limit_nm=torque_limit,
         max_stiffness_nm_per_rad=node.child('max_stiffness_nm_per_rad').number(positive=True),
         max_damping_nms_per_rad=node.child('max_damping_nms_per_rad').number(nonnegative=True),
         calibration=calibration,
