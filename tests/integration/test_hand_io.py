@@ -264,6 +264,55 @@ def test_impedance_command_settles_where_stiffness_balances_gravity(system, cfg)
     obs.command(names, [HandCommand.MODE_HOLD] * 3, [0.0] * 3)
 
 
+#: Allowance for torque-sensor noise in the frame-to-frame effort check [N*m]. The stand-in
+#: reports the torque it applied, quantised to 1e-5 N*m; a real joint torque sensor is noisier.
+EFFORT_NOISE_NM = 1e-3
+
+
+def test_an_impedance_step_is_slew_limited_frame_by_frame(system, cfg) -> None:
+    """The issue's command: MODE_IMPEDANCE with theta_0 0.675 rad from the measured angle and
+    k_theta 10 (6.75 N*m demanded; it used to jump from 0 to the 1 N*m limit within one frame).
+    In /joint_states the effort of that joint changes from one state frame to the next by at
+    most device.torque_rate_limit_nm_per_s / device.rate_hz (plus EFFORT_NOISE_NM), and the
+    joint still reaches theta_0."""
+    _, obs = system
+    from dam_interfaces.msg import HandCommand
+
+    names = [f'finger2_{role}_joint' for role in cfg.hand.joint_roles]
+    posture = [math.radians(-30.0), 0.0, math.radians(90.0)]  # swings above the object
+    obs.command(names, [HandCommand.MODE_POSITION] * 3, posture)
+    obs.spin(1.0)
+    theta = obs.latest()[names[0]][0]
+    assert theta == pytest.approx(posture[0], abs=math.radians(1.0))
+    theta_0 = theta + 0.675
+    k, d = 10.0, cfg.controller.damping_nms_per_rad
+    assert k * 0.675 > cfg.device.torque_limit_nm
+    obs.joint_states.clear()
+    obs.command(names, [HandCommand.MODE_IMPEDANCE, HandCommand.MODE_POSITION,
+                        HandCommand.MODE_POSITION], [theta_0, *posture[1:]], [k, 0.0, 0.0],
+                [d, 0.0, 0.0])
+    obs.spin(1.5)
+    frames = [(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec,
+               dict(zip(m.name, zip(m.position, m.effort, strict=True), strict=True))[names[0]])
+              for _, m in obs.joint_states]
+    stamps = np.array([t for t, _ in frames])
+    angles = np.array([q for _, (q, _) in frames])
+    efforts = np.array([e for _, (_, e) in frames])
+    period = 1.0 / cfg.device.rate_hz
+    # one state frame per period; a message lost on the way spans several
+    spans = np.maximum(1, np.round(np.diff(stamps) / period))
+    allowed = cfg.device.torque_rate_limit_nm_per_s * period * spans + EFFORT_NOISE_NM
+    changes = np.abs(np.diff(efforts))
+    worst = int(np.argmax(changes - allowed))
+    assert np.all(changes <= allowed), (
+        f'effort changed by {changes[worst]:.4f} N*m between frames {worst} and {worst + 1} '
+        f'(allowed {allowed[worst]:.4f} N*m); efforts {np.round(efforts[:40], 4).tolist()}')
+    assert len(frames) > 0.5 * 1.5 / period  # the check saw the frames
+    assert efforts.max() - efforts[0] > 0.1  # the command did drive the joint ...
+    assert angles[-1] == pytest.approx(theta_0, abs=math.radians(1.0))  # ... to theta_0
+    obs.command(names, [HandCommand.MODE_HOLD] * 3, [0.0] * 3)
+
+
 def test_bad_commands_are_rejected_and_the_driver_stays_up(system, cfg) -> None:
     driver, obs = system
     from dam_interfaces.msg import HandCommand
