@@ -3,7 +3,9 @@
 The YAML file is the single source of truth for the hand geometry, the object, friction, the
 controller gains and the device link. :func:`load_config` reads it, checks every value and
 returns frozen dataclasses in SI units (angles in radians). A bad file raises
-:class:`~dam_common.errors.ConfigError` whose message names the key and the value.
+:class:`~dam_common.errors.ConfigError` whose message names the key and the value; a key
+written twice in one mapping is refused with its path and both lines
+(:mod:`dam_common.strict_yaml`).
 
 This module is pure Python (numpy and PyYAML); it does not import rclpy.
 """
@@ -21,6 +23,7 @@ import numpy as np
 import yaml
 
 from dam_common.errors import ConfigError
+from dam_common.strict_yaml import safe_load_unique
 
 #: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).
 JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
@@ -260,7 +263,8 @@ def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
     Raises
     ------
     ConfigError
-        The file is missing, is not YAML, or any key is missing, unknown or has a bad value.
+        The file is missing, is not YAML, holds a key twice in one mapping, or any key is
+        missing, unknown or has a bad value.
     """
     cfg_path = Path(path) if path is not None else default_config_path()
     try:
@@ -268,7 +272,7 @@ def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
     except OSError as exc:
         raise ConfigError(f'cannot read configuration file {str(cfg_path)!r}: {exc}') from exc
     try:
-        data = yaml.safe_load(text)
+        data = safe_load_unique(text, str(cfg_path))
     except yaml.YAMLError as exc:
         raise ConfigError(f'{str(cfg_path)!r} is not valid YAML: {exc}') from exc
     return config_from_dict(data, source=str(cfg_path))
