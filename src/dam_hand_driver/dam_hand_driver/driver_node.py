@@ -30,7 +30,7 @@ Services
 --------
 ~/reset : std_srvs/Trigger
     Leave ERROR: succeeds when state frames arrive again; every joint then HOLDs its measured
-    position and torque restarts from zero.
+    position, and the slew of later torque commands starts afresh from the measured torques.
 
 Parameters
 ----------
@@ -46,10 +46,10 @@ thread_priority : int, read-only, in [0, 99], default 50
 
 States
 ------
-WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, HOLD, zero
-torque) -> ERROR (no state frame for ``device.state_timeout_s``: no more /joint_states, no
-more command frames, so the device's watchdog takes it to its safe state) -> ACTIVE only
-through ``~/reset``.
+WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, every joint
+HOLDs, the command slew starts afresh) -> ERROR (no state frame for ``device.state_timeout_s``:
+no more /joint_states, no more command frames, so the device's watchdog takes it to its safe
+state) -> ACTIVE only through ``~/reset``.
 """
 
 from __future__ import annotations
@@ -354,7 +354,8 @@ class HandDriverNode(Node):
     # Control loop (own thread)
 
     def _activate(self, frame: StateFrame) -> None:
-        """Clean start: every joint HOLDs its measured position, torque output from zero."""
+        """Clean start: every joint HOLDs its measured position; the slew of torque commands
+        starts afresh (from the measured torques)."""
         with self._lock:
             self._modes[:] = int(JointMode.HOLD)
             self._setpoints[:] = 0.0
@@ -365,7 +366,8 @@ class HandDriverNode(Node):
             self._error_reason = ''
         q = self.calibration.position_si(frame.position_counts)
         self.get_logger().info(f'device link active: holding the measured posture '
-                               f'{np.round(q, 3).tolist()} rad, torque from zero')
+                               f'{np.round(q, 3).tolist()} rad; torque commands ramp from '
+                               f'the measured torques')
 
     def _enter_error(self, reason: str) -> None:
         with self._lock:
