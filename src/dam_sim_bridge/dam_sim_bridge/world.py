@@ -272,8 +272,7 @@ def _towards(current: np.ndarray, target: np.ndarray, max_change: float | np.nda
     """``current`` moved towards ``target`` by at most ``max_change`` (``target`` itself,
     exactly, when it is that close)."""
     gap = target - current
-    return np.where(np.abs(gap) <= max_change, target,
-                    current + np.clip(gap, -max_change, max_change))
+    return np.where(np.abs(gap) <= max_change, target, current + np.copysign(max_change, gap))
 
 
 def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
