@@ -130,6 +130,11 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
         ('hand.link_masses_kg', [0.02, 0.0, 0.01], r'hand\.link_masses_kg\[1\].*positive'),
         ('device.watchdog_s', 0.5, r'device\.watchdog_s.*0\.5.*at most 0\.2'),
         ('device.watchdog_s', 0.0, r'device\.watchdog_s.*positive'),
+        ('device.torque_rate_limit_nm_per_s', 4.0,
+         r'device\.torque_rate_limit_nm_per_s: 4\.0 N\*m/s would take 0\.25 s .* at most '
+         r'0\.2 s .* at least 5 N\*m/s'),
+        ('device.torque_rate_limit_nm_per_s', 0.0,
+         r'device\.torque_rate_limit_nm_per_s.*positive'),
         ('device.state_port', 70000, r'device\.state_port.*65535.*70000'),
         ('device.command_port', 45110, r'device\.command_port.*45110.*state_port'),
         ('device.calibration.locked.torque_scale_nm_per_raw', 0.0, r'torque_scale.*zero'),
@@ -197,3 +202,62 @@ def test_angles_are_converted_to_radians(raw: dict[str, Any]) -> None:
     assert cfg.contact.friction_coefficient == pytest.approx(1 / math.sqrt(3))
     lo, hi = cfg.hand.joint_limits_rad['position']
     assert (lo, hi) == pytest.approx((0.0, math.radians(95.0)))
+
+
+# --------------------------------------------------------------------------------------------
+# Keys written twice: refused with the key path, the file and both lines
+
+
+def _shipped_lines() -> list[str]:
+    return CONFIG_FILE.read_text(encoding='utf-8').splitlines()
+
+
+def _line_of(lines: list[str], prefix: str, after: int = 0) -> int:
+    """1-based number of the first line at or after ``after`` that starts with ``prefix``."""
+    return next(i + 1 for i, line in enumerate(lines) if i >= after and line.startswith(prefix))
+
+
+def _write(tmp_path: Path, lines: list[str]) -> Path:
+    path = tmp_path / 'dam.yaml'
+    path.write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    return path
+
+
+def test_a_key_written_twice_in_a_section_is_refused(tmp_path: Path) -> None:
+    """friction_angle_deg under contact: 5 deg, then 30 deg on the next line (yaml.safe_load
+    would take 30 without a word)."""
+    lines = _shipped_lines()
+    first = _line_of(lines, '  friction_angle_deg:', _line_of(lines, 'contact:'))
+    lines.insert(first, '  friction_angle_deg: 30.0')
+    path = _write(tmp_path, lines)
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    message = str(info.value)
+    assert message.startswith('contact.friction_angle_deg: duplicate key')
+    assert f'first on line {first}, again on line {first + 1}' in message
+    assert str(path) in message
+
+
+def test_a_section_appended_twice_is_refused(tmp_path: Path) -> None:
+    lines = _shipped_lines()
+    first = _line_of(lines, 'contact:')
+    lines += ['contact:', '  friction_angle_deg: 30.0', '  cone_faces: 8',
+              '  contact_stiffness_n_per_m: [1.0e+5, 1.0e+5, 1.0e+5]',
+              '  table_friction_coefficient: 0.5']
+    again = len(lines) - 4
+    path = _write(tmp_path, lines)
+    with pytest.raises(ConfigError,
+                       match=rf'^contact: duplicate key, first on line {first}, again on line '
+                             rf'{again} \(in .*dam\.yaml\)$'):
+        load_config(path)
+
+
+def test_a_key_written_twice_in_a_list_item_is_refused(tmp_path: Path) -> None:
+    lines = _shipped_lines()
+    first = _line_of(lines, '      stiffness_ratio:', _line_of(lines, '    - name: finger2'))
+    lines.insert(first, '      stiffness_ratio: 0.25')
+    path = _write(tmp_path, lines)
+    with pytest.raises(ConfigError,
+                       match=rf'^hand\.fingers\[1\]\.stiffness_ratio: duplicate key, first on '
+                             rf'line {first}, again on line {first + 1} '):
+        load_config(path)

@@ -1,4 +1,4 @@
-"""The driver's link end over loopback UDP, HandCommand validation and the torque slew limit."""
+"""The driver's link end over loopback UDP and HandCommand validation."""
 
 from __future__ import annotations
 
@@ -154,12 +154,3 @@ def test_bad_impedance_commands_are_rejected_naming_field_and_value(
         setpoint, stiffness, damping, match) -> None:
     with pytest.raises(driver_node.CommandRejected, match=match):
         _validate(['a'], [3], [setpoint], stiffness, damping)
-
-
-def test_slew_limit_and_clamp() -> None:
-    prev = np.zeros(2)
-    out = driver_node.slew_torque(prev, np.array([0.5, -5.0]), 1.0, 20.0, 0.002)
-    assert out == pytest.approx([0.04, -0.04])  # 20 N*m/s * 2 ms
-    for _ in range(100):
-        out = driver_node.slew_torque(out, np.array([0.5, -5.0]), 1.0, 20.0, 0.002)
-    assert out == pytest.approx([0.5, -1.0])  # reaches the target, clamped to the limit

@@ -70,6 +70,7 @@ def test_world_options_follow_config(cfg: DamConfig) -> None:
     assert opts.time_step_s == pytest.approx(cfg.sim.time_step_s)
     assert opts.link_masses_kg == pytest.approx(tuple(cfg.hand.link_masses_kg))
     assert opts.torque_limit_nm == pytest.approx(cfg.device.torque_limit_nm)
+    assert opts.torque_rate_limit_nm_per_s == pytest.approx(cfg.device.torque_rate_limit_nm_per_s)
     assert opts.object_faces == cfg.sim.object_faces
     assert WorldOptions.from_config(cfg, time_step_s=0.002).time_step_s == 0.002
     with pytest.raises(ValueError, match='no_such_option'):

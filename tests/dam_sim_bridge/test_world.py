@@ -250,7 +250,9 @@ def test_torque_mode_reports_applied_clipped_torque(world: HandWorld) -> None:
     modes = [T, H, H] * 3
     world.set_joint_commands(modes, [0.002, 0, 0, 5.0 * limit, 0, 0, -5.0 * limit, 0, 0])
     assert world.joint_states().torques.tolist() == [0.0] * world.n_joints  # before a step
-    world.step(1)
+    # past the slew from zero to the limit
+    world.step(math.ceil(limit / world.options.torque_rate_limit_nm_per_s
+                         / world.time_step_s) + 1)
     torques = world.joint_states().torques
     assert torques[0] == pytest.approx(0.002)
     assert torques[3] == pytest.approx(limit) and torques[6] == pytest.approx(-limit)
@@ -579,12 +581,15 @@ def test_impedance_step_response_of_a_free_joint_is_the_damped_oscillator(
 
 
 def test_impedance_torque_is_clipped_and_flagged(world: HandWorld) -> None:
+    """An equilibrium 1 rad beyond the upper joint limit: the joint stops at the limit while
+    the device's equilibrium ramps on, until the law demands 2 N*m, beyond the actuator."""
     world.set_gravity((0.0, 0.0, 0.0))
-    q0 = world.joint_states().positions[0]
+    upper = world.joint_upper_limits[0]
     limit = world.options.torque_limit_nm
-    _impedance_on_finger1(world, q0 + 0.5, 100.0, 0.0)  # 50 N*m demanded
-    world.step(1)
+    _impedance_on_finger1(world, upper + 1.0, 2.0, 0.0)
+    world.step(1000)
     js = world.joint_states()
+    assert js.positions[0] == pytest.approx(upper, abs=0.01)
     assert js.torques[0] == pytest.approx(limit)
     assert world.joint_faults()[0] & JointFault.SATURATED
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 import os
 import signal
+import socket
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -428,3 +430,161 @@ def test_a_killed_driver_takes_its_standin_with_it(tmp_path: Path) -> None:
             assert gone, 'the stand-in outlived its driver'
     finally:
         client.close()
+
+
+# --- The torque slew limit, frame by frame ----------------------------------------------------
+# The stand-in started by hand sends its state frames to a tap in this process, which forwards
+# each one to the driver (backend hardware) at once and notes its sequence number: every
+# /joint_states message can then be placed exactly in the device's frame sequence, although
+# the driver publishes only the newest of the frames that arrived while it was busy.
+
+#: Allowance for torque-sensor noise in the frame-to-frame effort check [N*m]. The stand-in
+#: reports the torque it applied, quantised to 1e-5 N*m; a real joint torque sensor is noisier.
+EFFORT_NOISE_NM = 1e-3
+
+_TAP_REMAPS = ['-r', '/joint_states:=/tap/joint_states', '-r', '/hand/command:=/tap/command',
+               '-r', '/diagnostics:=/tap/diagnostics', '-r', '/sim/object_pose:=/tap/pose']
+
+
+class _StateTap:
+    """Forwards state datagrams from ``listen_port`` to ``forward_port`` (loopback) and keeps
+    ``(seq, state in SI)`` of every valid state frame."""
+
+    def __init__(self, cfg, listen_port: int, forward_port: int) -> None:
+        from dam_hand_driver.protocol import Calibration, FrameDecoder, FrameKind
+
+        self.calibration = Calibration.from_config(cfg)
+        self.decoder = FrameDecoder(FrameKind.STATE, len(cfg.hand.joint_names))
+        self.frames: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._forward = ('127.0.0.1', forward_port)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(('127.0.0.1', listen_port))
+        self._sock.settimeout(0.1)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(2048)
+            except OSError:  # timeout, or closed
+                continue
+            self._sock.sendto(data, self._forward)
+            frame = self.decoder.decode(data)
+            if frame is not None:
+                q, _, tau = self.calibration.state_si(frame)
+                self.frames.append((frame.seq, q, tau))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._sock.close()
+
+
+def _frame_numbers(frames: list[tuple[int, np.ndarray, np.ndarray]], messages: list
+                   ) -> np.ndarray:
+    """The device frame (seq) each /joint_states message was made from, increasing: the
+    latest frame with the message's positions and efforts (bitwise) that lies before the
+    frame of the next message. Several frames of a joint at rest can share one state; the
+    latest of them is the one the next change starts from."""
+    by_state: dict[tuple[bytes, bytes], list[int]] = {}
+    for seq, q, tau in frames:
+        by_state.setdefault((q.tobytes(), tau.tobytes()), []).append(seq)
+    out = []
+    after = math.inf
+    for msg in reversed(messages):
+        key = (np.array(msg.position).tobytes(), np.array(msg.effort).tobytes())
+        candidates = [seq for seq in by_state[key] if seq < after]
+        after = max(candidates)
+        out.append(after)
+    return np.array(out[::-1])
+
+
+def test_an_impedance_step_is_slew_limited_frame_by_frame(tmp_path: Path, cfg) -> None:
+    """The issue's command: MODE_IMPEDANCE with theta_0 0.675 rad from the measured angle and
+    k_theta 10 (6.75 N*m demanded; it used to jump from 0 to the 1 N*m limit within one frame).
+    In /joint_states the effort of that joint changes from one state frame to the next by at
+    most device.torque_rate_limit_nm_per_s / device.rate_hz (plus EFFORT_NOISE_NM; n times
+    that where the driver skipped n - 1 frames), and the joint still reaches theta_0."""
+    from sensor_msgs.msg import JointState
+
+    from dam_interfaces.msg import HandCommand
+
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    tap_port, driver_port, command_port = free_udp_ports(3)
+    data['device']['command_port'] = command_port
+    data['device']['state_port'] = tap_port
+    sim_config = tmp_path / 'sim.yaml'
+    sim_config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    data['device']['state_port'] = driver_port
+    driver_config = tmp_path / 'driver.yaml'
+    driver_config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    tap = _StateTap(cfg, tap_port, driver_port)
+    client = RosClient()
+    received: list[JointState] = []
+    client.node.create_subscription(JointState, '/tap/joint_states', received.append, 1000)
+    publisher = client.node.create_publisher(HandCommand, '/tap/command', 10)
+    names = [f'finger2_{role}_joint' for role in cfg.hand.joint_roles]
+    j = list(cfg.hand.joint_names).index(names[0])
+
+    def command(modes: list[int], setpoints: list[float], stiffness: list[float],
+                damping: list[float]) -> None:
+        msg = HandCommand(name=names, mode=modes, setpoint=setpoints, stiffness=stiffness,
+                          damping=damping)
+        for _ in range(3):  # volatile QoS: repeat so that a late-matched publisher still lands
+            publisher.publish(msg)
+            client.spin_until(lambda: False, 0.05)
+
+    def settled_at(angle: float) -> bool:
+        if not received:
+            return False
+        i = list(received[-1].name).index(names[0])
+        return (abs(received[-1].position[i] - angle) < math.radians(0.5)
+                and abs(received[-1].velocity[i]) < 0.01)
+
+    try:
+        with node_process([installed_executable('dam_sim_bridge', 'sim_bridge'), '--ros-args',
+                           '-r', '__node:=tap_sim', *_TAP_REMAPS],
+                          env={'DAM_CONFIG': str(sim_config)}), \
+                node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                              '--ros-args', '-r', '__node:=tap_driver', '-p',
+                              'backend:=hardware', *_TAP_REMAPS],
+                             env={'DAM_CONFIG': str(driver_config)}) as driver:
+            assert client.spin_until(lambda: len(received) > 50, 30.0), driver.output()
+            # finger 2 with its distal link curled in: it swings above the object
+            posture = [math.radians(-30.0), 0.0, math.radians(90.0)]
+            command([HandCommand.MODE_POSITION] * 3, posture, [], [])
+            assert client.spin_until(lambda: settled_at(posture[0]), 10.0), driver.output()
+            client.spin_until(lambda: False, 0.2)
+            theta_0 = received[-1].position[j] + 0.675
+            k, d = 10.0, cfg.controller.damping_nms_per_rad
+            assert k * 0.675 > cfg.device.torque_limit_nm
+            received.clear()
+            command([HandCommand.MODE_IMPEDANCE, HandCommand.MODE_POSITION,
+                     HandCommand.MODE_POSITION], [theta_0, *posture[1:]], [k, 0.0, 0.0],
+                    [d, 0.0, 0.0])
+            # theta_0 is approached at rate / k (2 rad/s): 0.34 s of device time
+            reached = client.spin_until(lambda: settled_at(theta_0), 10.0)
+            client.spin_until(lambda: False, 0.2)
+    finally:
+        client.close()
+        tap.close()
+    seqs = _frame_numbers(tap.frames, received)
+    efforts = np.array([m.effort[j] for m in received])
+    angles = np.array([m.position[j] for m in received])
+    step = cfg.device.torque_rate_limit_nm_per_s / cfg.device.rate_hz
+    gaps = np.diff(seqs)
+    allowed = step * gaps + EFFORT_NOISE_NM
+    changes = np.abs(np.diff(efforts))
+    worst = int(np.argmax(changes - allowed))
+    assert np.all(changes <= allowed), (
+        f'effort changed by {changes[worst]:.4f} N*m from frame {seqs[worst]} to frame '
+        f'{seqs[worst + 1]} (allowed {allowed[worst]:.4f} N*m); efforts '
+        f'{np.round(efforts[:40], 4).tolist()}')
+    assert np.mean(gaps == 1) > 0.5  # mostly consecutive frames: the check is frame by frame
+    # The device's own frames, every one of them, obey the bound as well.
+    device_efforts = np.array([tau[j] for seq, _, tau in tap.frames if seq >= seqs[0]])
+    assert np.abs(np.diff(device_efforts)).max() <= step + EFFORT_NOISE_NM
+    assert changes.max() > 0.5 * step  # the torque did ramp near the limit ...
+    assert reached, (theta_0, angles[-1])  # ... and drove the joint to theta_0

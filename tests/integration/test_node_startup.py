@@ -109,3 +109,23 @@ def test_an_override_that_matches_no_parameter_is_warned_about(tmp_path: Path) -
     assert len(warnings) == 2, output
     assert any("'default_fiction_angle'" in w for w in warnings)
     assert any("'defualt_friction_angle'" in w for w in warnings)
+
+
+@pytest.mark.parametrize(('package', 'executable', 'status'), NODES)
+def test_a_config_file_with_a_key_written_twice_is_refused(tmp_path: Path, package: str,
+                                                           executable: str,
+                                                           status: int) -> None:
+    """friction_angle_deg under contact: twice (5 deg, then 30 deg): refused by key path and
+    both lines, in one line, not run with the later value."""
+    repo = Path(__file__).resolve().parents[2]
+    lines = (repo / 'config' / 'dam.yaml').read_text(encoding='utf-8').splitlines()
+    first = next(i for i, line in enumerate(lines)
+                 if line.startswith('  friction_angle_deg:')) + 1
+    lines.insert(first, '  friction_angle_deg: 30.0')
+    bad = tmp_path / 'dam.yaml'
+    bad.write_text('\n'.join(lines) + '\n', encoding='utf-8')
+    proc = _start(package, executable, '-p', f'config_file:={bad}')
+    _assert_refused(proc, status, 'contact.friction_angle_deg: duplicate key',
+                    f'first on line {first}, again on line {first + 1}', str(bad))
+    output = proc.stdout + proc.stderr
+    assert len([line for line in output.splitlines() if 'cannot start' in line]) == 1, output

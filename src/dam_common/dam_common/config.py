@@ -3,7 +3,9 @@
 The YAML file is the single source of truth for the hand geometry, the object, friction, the
 controller gains and the device link. :func:`load_config` reads it, checks every value and
 returns frozen dataclasses in SI units (angles in radians). A bad file raises
-:class:`~dam_common.errors.ConfigError` whose message names the key and the value.
+:class:`~dam_common.errors.ConfigError` whose message names the key and the value; a key
+written twice in one mapping is refused with its path and both lines
+(:mod:`dam_common.strict_yaml`).
 
 This module is pure Python (numpy and PyYAML); it does not import rclpy.
 """
@@ -21,6 +23,7 @@ import numpy as np
 import yaml
 
 from dam_common.errors import ConfigError
+from dam_common.strict_yaml import safe_load_unique
 
 #: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).
 JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
@@ -29,6 +32,9 @@ JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
 CONFIG_ENV_VAR = 'DAM_CONFIG'
 
 _FORMAT_VERSION = 1
+#: Longest the device's slew-limited safe stop may take from the actuator limit to zero [s]
+#: (``device.torque_limit_nm / device.torque_rate_limit_nm_per_s``).
+_SAFE_STOP_RAMP_MAX_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -257,7 +263,8 @@ def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
     Raises
     ------
     ConfigError
-        The file is missing, is not YAML, or any key is missing, unknown or has a bad value.
+        The file is missing, is not YAML, holds a key twice in one mapping, or any key is
+        missing, unknown or has a bad value.
     """
     cfg_path = Path(path) if path is not None else default_config_path()
     try:
@@ -265,7 +272,7 @@ def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
     except OSError as exc:
         raise ConfigError(f'cannot read configuration file {str(cfg_path)!r}: {exc}') from exc
     try:
-        data = yaml.safe_load(text)
+        data = safe_load_unique(text, str(cfg_path))
     except yaml.YAMLError as exc:
         raise ConfigError(f'{str(cfg_path)!r} is not valid YAML: {exc}') from exc
     return config_from_dict(data, source=str(cfg_path))
@@ -505,6 +512,15 @@ def _device(node: _Node) -> DeviceConfig:
     command_port = command.integer(minimum=1, maximum=65535)
     if command_port == state_port:
         raise command.error(f'{command_port} is also the state_port')
+    torque_limit = node.child('torque_limit_nm').number(positive=True)
+    rate_node = node.child('torque_rate_limit_nm_per_s')
+    rate = rate_node.number(positive=True)
+    if torque_limit / rate > _SAFE_STOP_RAMP_MAX_S:
+        raise rate_node.error(
+            f'{rate!r} N*m/s would take {torque_limit / rate:.3g} s to bring torque_limit_nm '
+            f'({torque_limit!r} N*m) to zero after a watchdog trip; at most '
+            f'{_SAFE_STOP_RAMP_MAX_S} s is allowed (a rate of at least '
+            f'{torque_limit / _SAFE_STOP_RAMP_MAX_S:.6g} N*m/s)')
     cal_node = node.child('calibration')
     cal_node.only_keys(set(JOINT_ROLES))
     calibration: dict[str, Calibration] = {}
@@ -532,9 +548,8 @@ def _device(node: _Node) -> DeviceConfig:
         watchdog_s=watchdog_s,
         probe_timeout_s=node.child('probe_timeout_s').number(positive=True),
         state_timeout_s=node.child('state_timeout_s').number(positive=True),
-        torque_rate_limit_nm_per_s=node.child('torque_rate_limit_nm_per_s').number(
-            positive=True),
-        torque_limit_nm=node.child('torque_limit_nm').number(positive=True),
+        torque_rate_limit_nm_per_s=rate,
+        torque_limit_nm=torque_limit,
         max_stiffness_nm_per_rad=node.child('max_stiffness_nm_per_rad').number(positive=True),
         max_damping_nms_per_rad=node.child('max_damping_nms_per_rad').number(nonnegative=True),
         calibration=calibration,

@@ -17,9 +17,11 @@ Topics
     impedance equilibrium beyond the joint limits, a stiffness outside
     (0, ``device.max_stiffness_nm_per_rad``], a damping outside
     [0, ``device.max_damping_nms_per_rad``]) is rejected as a whole with a logged reason naming
-    the field and the value (throttled). Torques are clamped and slew-limited to
-    ``device.torque_rate_limit_nm_per_s``. MODE_IMPEDANCE joints go to the device in its
-    IMPEDANCE mode: the device runs the impedance law at its physics rate.
+    the field and the value (throttled). MODE_IMPEDANCE joints go to the device in its
+    IMPEDANCE mode: the device runs the impedance law at its physics rate. Every frame the
+    driver moves a TORQUE setpoint by at most ``device.torque_rate_limit_nm_per_s`` times the
+    device period and an impedance equilibrium by at most that over the stiffness
+    (:mod:`dam_hand_driver.slew`), so that no command steps the torque faster.
 /diagnostics : diagnostic_msgs/DiagnosticArray (published, 1 Hz)
     Driver state, backend, achieved rate, frame counts by rejection reason, loop latency,
     device watchdog state.
@@ -28,7 +30,7 @@ Services
 --------
 ~/reset : std_srvs/Trigger
     Leave ERROR: succeeds when state frames arrive again; every joint then HOLDs its measured
-    position and torque restarts from zero.
+    position, and the slew of later torque commands starts afresh from the measured torques.
 
 Parameters
 ----------
@@ -44,10 +46,10 @@ thread_priority : int, read-only, in [0, 99], default 50
 
 States
 ------
-WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, HOLD, zero
-torque) -> ERROR (no state frame for ``device.state_timeout_s``: no more /joint_states, no
-more command frames, so the device's watchdog takes it to its safe state) -> ACTIVE only
-through ``~/reset``.
+WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, every joint
+HOLDs, the command slew starts afresh) -> ERROR (no state frame for ``device.state_timeout_s``:
+no more /joint_states, no more command frames, so the device's watchdog takes it to its safe
+state) -> ACTIVE only through ``~/reset``.
 """
 
 from __future__ import annotations
@@ -79,6 +81,7 @@ from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
+from dam_hand_driver.slew import CommandSlew
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim')
@@ -193,15 +196,6 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
     return out
 
 
-def slew_torque(previous_nm: np.ndarray, target_nm: np.ndarray, limit_nm: float,
-                rate_nm_per_s: float, dt_s: float) -> np.ndarray:
-    """Clamp ``target_nm`` to +-``limit_nm`` and move towards it from ``previous_nm`` by at
-    most ``rate_nm_per_s * dt_s`` [N*m]."""
-    target = np.clip(target_nm, -limit_nm, limit_nm)
-    step = rate_nm_per_s * max(0.0, dt_s)
-    return previous_nm + np.clip(target - previous_nm, -step, step)
-
-
 class HandDriverNode(Node):
     """Device link, /joint_states, /hand/command, /diagnostics, backend selection.
 
@@ -241,7 +235,8 @@ class HandDriverNode(Node):
         self.period_s = 1.0 / float(dev.rate_hz)
         self.state_timeout_s = float(dev.state_timeout_s)
         self.torque_limit_nm = float(dev.torque_limit_nm)
-        self.torque_rate_nm_per_s = float(dev.torque_rate_limit_nm_per_s)
+        self.slew = CommandSlew(self.n, self.torque_limit_nm,
+                                float(dev.torque_rate_limit_nm_per_s), self.period_s)
         self.max_stiffness = float(dev.max_stiffness_nm_per_rad)
         self.max_damping = float(dev.max_damping_nms_per_rad)
         self.link = DeviceLink(self.n, dev.host, dev.state_port, dev.command_port)
@@ -251,8 +246,6 @@ class HandDriverNode(Node):
         self._setpoints = np.zeros(self.n)
         self._stiffness = np.zeros(self.n)
         self._damping = np.zeros(self.n)
-        self._tau_out = np.zeros(self.n)
-        self._last_send_t: float | None = None
         self.state = DriverState.WAITING
         self._error_reason = ''
         self._last_frame: StateFrame | None = None
@@ -377,19 +370,20 @@ class HandDriverNode(Node):
     # Control loop (own thread)
 
     def _activate(self, frame: StateFrame) -> None:
-        """Clean start: every joint HOLDs its measured position, torque output from zero."""
+        """Clean start: every joint HOLDs its measured position; the slew of torque commands
+        starts afresh (from the measured torques)."""
         with self._lock:
             self._modes[:] = int(JointMode.HOLD)
             self._setpoints[:] = 0.0
             self._stiffness[:] = 0.0
             self._damping[:] = 0.0
-            self._tau_out[:] = 0.0
-            self._last_send_t = None
+            self.slew.reset()
             self.state = DriverState.ACTIVE
             self._error_reason = ''
         q = self.calibration.position_si(frame.position_counts)
         self.get_logger().info(f'device link active: holding the measured posture '
-                               f'{np.round(q, 3).tolist()} rad, torque from zero')
+                               f'{np.round(q, 3).tolist()} rad; torque commands ramp from '
+                               f'the measured torques')
 
     def _enter_error(self, reason: str) -> None:
         with self._lock:
@@ -430,8 +424,9 @@ class HandDriverNode(Node):
                 self._activate(frame)
             if self.state is not DriverState.ACTIVE:
                 continue
+            state_si = self.calibration.state_si(frame)
             try:
-                self._send_command(frame, now)
+                self._send_command(frame, state_si)
             except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
                 self.get_logger().error(f'command not sent: {exc!r}',
                                         throttle_duration_sec=_LOG_THROTTLE_S)
@@ -439,33 +434,30 @@ class HandDriverNode(Node):
             if not self.context.ok():
                 return  # shutting down: the publishers are gone
             try:
-                self._publish_joint_states(frame)
+                self._publish_joint_states(state_si)
             except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
                 if not self.context.ok():
                     return
                 self.get_logger().error(f'/joint_states not published: {exc!r}',
                                         throttle_duration_sec=_LOG_THROTTLE_S)
 
-    def _send_command(self, frame: StateFrame, now: float) -> None:
+    def _send_command(self, frame: StateFrame,
+                      state_si: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Answer ``frame`` (its state in SI: angles [rad], velocities [rad/s], torques
+        [N*m]) with the newest command, slew-limited."""
         with self._lock:
             modes = self._modes.copy()
             target = self._setpoints.copy()
-            torque = modes == int(JointMode.TORQUE)
-            dt = self.period_s if self._last_send_t is None else min(
-                now - self._last_send_t, 4.0 * self.period_s)
-            tau = slew_torque(self._tau_out, np.where(torque, target, 0.0),
-                              self.torque_limit_nm, self.torque_rate_nm_per_s, dt)
-            self._tau_out = np.where(torque, tau, 0.0)  # leaving TORQUE restarts from zero
-            self._last_send_t = now
-            setpoints = np.where(torque, self._tau_out, target)
             stiffness = self._stiffness.copy()
             damping = self._damping.copy()
+        setpoints = self.slew.step(modes, target, stiffness, damping, *state_si)
         raw = self.calibration.setpoints_raw(modes, setpoints)
         k_raw, d_raw = self.calibration.gains_raw(modes, stiffness, damping)
         self.link.send(modes, raw, frame.seq, k_raw, d_raw)
 
-    def _publish_joint_states(self, frame: StateFrame) -> None:
-        q, dq, tau = self.calibration.state_si(frame)
+    def _publish_joint_states(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray]
+                              ) -> None:
+        q, dq, tau = state_si
         msg = self._js_msg  # one message, refilled: publish() serialises it at once
         msg.header.stamp = self.get_clock().now().to_msg()
         # array.array('d') is taken as is by the generated setters (no per-element checks).
@@ -490,8 +482,6 @@ class HandDriverNode(Node):
             return
         with self._lock:
             for j, mode, sp, k, d in items:
-                if mode is not JointMode.TORQUE and self._modes[j] == int(JointMode.TORQUE):
-                    self._tau_out[j] = 0.0
                 self._modes[j] = int(mode)
                 self._setpoints[j] = sp if mode is not JointMode.HOLD else 0.0
                 self._stiffness[j] = k

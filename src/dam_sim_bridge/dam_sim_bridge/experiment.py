@@ -3,13 +3,14 @@
 :func:`run_experiment` steps a :class:`~dam_sim_bridge.world.HandWorld` and a
 :class:`~dam_spcm_controller.sequence.DamSequence` together at the device rate
 (``device.rate_hz``): each cycle the sequence sees the joint state and its command reaches the
-world ``latency_cycles`` later, torque commands slew-limited like the driver does
-(``device.torque_rate_limit_nm_per_s``). IMPEDANCE commands (the default,
+world ``latency_cycles`` later, its TORQUE setpoints and IMPEDANCE equilibria slew-limited as
+the driver does (:class:`~dam_hand_driver.slew.CommandSlew`,
+``device.torque_rate_limit_nm_per_s``). IMPEDANCE commands (the default,
 ``controller.impedance_on_device``) reach the world with their equilibrium and gains, and the
-world runs the law at every physics step exactly as the stand-in device does
-(:meth:`HandWorld.set_joint_commands`). It returns the controller's end phase, the outcome as
-the controller would classify it from joint signals alone, the ground-truth lift of the object
-and, on request, the recorded signals.
+world runs the law at every physics step, and slews every torque, exactly as the stand-in
+device does (:meth:`HandWorld.set_joint_commands`). It returns the controller's end phase, the
+outcome as the controller would classify it from joint signals alone, the ground-truth lift of
+the object and, on request, the recorded signals.
 
 ``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
 friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from dam_hand_driver.protocol import JointMode as WireMode
+from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
 from dam_spcm_controller.classification import (
     ClassifierSettings,
@@ -123,13 +125,6 @@ class ExperimentResult:
         }
 
 
-def _slew(previous: np.ndarray, target: np.ndarray, limit: float, rate: float,
-          dt: float) -> np.ndarray:
-    """The driver's torque slew: clamp to +-``limit`` [N*m], move by at most ``rate * dt``."""
-    target = np.clip(target, -limit, limit)
-    return previous + np.clip(target - previous, -rate * dt, rate * dt)
-
-
 def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                    friction_angle: float | None = None, world: HandWorld | None = None,
                    latency_cycles: int = 2, max_time: float = 20.0, settle_after: float = 0.0,
@@ -194,7 +189,8 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         seq.step(0.0, js.positions, js.velocities, js.torques)
         seq.start(k_theta, delta_theta_p)
         pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        tau_out = np.zeros(w.n_joints)
+        slew = CommandSlew(w.n_joints, float(dev.torque_limit_nm),
+                           float(dev.torque_rate_limit_nm_per_s), dt)
         rec: dict[str, list[np.ndarray | float]] = {
             k: [] for k in ('t', 'positions', 'velocities', 'efforts', 'object_position',
                             'phase')}
@@ -214,17 +210,11 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                     lift_rolling_end = float(w.object_pose().position[2]) - z0
                 last_phase = seq.phase
             modes = np.array([_TO_WORLD[int(m)] for m in cmd.modes], dtype=np.int64)
-            pending.append((modes, cmd.setpoints.copy(), cmd.stiffness.copy(),
-                            cmd.damping.copy()))
+            setpoints = slew.step(modes, cmd.setpoints, cmd.stiffness, cmd.damping,
+                                  js.positions, js.velocities, js.torques)
+            pending.append((modes, setpoints, cmd.stiffness.copy(), cmd.damping.copy()))
             if len(pending) >= latency_cycles:
-                modes_w, sets_w, stiff_w, damp_w = pending.pop(0)
-                torque = modes_w == int(WireMode.TORQUE)
-                tau = _slew(tau_out, np.where(torque, sets_w, 0.0),
-                            float(dev.torque_limit_nm),
-                            float(dev.torque_rate_limit_nm_per_s), dt)
-                tau_out = np.where(torque, tau, 0.0)
-                w.set_joint_commands(modes_w, np.where(torque, tau_out, sets_w), stiff_w,
-                                     damp_w)
+                w.set_joint_commands(*pending.pop(0))
             w.step(steps)
             t = round(t + dt, 9)
             pos = w.object_pose().position

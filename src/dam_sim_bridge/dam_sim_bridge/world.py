@@ -53,6 +53,41 @@ Each joint is in one :class:`~dam_hand_driver.protocol.JointMode`:
   This is the device-side joint impedance of torque-controlled arms: the loop runs at the
   physics rate (1 kHz), whatever the latency of the commands.
 
+Both torque modes are slew-limited (next section).
+
+Torque slew limit
+-----------------
+The torque a TORQUE or IMPEDANCE joint receives changes by at most
+``WorldOptions.torque_rate_limit_nm_per_s * time_step_s`` from one physics step to the next
+(``device.torque_rate_limit_nm_per_s``; 20 N*m/s is 0.02 N*m per 1 ms step): before every step
+the applied torque moves towards the clipped target (the TORQUE setpoint, or the IMPEDANCE law
+of that step) by at most this much.
+
+A rate limit inside the impedance loop alone would make a stiff joint oscillate between its
+limits after a large step or knock (the restoring torque cannot turn round in time), so an
+IMPEDANCE joint also handles its equilibrium like a torque-controlled arm handles a set point:
+
+* the law runs around an effective equilibrium that moves towards the commanded ``theta_0`` by
+  at most ``rate * time_step_s / k`` per step, so that the command's share of the torque change
+  stays within the limit (a far ``theta_0`` is approached at ``rate / k``, 2 rad/s at
+  ``k`` = 10 N*m/rad);
+* in a step where the slew limit cuts the law's torque, the effective equilibrium is set to
+  where the law gives the torque actually applied: the spring yields instead of winding up,
+  and then returns to ``theta_0`` by the first rule.
+
+Mode changes:
+
+* entering TORQUE or IMPEDANCE from POSITION or HOLD, the slew starts from the torque the
+  servo applied in the last step (clipped to ``torque_limit_nm``): the hand-over is bumpless;
+* between TORQUE and IMPEDANCE it continues from the torque applied last; entering IMPEDANCE,
+  or new gains, seat the effective equilibrium where the law gives that torque;
+* entering POSITION or HOLD, the position servo takes over at once: a servo's torque is its
+  reaction to the load and is not slew-limited (see ``docs/device_protocol.md``).
+
+The watchdog's safe state is a TORQUE command of zero, so it ramps to zero at the same rate:
+from the actuator limit in ``torque_limit_nm / torque_rate_limit_nm_per_s`` (50 ms with the
+shipped configuration).
+
 Torque sensor
 -------------
 :meth:`HandWorld.joint_states` reports, like a joint torque sensor between the actuator and the
@@ -60,9 +95,10 @@ link of a frictionless joint, the actuator torque transmitted to the link [N*m] 
 the positive joint direction): for servoed joints (POSITION, HOLD) Bullet's
 ``appliedJointMotorTorque`` of the last step (the servo's constraint torque, which carries the
 load); for TORQUE and IMPEDANCE joints the torque Bullet applied during the last step after
-clipping (for IMPEDANCE computed from the simulated angle and velocity of that step). Bullet
-does not report the latter itself: ``appliedJointMotorTorque`` keeps the last servo value, and
-the joint reaction excludes generalised forces. Before the first step every reading is zero.
+clipping and the slew limit (for IMPEDANCE computed from the simulated angle and velocity of
+that step). Bullet does not report the latter itself: ``appliedJointMotorTorque`` keeps the
+last servo value, and the joint reaction excludes generalised forces. Before the first step
+every reading is zero.
 """
 
 from __future__ import annotations
@@ -108,6 +144,10 @@ class WorldOptions:
         Largest torque of the position servo (POSITION and HOLD joints) [N*m].
     torque_limit_nm
         TORQUE commands are clipped to +-this [N*m] (the device's actuator limit).
+    torque_rate_limit_nm_per_s
+        Slew limit of every torque applied in TORQUE and IMPEDANCE mode [N*m/s]: the torque
+        changes by at most this times ``time_step_s`` per physics step; ``math.inf`` turns the
+        limit off (a device that does not slew).
     position_gain, velocity_gain
         Gains of Bullet's position servo (dimensionless, see ``setJointMotorControlArray``).
     solver_iterations
@@ -135,6 +175,7 @@ class WorldOptions:
     initial_compliant_angle_rad: float = math.radians(-10.0)
     servo_force_limit_nm: float = 2.0
     torque_limit_nm: float = 1.0
+    torque_rate_limit_nm_per_s: float = 20.0
     position_gain: float = 0.3
     velocity_gain: float = 1.0
     solver_iterations: int = 20
@@ -154,6 +195,10 @@ class WorldOptions:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise WorldConfigError(f'{name} {value!r} must be a positive number')
+        rate = self.torque_rate_limit_nm_per_s
+        if not (isinstance(rate, (int, float)) and rate > 0.0):  # inf allowed, NaN not
+            raise WorldConfigError(f'torque_rate_limit_nm_per_s {rate!r} must be a positive '
+                                   f'number or inf')
         if not math.isfinite(self.initial_compliant_angle_rad):
             raise WorldConfigError(f'initial_compliant_angle_rad '
                                    f'{self.initial_compliant_angle_rad!r} is not finite')
@@ -168,8 +213,9 @@ class WorldOptions:
 
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: object) -> WorldOptions:
-        """Options from ``config``: ``sim`` section, ``hand.link_masses_kg`` and
-        ``device.torque_limit_nm``; ``overrides`` (field name -> value) win.
+        """Options from ``config``: ``sim`` section, ``hand.link_masses_kg``,
+        ``device.torque_limit_nm`` and ``device.torque_rate_limit_nm_per_s``; ``overrides``
+        (field name -> value) win.
 
         Raises
         ------
@@ -183,6 +229,7 @@ class WorldOptions:
             'initial_compliant_angle_rad': float(sim.initial_compliant_angle_rad),
             'servo_force_limit_nm': float(sim.servo_force_limit_nm),
             'torque_limit_nm': float(config.device.torque_limit_nm),
+            'torque_rate_limit_nm_per_s': float(config.device.torque_rate_limit_nm_per_s),
             'solver_iterations': int(sim.solver_iterations),
             'object_faces': int(sim.object_faces),
             'compliant_rotor_inertia_kg_m2': float(sim.compliant_rotor_inertia_kg_m2),
@@ -218,6 +265,14 @@ class _JointTable:
     roles: list[str] = field(default_factory=list)
     lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+def _towards(current: np.ndarray, target: np.ndarray, max_change: float | np.ndarray
+             ) -> np.ndarray:
+    """``current`` moved towards ``target`` by at most ``max_change`` (``target`` itself,
+    exactly, when it is that close)."""
+    gap = target - current
+    return np.where(np.abs(gap) <= max_change, target, current + np.copysign(max_change, gap))
 
 
 def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
@@ -607,6 +662,7 @@ class HandWorld:
         self._applied_torque = np.zeros(self.n_joints)
         self._saturated = np.zeros(self.n_joints, dtype=bool)
         self._theta_0 = np.zeros(self.n_joints)
+        self._theta_0_eff = np.zeros(self.n_joints)
         self._stiffness = np.zeros(self.n_joints)
         self._damping = np.zeros(self.n_joints)
         self._sent_servo: tuple[bytes, bytes] | None = None
@@ -685,6 +741,8 @@ class HandWorld:
                                    f'{d_in.tolist()!r}')
             k[impedance_now] = ki
             d[impedance_now] = di
+        reseat = impedance_now & ((self._modes != _IMPEDANCE) | (k != self._stiffness)
+                                  | (d != self._damping))
         self._theta_0 = np.where(impedance_now, sp, 0.0)
         self._stiffness = k
         self._damping = d
@@ -701,6 +759,18 @@ class HandWorld:
         self._saturated = np.abs(tau) > limit
         was_torque = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
         newly_torque = (torque_now | impedance_now) & ~was_torque
+        if np.any(newly_torque):  # the slew starts from the servo's last torque: bumpless
+            self._applied_torque = np.where(newly_torque, np.clip(
+                self._servo_torques(), -limit, limit), self._applied_torque)
+        self._applied_torque[~(torque_now | impedance_now)] = 0.0
+        if np.any(reseat):  # the law starts where it gives the torque applied now
+            states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+            theta = np.array([s[0] for s in states])
+            theta_dot = np.array([s[1] for s in states])
+            with np.errstate(divide='ignore', invalid='ignore'):
+                seat = theta + (self._applied_torque + d * theta_dot) / k
+            self._theta_0_eff = np.where(reseat, seat, self._theta_0_eff)
+        self._theta_0_eff[~impedance_now] = 0.0
         self._modes = m
         if np.any(newly_torque):
             idx = [self._joints.indices[i] for i in np.flatnonzero(newly_torque)]
@@ -722,6 +792,14 @@ class HandWorld:
             velocityGains=[self.options.velocity_gain] * n)
         self._sent_servo = key
 
+    def _servo_torques(self) -> np.ndarray:
+        """(n,) Bullet's ``appliedJointMotorTorque`` of the last step [N*m] (the servo torque
+        of POSITION and HOLD joints); zeros before the first step."""
+        if not self._stepped:
+            return np.zeros(self.n_joints)
+        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+        return np.array([s[3] for s in states])
+
     # ---------------------------------------------------------------------------------------
     # Stepping and reading
 
@@ -729,7 +807,9 @@ class HandWorld:
         """Advance the physics by ``n`` steps of ``time_step_s`` (lockstep, no pacing).
 
         Torque-mode joints receive their torque before every step; IMPEDANCE joints the
-        torque of their impedance law, computed from the joint state before that step.
+        torque of their impedance law, computed from the joint state before that step. Both
+        move from the torque applied in the previous step by at most
+        ``torque_rate_limit_nm_per_s * time_step_s`` (the slew limit).
         """
         steps = int(n)
         if steps < 0:
@@ -742,32 +822,38 @@ class HandWorld:
         both = np.concatenate([torque_idx, imp_idx])
         joints = [self._joints.indices[i] for i in both]
         imp_joints = [self._joints.indices[i] for i in imp_idx]
-        forces = np.concatenate([self._torque_cmd[torque_idx], np.zeros(imp_idx.size)])
+        target = np.concatenate([self._torque_cmd[torque_idx], np.zeros(imp_idx.size)])
+        forces = self._applied_torque[both].astype(float)
+        max_change = float(self.options.torque_rate_limit_nm_per_s) * self.options.time_step_s
         n_t = torque_idx.size
         limit = float(self.options.torque_limit_nm)
         k = self._stiffness[imp_idx]
         d = self._damping[imp_idx]
         theta_0 = self._theta_0[imp_idx]
-        tau_imp = np.zeros(imp_idx.size)
+        theta_0_eff = self._theta_0_eff[imp_idx]
+        max_shift = max_change / k  # the equilibrium's ramp [rad] per step
         raw_imp = np.zeros(imp_idx.size)
         for _ in range(steps):
             if imp_joints:
                 states = pb.getJointStates(self.hand_id, imp_joints)
                 theta = np.fromiter((s[0] for s in states), float, imp_idx.size)
                 theta_dot = np.fromiter((s[1] for s in states), float, imp_idx.size)
-                raw_imp = k * (theta_0 - theta) - d * theta_dot
-                tau_imp = np.clip(raw_imp, -limit, limit)
-                forces[n_t:] = tau_imp
+                theta_0_eff = _towards(theta_0_eff, theta_0, max_shift)
+                raw_imp = k * (theta_0_eff - theta) - d * theta_dot
+                target[n_t:] = np.clip(raw_imp, -limit, limit)
             if joints:
+                forces = _towards(forces, target, max_change)
+                if imp_joints:  # slewed: the spring yields instead of winding up
+                    cut = forces[n_t:] != target[n_t:]
+                    theta_0_eff[cut] = (theta + (forces[n_t:] + d * theta_dot) / k)[cut]
                 pb.setJointMotorControlArray(self.hand_id, joints, pybullet.TORQUE_CONTROL,
                                              forces=forces.tolist())
             pb.stepSimulation()
         if steps:
             self._steps += steps
             self._stepped = True
-            applied = np.where(self._modes == _TORQUE, self._torque_cmd, 0.0)
-            applied[imp_idx] = tau_imp
-            self._applied_torque = applied
+            self._applied_torque[both] = forces
+            self._theta_0_eff[imp_idx] = theta_0_eff
             self._saturated[imp_idx] = np.abs(raw_imp) > limit
 
     def _read_positions(self) -> np.ndarray:
