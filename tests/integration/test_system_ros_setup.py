@@ -125,13 +125,10 @@ def _run(command: list[str], env: dict[str, str], cwd: Path | None = None,
 
 
 def _in_env_sh(copy: Path, command: str) -> str:
-    """A bash command line that runs ``command`` after ``source scripts/env.sh`` in the copy.
-
-    The colcon-generated overlay setup.bash reads unset variables (COLCON_TRACE), so env.sh is
-    sourced before ``set -u``.
-    """
+    """A bash command line that runs ``command`` after ``source scripts/env.sh`` in the copy,
+    sourced from a strict script (``set -euo pipefail``), as a user's bring-up script would."""
     cd = shlex.quote(str(copy))
-    return f'set -eo pipefail; cd {cd}; source scripts/env.sh; set -u; {command}'
+    return f'set -euo pipefail; cd {cd}; source scripts/env.sh; {command}''
 
 
 @pytest.fixture(scope='module')
