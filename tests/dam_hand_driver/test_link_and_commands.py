@@ -154,3 +154,18 @@ def test_bad_impedance_commands_are_rejected_naming_field_and_value(
         setpoint, stiffness, damping, match) -> None:
     with pytest.raises(driver_node.CommandRejected, match=match):
         _validate(['a'], [3], [setpoint], stiffness, damping)
+
+
+def test_impedance_gains_the_link_cannot_carry_are_rejected() -> None:
+    """A stiffness below one raw unit of the calibration (1e-4 N*m/rad by default) passes the
+    range check but could not be encoded into any frame: refused on arrival, by joint."""
+    from dam_hand_driver.protocol import Calibration
+
+    calibration = Calibration(position_scale_rad_per_count=[1e-4] * N,
+                              position_offset_counts=[0] * N,
+                              torque_scale_nm_per_raw=[1e-5] * N, torque_offset_raw=[0] * N)
+    tiny = _validate(['a'], [3], [0.1], [1e-5], [0.1])
+    with pytest.raises(driver_node.CommandRejected, match='cannot carry.*stiffness'):
+        driver_node.check_encodable(tiny, calibration)
+    fine = _validate(['a', 'b'], [3, 0], [0.1, 0.2], [5.0, 0.0], [0.1, 0.0])
+    driver_node.check_encodable(fine, calibration)  # no exception

@@ -128,7 +128,7 @@ def _in_env_sh(copy: Path, command: str) -> str:
     """A bash command line that runs ``command`` after ``source scripts/env.sh`` in the copy,
     sourced from a strict script (``set -euo pipefail``), as a user's bring-up script would."""
     cd = shlex.quote(str(copy))
-    return f'set -euo pipefail; cd {cd}; source scripts/env.sh; {command}''
+    return f'set -euo pipefail; cd {cd}; source scripts/env.sh; {command}'
 
 
 @pytest.fixture(scope='module')

@@ -78,7 +78,7 @@ from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import SWITCH_INTERVAL_S, die_with_parent, set_thread_priority
 from dam_common.shutdown import SHUTDOWN
-from dam_hand_driver.errors import HandDriverError
+from dam_hand_driver.errors import HandDriverError, ParameterError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
 from dam_hand_driver.slew import CommandSlew
@@ -194,6 +194,30 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
                                   f'[0, {max_damping_nms_per_rad!r}] N*m*s/rad')
         out.append(CommandItem(j, wire, sp, k, d))
     return out
+
+
+def check_encodable(items: list[CommandItem], calibration: Calibration) -> None:
+    """Refuse impedance gains the device link cannot carry (e.g. a stiffness below one raw
+    unit of the calibration), which would fail every frame after the command was taken.
+
+    Raises
+    ------
+    CommandRejected
+        The gain, the joint and why (from :meth:`Calibration.gains_raw`).
+    """
+    n = calibration.n_joints
+    modes = np.full(n, int(JointMode.HOLD), dtype=np.int64)
+    stiffness = np.zeros(n)
+    damping = np.zeros(n)
+    for item in items:
+        if item.mode is JointMode.IMPEDANCE:
+            modes[item.joint] = int(JointMode.IMPEDANCE)
+            stiffness[item.joint] = item.stiffness
+            damping[item.joint] = item.damping
+    try:
+        calibration.gains_raw(modes, stiffness, damping)
+    except ParameterError as exc:
+        raise CommandRejected(f'impedance gains the device link cannot carry: {exc}') from exc
 
 
 class HandDriverNode(Node):
@@ -474,6 +498,7 @@ class HandDriverNode(Node):
         try:
             items = validate_command(msg, self._index, self.torque_limit_nm, self._lower,
                                      self._upper, self.max_stiffness, self.max_damping)
+            check_encodable(items, self.calibration)
         except CommandRejected as exc:
             self._rejected_commands += 1
             self._last_reject_reason = str(exc)
