@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -45,15 +44,12 @@ def test_boundaries_are_where_the_margins_change_sign(analyzer, bounds, dps, alp
     assert checked >= 4
 
 
-def test_map_equals_check_lift_and_is_fast(analyzer):
+def test_map_equals_check_lift(analyzer):
+    """The vectorised map equals one check_lift per point (its speed: bench/bench_lift_map)."""
     alphas = np.radians([1.0, 5.0, 30.0])
     dps = np.linspace(0.0, DP_MAX, 200)
     ks = np.geomspace(0.01, 50.0, 200)
-    analyzer.lift_map(alphas, dps[:3], ks[:3])  # warm-up
-    t0 = time.perf_counter()
     lm = analyzer.lift_map(alphas, dps, ks)
-    elapsed = time.perf_counter() - t0
-    assert elapsed < 1.0, elapsed
     assert lm.sufficient_margin.shape == (3, 200, 200)
     rng = np.random.default_rng(4)
     compared = beyond = 0

@@ -520,15 +520,17 @@ def test_release_lets_go_and_stops_commanding(stack) -> None:
     assert ctl.alive()
 
 
+@pytest.mark.parametrize('stack', [['-p', 'torque_ramp_time:=3.0']], indirect=True)
 def test_release_answers_failure_when_joint_states_go_silent(stack) -> None:
-    """The plant stops publishing while the hand opens: the release ends with success false
-    and the reason, within a bounded time; the controller takes new goals afterwards."""
+    """The plant stops publishing while the hand is released (a 3 s unloading ramp): the
+    release ends with success false and the reason, within a bounded time."""
     from std_srvs.srv import Trigger
 
     h, ctl, _plant = stack
     client = h.node.create_client(Trigger, '/spcm_controller/release')
     assert client.wait_for_service(timeout_sec=10.0)
     release = client.call_async(Trigger.Request())
+    assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'RELEASING', 5.0)
     assert h.ros.call(Trigger, '/plant/stop', Trigger.Request()).success
     assert h.ros.wait_future(release, 5.0), 'the release did not answer'
     answer = release.result()

@@ -348,17 +348,20 @@ class SpcmControllerNode(Node):
                                     f'a grasp is running (phase {_phase_name(self._seq.phase)}):'
                                     ' cancel its goal first')
                 return response
-            last = self._last_state_time
-            if last is None or time.monotonic() - last > self._values['state_timeout']:
-                response.success = False
-                response.message = 'no recent /joint_states: cannot release'
-                return response
+            self._busy = True  # no goal starts while the release waits for a joint state
+        if not await self._fresh_state(_START_STATE_WAIT_S):
+            with self._lock:
+                self._busy = False
+            response.success = False
+            response.message = (f'no /joint_states within {_START_STATE_WAIT_S:g} s: cannot '
+                                'release')
+            return response
+        with self._lock:
             held = self._last_cmd if self._publishing or self._seq.phase is Phase.DONE \
                 else None
             self._release = ReleaseMotion(self._params, held, time.monotonic(),
                                           self._last_pos)
             self._release_done = Future()
-            self._busy = True
             self._publishing = True
             self._state_timed_out = False
             done = self._release_done
@@ -603,9 +606,10 @@ class SpcmControllerNode(Node):
         finally:
             self.destroy_timer(timer)
 
-    async def _fresh_state(self, wait_s: float, goal_handle: ServerGoalHandle) -> bool:
+    async def _fresh_state(self, wait_s: float, goal_handle: ServerGoalHandle | None = None
+                           ) -> bool:
         """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``; ``False``
-        also when the goal is cancelled meanwhile."""
+        also when ``goal_handle``'s goal is cancelled meanwhile."""
         fresh: Future = Future()
         deadline = time.monotonic() + wait_s
 
@@ -616,7 +620,8 @@ class SpcmControllerNode(Node):
             now = time.monotonic()
             if last is not None and now - last <= self._values['state_timeout']:
                 fresh.set_result(True)
-            elif now >= deadline or goal_handle.is_cancel_requested:
+            elif now >= deadline or (goal_handle is not None
+                                     and goal_handle.is_cancel_requested):
                 fresh.set_result(False)
 
         timer = create_steady_timer(self, 0.01, poll)
