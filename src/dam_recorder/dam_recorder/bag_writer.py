@@ -277,10 +277,14 @@ class BagWriter:
             self.split()
 
     def file_bytes(self) -> int:
-        """Size of the current file [bytes]: what is written, plus the pending chunk
-        (uncompressed) for MCAP; the message data for sqlite3."""
+        """Size of the current file [bytes]: for MCAP what is written, plus the pending chunk
+        (uncompressed) and its message index (16 bytes a message); for sqlite3 the message
+        data. The summary written when the file closes (schemas, channels, chunk index,
+        statistics: a few hundred bytes) is not counted."""
         if self.storage == 'mcap':
-            return self._writer.bio.tell() + self._writer.chunk.bio.tell()
+            writer = self._writer
+            pending = sum(len(m) for m in writer.chunk.msgs.values())
+            return writer.bio.tell() + writer.chunk.bio.tell() + 16 * pending
         return self._file_data_bytes
 
     def flush(self) -> None:
