@@ -23,7 +23,7 @@ def test_options_left_out_leave_the_parameters_alone() -> None:
 
 
 def test_a_regex_alone_replaces_the_default_topics() -> None:
-    assert parameter_overrides(['-e', 'status']) == {'topics': [], 'regex': 'status'}
+    assert parameter_overrides(['-e', 'status']) == {'topics': [''], 'regex': 'status'}
     assert parameter_overrides(['/a', '-e', 'status'])['topics'] == ['/a']
 
 

@@ -100,4 +100,7 @@ def test_bad_selection_names_the_value(kwargs, quoted) -> None:
 def test_nothing_selected_is_refused() -> None:
     with pytest.raises(ConfigurationError, match='no topic'):
         TopicSelection([])
+    with pytest.raises(ConfigurationError, match='no topic'):
+        TopicSelection([''])
+    assert TopicSelection([''], regex='x').topics == ()
     assert absolute_topic_name(' /x ') == '/x'

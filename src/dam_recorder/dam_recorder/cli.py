@@ -77,7 +77,9 @@ def parameter_overrides(argv: Sequence[str]) -> dict[str, Any]:
     if args.topics:
         overrides['topics'] = list(args.topics)
     elif args.regex:
-        overrides['topics'] = []  # --regex alone records what it matches, not the default set
+        # --regex alone records what it matches, not the default set; [''] selects no name
+        # (an override of a string array parameter cannot be empty).
+        overrides['topics'] = ['']
     for option in ('output', 'storage', 'compression', 'regex', 'exclude', 'max_bag_size',
                    'max_bag_duration', 'chunk_interval'):
         value = getattr(args, option)

@@ -12,7 +12,8 @@ storage : string
 compression : string
     MCAP chunk compression ``zstd`` or ``none``; empty: ``zstd`` for MCAP, ``none`` for sqlite3.
 topics : string[]
-    Topics recorded by name (default: :data:`~dam_recorder.selection.DEFAULT_TOPICS`).
+    Topics recorded by name (default: :data:`~dam_recorder.selection.DEFAULT_TOPICS`); ``['']``
+    names none (then ``regex`` alone selects).
 regex, exclude : string
     Also record the topics ``regex`` matches; never those ``exclude`` matches (empty: none).
 max_bag_size : int [bytes], max_bag_duration : double [s]
@@ -122,9 +123,7 @@ class RecorderNode(Node):
 
     def __init__(self, overrides: dict[str, Any] | None = None) -> None:
         super().__init__('recorder', parameter_overrides=[
-            Parameter(k, value=v) if k != 'topics' else
-            Parameter(k, Parameter.Type.STRING_ARRAY, list(v))
-            for k, v in (overrides or {}).items()])
+            Parameter(k, value=v) for k, v in (overrides or {}).items()])
         self._writer: BagWriter | None = None
         self._recorded: dict[str, _Recorded] = {}
         self._refused: set[str] = set()

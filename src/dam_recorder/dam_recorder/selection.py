@@ -2,7 +2,9 @@
 
 A topic is recorded when it is in the list or the regular expression matches it (anywhere in
 the name, as ``re.search`` and ``ros2 bag record --regex`` do), and the exclusion does not match
-it. Names are absolute: a name given without a leading ``/`` is taken relative to ``/``.
+it. Names are absolute: a name given without a leading ``/`` is taken relative to ``/``. An
+empty name is ignored, so that a list of one empty name (``['']``, which ROS parameters can
+hold where they cannot hold an empty string array) selects by the regular expression only.
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ class TopicSelection:
     Parameters
     ----------
     topics : iterable of str
-        Topics recorded by name.
+        Topics recorded by name (empty names are ignored).
     regex : str
         Topics matching this regular expression are recorded too; ``''`` matches none.
     exclude : str
@@ -82,7 +84,7 @@ class TopicSelection:
     _exclude: re.Pattern[str] | None = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        names = tuple(dict.fromkeys(absolute_topic_name(t) for t in self.topics))
+        names = tuple(dict.fromkeys(absolute_topic_name(t) for t in self.topics if t.strip()))
         object.__setattr__(self, 'topics', names)
         object.__setattr__(self, '_regex', _compile('regex', self.regex))
         object.__setattr__(self, '_exclude', _compile('exclude', self.exclude))
