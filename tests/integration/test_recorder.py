@@ -15,7 +15,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ros_testing import RosClient, fixture_command, installed_executable, node_process
+from ros_testing import (
+    RosClient,
+    caught_signals,
+    fixture_command,
+    installed_executable,
+    node_process,
+)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'dam_recorder'))
 import recorder_samples as samples  # noqa: E402
@@ -188,3 +194,25 @@ def test_pause_resume_and_split_services(tmp_path: Path) -> None:
     assert paused['/joint_states'] == len(missing)
     first_file = info['files'][0]['message_count']
     assert 0 < first_file < info['message_count']
+
+
+@pytest.mark.parametrize('delay_s, signum', [(0.0, signal.SIGINT), (0.3, signal.SIGTERM),
+                                             (0.8, signal.SIGINT), (2.0, signal.SIGTERM)])
+def test_a_signal_at_any_moment_leaves_a_whole_bag_or_none(tmp_path: Path, delay_s: float,
+                                                           signum: int) -> None:
+    from dam_recorder.recovery import mcap_is_complete
+
+    bag = tmp_path / 'early'
+    with node_process([RECORDER, '-o', str(bag)]) as rec:
+        deadline = time.monotonic() + 20.0
+        while signal.SIGTERM not in caught_signals(rec.pid):  # the entry point's first line
+            assert rec.alive() and time.monotonic() < deadline, rec.output()
+            time.sleep(0.002)
+        time.sleep(delay_s)
+        started = time.monotonic()
+        assert stop(rec, signum) == 0, rec.output()
+        assert time.monotonic() - started < 3.0
+        assert 'Traceback' not in rec.output()
+    if bag.exists():  # made whole, never half
+        assert metadata_problems(bag) == []
+        assert all(mcap_is_complete(f) for f in bag.glob('*.mcap'))

@@ -54,6 +54,7 @@ from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
 from dam_common.node import run_node
+from dam_common.shutdown import SHUTDOWN
 from dam_recorder.bag_writer import BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
@@ -138,11 +139,20 @@ class RecorderNode(Node):
         output = p['output'] or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         compression = p['compression'] or ('zstd' if p['storage'] == 'mcap' else 'none')
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
-        self._writer = BagWriter(
-            Path(output).absolute(), storage=p['storage'], compression=compression,
-            max_file_bytes=p['max_bag_size'],
-            max_file_duration_ns=int(round(p['max_bag_duration'] * 1e9)),
-            ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), custom_data=self._custom_data)
+        try:
+            with SHUTDOWN.uninterrupted():  # a bag directory is made whole or not at all
+                self._writer = BagWriter(
+                    Path(output).absolute(), storage=p['storage'], compression=compression,
+                    max_file_bytes=p['max_bag_size'],
+                    max_file_duration_ns=int(round(p['max_bag_duration'] * 1e9)),
+                    ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'),
+                    custom_data=self._custom_data)
+            self._start(p, compression)
+        except BaseException:  # a stop request or an error while starting: close the bag
+            self.destroy_node()
+            raise
+
+    def _start(self, p: dict[str, Any], compression: str) -> None:
         self._depth = p['queue_depth']
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
