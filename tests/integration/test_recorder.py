@@ -216,3 +216,15 @@ def test_a_signal_at_any_moment_leaves_a_whole_bag_or_none(tmp_path: Path, delay
     if bag.exists():  # made whole, never half
         assert metadata_problems(bag) == []
         assert all(mcap_is_complete(f) for f in bag.glob('*.mcap'))
+
+
+def test_help_and_an_existing_output_directory(tmp_path: Path) -> None:
+    shown = subprocess.run([str(RECORDER), '--help'], capture_output=True, text=True,
+                           timeout=60)
+    assert shown.returncode == 0 and '--output' in shown.stdout and 'recover' in shown.stdout
+    (tmp_path / 'taken').mkdir()
+    refused = subprocess.run([str(RECORDER), '-o', str(tmp_path / 'taken')],
+                             capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 1
+    assert f'cannot start: {tmp_path / "taken"} exists already' in refused.stderr
+    assert list((tmp_path / 'taken').iterdir()) == []
