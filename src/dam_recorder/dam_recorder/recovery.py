@@ -69,7 +69,8 @@ class FileReport:
     message_count : int
         Messages the file holds now.
     dropped_bytes : int
-        Bytes at the end of the damaged file that could not be read (a partial chunk) [bytes].
+        Bytes at the end of the damaged file that could not be read [bytes]: a partly written
+        chunk (its messages are lost) or message index (nothing is lost with it).
     """
 
     path: str
