@@ -13,7 +13,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 SRC = REPO_ROOT / 'src'
 INSTALL = REPO_ROOT / 'ros2_ws' / 'install'
 PYTHON_PACKAGES = ['dam_common', 'dam_analysis', 'dam_sim_bridge', 'dam_hand_driver',
-                   'dam_spcm_controller']
+                   'dam_spcm_controller', 'dam_recorder']
 
 
 def declared_executables(setup_py: Path) -> list[str]:

@@ -1,0 +1,318 @@
+"""Writing a rosbag2 bag, split into files, with the storage writers of ``rosbags``.
+
+A bag is a directory holding ``metadata.yaml`` (:mod:`dam_recorder.metadata`) and one or more
+storage files ``<bag name>_<index>.mcap`` (or ``.db3``), as ``ros2 bag record`` lays it out.
+``rosbags``' :class:`~rosbags.rosbag2.Writer` writes a bag of one file only, so this module
+drives its storage writers (the MCAP and sqlite3 plugins) itself, one per file, and writes the
+metadata of the whole bag.
+
+MCAP files are chunked: messages collect in a chunk (zstd-compressed by default) that is
+written out with its message index when it exceeds 1 MiB or when :meth:`BagWriter.flush` is
+called (the recorder calls it every ``chunk_interval``), and the file is flushed to the
+operating system right then. A file is finished with its summary (schemas, channels, chunk
+index, statistics) and footer only when it is closed; if the process dies before, every chunk
+written so far stays readable and :mod:`dam_recorder.recovery` adds the summary. sqlite3 files
+commit on every flush.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+from rosbags.interfaces import (
+    Connection,
+    ConnectionExtRosbag2,
+    MessageDefinition,
+    MessageDefinitionFormat,
+    Qos,
+)
+from rosbags.rosbag2.enums import CompressionMode
+from rosbags.rosbag2.storage_mcap import McapWriter
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
+
+from dam_recorder.errors import BagError, ConfigurationError
+from dam_recorder.metadata import (
+    METADATA_VERSION,
+    TOP_KEY,
+    FileInfo,
+    TopicInfo,
+    bag_metadata,
+    dump_metadata,
+    write_metadata,
+)
+from dam_recorder.qos import metadata_profiles
+
+#: Storage plugins: identifier -> file suffix.
+STORAGE_SUFFIXES: dict[str, str] = {'mcap': '.mcap', 'sqlite3': '.db3'}
+#: Compression of MCAP chunks.
+COMPRESSIONS: tuple[str, ...] = ('zstd', 'none')
+
+
+class _FileTarget:
+    """Stands in for the bag directory that ``rosbags``' storage writers take: they open
+    ``<directory>/<directory name>.<suffix>``; this names the file of a split bag instead."""
+
+    def __init__(self, file: Path) -> None:
+        self.file = file
+        self.name = file.stem
+
+    def __truediv__(self, _name: str) -> Path:
+        return self.file
+
+
+def storage_file_name(bag_dir: Path, index: int, storage: str) -> str:
+    """Name of the ``index``-th storage file of ``bag_dir`` (``bag_0.mcap``, ``bag_1.mcap``)."""
+    return f'{bag_dir.name}_{index}{STORAGE_SUFFIXES[storage]}'
+
+
+def qos_text(profiles: Sequence[Qos]) -> str:
+    """Offered profiles as the YAML text that MCAP channel metadata and the sqlite3 ``topics``
+    table carry (the same list as ``metadata.yaml``)."""
+    return yaml.safe_dump(metadata_profiles(profiles), sort_keys=False,
+                          default_flow_style=False).strip()
+
+
+@dataclass(frozen=True)
+class _Topic:
+    connection: Connection
+    info: TopicInfo
+
+
+def open_storage(file: Path, storage: str, compression: str) -> Any:
+    """A ``rosbags`` storage writer for a new ``file`` (MCAP chunks compressed with zstd when
+    ``compression`` is ``'zstd'``)."""
+    if storage == 'mcap':
+        mode = CompressionMode.STORAGE if compression == 'zstd' else CompressionMode.NONE
+        return McapWriter(_FileTarget(file), mode)  # type: ignore[arg-type]
+    return Sqlite3Writer(_FileTarget(file), CompressionMode.NONE)  # type: ignore[arg-type]
+
+
+def add_connection(writer: Any, connection: Connection, new_type: bool) -> None:
+    """Register ``connection`` (and its type, when ``new_type``) with a storage writer."""
+    if new_type:
+        writer.add_msgtype(connection)
+    writer.add_connection(connection, qos_text(connection.ext.offered_qos_profiles))
+
+
+def make_connection(connection_id: int, info: TopicInfo, definition: str) -> Connection:
+    """The ``rosbags`` connection of a topic."""
+    return Connection(
+        id=connection_id, topic=info.name, msgtype=info.type,
+        msgdef=MessageDefinition(MessageDefinitionFormat.MSG, definition),
+        digest=info.type_hash, msgcount=0,
+        ext=ConnectionExtRosbag2(serialization_format=info.serialization_format,
+                                 offered_qos_profiles=list(info.offered_qos)),
+        owner=None)
+
+
+class BagWriter:
+    """A rosbag2 bag being written.
+
+    Parameters
+    ----------
+    bag_dir : path
+        The bag directory; it must not exist (it is created, with its parents).
+    storage : str
+        ``'mcap'`` (default) or ``'sqlite3'``.
+    compression : str
+        ``'zstd'`` (MCAP chunk compression, the default for MCAP) or ``'none'``; sqlite3 takes
+        ``'none'`` only.
+    max_file_bytes : int
+        Start a new file once the current one holds this many bytes [bytes]; 0: no limit.
+    max_file_duration_ns : int
+        Start a new file before a message stamped this long [ns] after the file's first one;
+        0: no limit.
+    ros_distro : str
+        Written as ``ros_distro``.
+    custom_data : callable, optional
+        Returns the ``custom_data`` entries (strings) each time the metadata is written.
+
+    Raises
+    ------
+    ConfigurationError
+        For an unknown storage or compression, or a negative limit (the value is named).
+    BagError
+        If ``bag_dir`` exists or cannot be created.
+    """
+
+    def __init__(self, bag_dir: str | os.PathLike[str], *, storage: str = 'mcap',
+                 compression: str = 'zstd', max_file_bytes: int = 0,
+                 max_file_duration_ns: int = 0, ros_distro: str = 'jazzy',
+                 custom_data: Callable[[], Mapping[str, str]] | None = None) -> None:
+        if storage not in STORAGE_SUFFIXES:
+            raise ConfigurationError(
+                f'storage must be one of {", ".join(STORAGE_SUFFIXES)}, got {storage!r}')
+        if compression not in COMPRESSIONS:
+            raise ConfigurationError(
+                f'compression must be one of {", ".join(COMPRESSIONS)}, got {compression!r}')
+        if storage == 'sqlite3' and compression != 'none':
+            raise ConfigurationError(
+                f'compression {compression!r} is for MCAP chunks; sqlite3 takes none')
+        if max_file_bytes < 0 or max_file_duration_ns < 0:
+            raise ConfigurationError(
+                'split limits must be 0 (off) or positive, got max_file_bytes='
+                f'{max_file_bytes!r}, max_file_duration_ns={max_file_duration_ns!r}')
+        self.bag_dir = Path(bag_dir)
+        self.storage = storage
+        self.compression = compression
+        self.max_file_bytes = int(max_file_bytes)
+        self.max_file_duration_ns = int(max_file_duration_ns)
+        self.ros_distro = ros_distro
+        self._custom_data = custom_data
+        if self.bag_dir.exists():
+            raise BagError(f'{self.bag_dir} exists already; a bag is never written over')
+        try:
+            self.bag_dir.mkdir(parents=True)
+        except OSError as exc:
+            raise BagError(f'cannot create the bag directory {self.bag_dir}: {exc}') from None
+        self.files: list[FileInfo] = []
+        self._topics: list[_Topic] = []
+        self._writer: Any = None
+        self._file_data_bytes = 0
+        self._open_file()
+
+    # -- files -------------------------------------------------------------------------------
+
+    @property
+    def topics(self) -> list[TopicInfo]:
+        """The topics added so far, with their message counts."""
+        return [t.info for t in self._topics]
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` ran."""
+        return self._writer is None
+
+    @property
+    def current_file(self) -> Path:
+        """The storage file being written."""
+        return self.bag_dir / self.files[-1].path
+
+    def _open_file(self) -> None:
+        name = storage_file_name(self.bag_dir, len(self.files), self.storage)
+        try:
+            self._writer = open_storage(self.bag_dir / name, self.storage, self.compression)
+        except OSError as exc:
+            raise BagError(f'cannot open {self.bag_dir / name}: {exc}') from None
+        self.files.append(FileInfo(name))
+        self._file_data_bytes = 0
+        seen: set[str] = set()
+        for topic in self._topics:
+            add_connection(self._writer, topic.connection, topic.info.type not in seen)
+            seen.add(topic.info.type)
+        self.write_metadata()
+
+    def metadata(self) -> dict[str, Any]:
+        """The bag's ``metadata.yaml`` content as of now."""
+        return bag_metadata(
+            storage_identifier=self.storage, files=self.files, topics=self.topics,
+            custom_data=self._custom_data() if self._custom_data else None,
+            ros_distro=self.ros_distro)
+
+    def write_metadata(self) -> None:
+        """Write ``metadata.yaml`` as of now (done on every new file, topic and close)."""
+        write_metadata(self.bag_dir, self.metadata())
+
+    def _close_file(self) -> None:
+        writer, self._writer = self._writer, None
+        text = dump_metadata(self.metadata()[TOP_KEY]).strip()
+        writer.close(METADATA_VERSION, text)
+
+    # -- topics and messages -----------------------------------------------------------------
+
+    def add_topic(self, name: str, type_name: str, definition: str, type_hash: str,
+                  offered_qos: Sequence[Qos]) -> int:
+        """Add a topic; return the id to :meth:`write` its messages with.
+
+        Parameters
+        ----------
+        name, type_name : str
+            Topic name and full type name.
+        definition : str
+            ``ros2msg`` message definition (:meth:`MessageType.definition`).
+        type_hash : str
+            RIHS01 type hash.
+        offered_qos : sequence of rosbags Qos
+            The profiles the topic's publishers offer.
+
+        Raises
+        ------
+        BagError
+            If the bag is closed or ``name`` was added before.
+        """
+        self._check_open()
+        if any(t.info.name == name for t in self._topics):
+            raise BagError(f'topic {name!r} is in the bag already')
+        info = TopicInfo(name, type_name, type_hash, list(offered_qos))
+        connection = make_connection(len(self._topics) + 1, info, definition)
+        new_type = all(t.info.type != type_name for t in self._topics)
+        add_connection(self._writer, connection, new_type)
+        self._topics.append(_Topic(connection, info))
+        self.write_metadata()
+        return connection.id
+
+    def write(self, topic_id: int, timestamp_ns: int, data: bytes | memoryview) -> None:
+        """Write one serialized message of topic ``topic_id`` received at ``timestamp_ns``
+        [ns since the epoch], starting a new file first or after when a limit says so."""
+        self._check_open()
+        topic = self._topics[topic_id - 1]
+        file = self.files[-1]
+        if (self.max_file_duration_ns and file.message_count
+                and timestamp_ns - file.start_ns >= self.max_file_duration_ns):
+            self.split()
+            file = self.files[-1]
+        writer = self._writer
+        writer.write(topic.connection, timestamp_ns, data)
+        file.add(timestamp_ns)
+        topic.info.message_count += 1
+        self._file_data_bytes += len(data)
+        if self.storage == 'mcap' and writer.chunk.bio.tell() == 0:
+            writer.bio.flush()  # the writer just wrote out a full chunk
+        if self.max_file_bytes and self.file_bytes() >= self.max_file_bytes:
+            self.split()
+
+    def file_bytes(self) -> int:
+        """Size of the current file [bytes]: for MCAP what is written, plus the pending chunk
+        (uncompressed) and its message index (16 bytes a message); for sqlite3 the message
+        data. The summary written when the file closes (schemas, channels, chunk index,
+        statistics: a few hundred bytes) is not counted."""
+        if self.storage == 'mcap':
+            writer = self._writer
+            pending = sum(len(m) for m in writer.chunk.msgs.values())
+            return writer.bio.tell() + writer.chunk.bio.tell() + 16 * pending
+        return self._file_data_bytes
+
+    def flush(self) -> None:
+        """Make every message written so far readable after a crash: write out the pending
+        MCAP chunk and flush the file to the operating system (sqlite3: commit)."""
+        self._check_open()
+        if self.storage == 'mcap':
+            if self._writer.chunk.msgs:
+                self._writer.close_chunk()
+            self._writer.bio.flush()
+        else:
+            self._writer.conn.commit()
+
+    def split(self) -> Path:
+        """Finish the current file and continue in a new one; return the new file's path."""
+        self._check_open()
+        self._close_file()
+        self._open_file()
+        return self.current_file
+
+    def close(self) -> None:
+        """Finish the current file (summary and footer) and write ``metadata.yaml``; a second
+        call does nothing."""
+        if self._writer is None:
+            return
+        self._close_file()
+        self.write_metadata()
+
+    def _check_open(self) -> None:
+        if self._writer is None:
+            raise BagError(f'the bag {self.bag_dir} is closed')

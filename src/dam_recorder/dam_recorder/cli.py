@@ -1,0 +1,88 @@
+"""The recorder's command line: options that become the node's parameters (no rclpy).
+
+``ros2 run dam_recorder recorder -o DIR [topics...]``: an option given on the command line
+overrides the parameter of the same meaning (also one from ``--params-file``); an option left
+out leaves the parameter as it is. ROS arguments (``--ros-args ...``) are removed before.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from typing import Any
+
+from dam_recorder.bag_writer import COMPRESSIONS, STORAGE_SUFFIXES
+from dam_recorder.selection import DEFAULT_TOPICS
+
+EPILOG = f"""\
+Without topics and without --regex the default set is recorded:
+  {' '.join(DEFAULT_TOPICS)}
+A topic is recorded when it is named or matches --regex (anywhere in the name), and does not
+match --exclude. Topics that appear later are picked up. The subscription asks for the QoS the
+publishers offer (reliable or best effort; transient local for latched topics).
+
+Services while recording (std_srvs/srv/Trigger): ~/pause, ~/resume, ~/split.
+SIGINT or SIGTERM closes the bag. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
+Every option is also a parameter of the node (see the README, section Recording)."""
+
+
+def _non_negative(kind: type) -> Any:
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f'{text!r} is negative (0 turns the limit off)')
+        return value
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``recorder``."""
+    parser = argparse.ArgumentParser(
+        prog='recorder', formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Record topics into a rosbag2 bag (MCAP or sqlite3) that ros2 bag info '
+                    'and ros2 bag play read.', epilog=EPILOG)
+    parser.add_argument('topics', nargs='*', metavar='TOPIC',
+                        help='topics to record (default: the set listed below)')
+    parser.add_argument('-o', '--output', metavar='DIR',
+                        help='bag directory to create (must not exist; default: '
+                             'rosbag2_<date>-<time> in the current directory)')
+    parser.add_argument('-s', '--storage', choices=sorted(STORAGE_SUFFIXES),
+                        help='storage format (default: mcap)')
+    parser.add_argument('--compression', choices=COMPRESSIONS,
+                        help='MCAP chunk compression (default: zstd for mcap, none for sqlite3)')
+    parser.add_argument('-e', '--regex', metavar='REGEX',
+                        help='also record every topic this regular expression matches')
+    parser.add_argument('-x', '--exclude', metavar='REGEX',
+                        help='never record a topic this regular expression matches')
+    parser.add_argument('-b', '--max-bag-size', type=_non_negative(int), metavar='BYTES',
+                        help='start a new file when the current one reaches this size '
+                             '(default: 0, no limit)')
+    parser.add_argument('-d', '--max-bag-duration', type=_non_negative(float), metavar='S',
+                        help='start a new file when the current one spans this many seconds '
+                             '(default: 0, no limit)')
+    parser.add_argument('--chunk-interval', type=_non_negative(float), metavar='S',
+                        help='write the pending chunk out at least this often: the most that '
+                             'a SIGKILL can lose (default: 1.0)')
+    return parser
+
+
+def parameter_overrides(argv: Sequence[str]) -> dict[str, Any]:
+    """The node parameters the command line ``argv`` (without the program name and without
+    ROS arguments) sets. Exits with status 2 and a usage message on a bad command line."""
+    args = build_parser().parse_args(list(argv))
+    overrides: dict[str, Any] = {}
+    if args.topics:
+        overrides['topics'] = list(args.topics)
+    elif args.regex:
+        # --regex alone records what it matches, not the default set; [''] selects no name
+        # (an override of a string array parameter cannot be empty).
+        overrides['topics'] = ['']
+    for option in ('output', 'storage', 'compression', 'regex', 'exclude', 'max_bag_size',
+                   'max_bag_duration', 'chunk_interval'):
+        value = getattr(args, option)
+        if value is not None:
+            overrides[option] = value
+    return overrides

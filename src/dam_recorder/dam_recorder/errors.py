@@ -1,0 +1,30 @@
+"""Errors raised by dam_recorder.
+
+Every error names the offending value (a path, a topic, a type, a parameter) in its message.
+"""
+
+from __future__ import annotations
+
+
+class DamRecorderError(Exception):
+    """Base class of every error raised by this package."""
+
+
+class ConfigurationError(DamRecorderError, ValueError):
+    """A recorder option is malformed: a topic name, a regular expression, a limit."""
+
+
+class TypeDescriptionError(DamRecorderError):
+    """A message type cannot be described (no type description file, unsupported field)."""
+
+
+class CdrError(DamRecorderError, ValueError):
+    """A serialized message is shorter than its own content says (truncated or malformed)."""
+
+
+class BagError(DamRecorderError):
+    """A bag cannot be written: the output exists, the storage cannot be opened, ..."""
+
+
+class RecoveryError(DamRecorderError):
+    """A bag cannot be recovered: no bag directory, no storage file, no readable record."""

@@ -1,0 +1,349 @@
+"""``recorder``: records topics into a rosbag2 bag (the thin ROS layer over the core).
+
+Run it with ``ros2 run dam_recorder recorder -o DIR [topics...]`` (``--help`` lists the
+options; each is also a parameter below).
+
+Parameters (all read-only)
+--------------------------
+output : string
+    Bag directory to create; empty: ``rosbag2_<YYYY_MM_DD-HH_MM_SS>`` in the working directory.
+storage : string
+    ``mcap`` (default) or ``sqlite3``.
+compression : string
+    MCAP chunk compression ``zstd`` or ``none``; empty: ``zstd`` for MCAP, ``none`` for sqlite3.
+topics : string[]
+    Topics recorded by name (default: :data:`~dam_recorder.selection.DEFAULT_TOPICS`); ``['']``
+    names none (then ``regex`` alone selects).
+regex, exclude : string
+    Also record the topics ``regex`` matches; never those ``exclude`` matches (empty: none).
+max_bag_size : int [bytes], max_bag_duration : double [s]
+    Start a new storage file at this size or time span; 0: no limit.
+chunk_interval : double [s]
+    Longest time a received message waits in memory before it is in the file.
+discovery_period : double [s]
+    How often the recorder looks for new topics and publishers.
+queue_depth : int [messages]
+    Depth of each subscription's queue.
+
+Messages are taken serialized (``raw=True``: never deserialized), cut at their CDR end
+(:mod:`~dam_recorder.cdr_end`) and stamped with the time the middleware received them (the
+node's clock with ``use_sim_time:=true``). Services (``std_srvs/srv/Trigger``): ``~/pause``,
+``~/resume``, ``~/split``. SIGINT and SIGTERM close the bag (``destroy_node``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from rclpy.utilities import remove_ros_args
+from std_srvs.srv import Trigger
+
+from dam_common.clock import create_steady_timer
+from dam_common.node import run_node
+from dam_common.shutdown import SHUTDOWN
+from dam_recorder.bag_writer import BagWriter
+from dam_recorder.cdr_end import CdrEnd
+from dam_recorder.cli import parameter_overrides
+from dam_recorder.errors import CdrError, DamRecorderError, TypeDescriptionError
+from dam_recorder.qos import OfferedQos, request_for_offers, to_rosbags_qos
+from dam_recorder.selection import DEFAULT_TOPICS, TopicSelection
+from dam_recorder.type_description import install_prefix_of, load_message_type
+
+#: Longest time [s] a stop request waits for messages still arriving (see begin_shutdown).
+DRAIN_QUIET_S = 0.1
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of ``type_name`` (``pkg/msg/Name``, or a type derived from an action
+    or a service such as ``pkg/action/Name_FeedbackMessage``).
+
+    Raises
+    ------
+    TypeDescriptionError
+        If the class cannot be imported (the message names the type).
+    """
+    try:
+        package, kind, name = type_name.split('/')
+        module = importlib.import_module(f'{package}.{kind}')
+    except (ValueError, ImportError) as exc:
+        raise TypeDescriptionError(f'cannot import the type {type_name!r}: {exc}') from None
+    if hasattr(module, name):
+        return getattr(module, name)
+    for cut in range(len(name) - 1, 0, -1):  # Name_FeedbackMessage lives beside Name
+        base = getattr(module, name[:cut], None) if name[cut] == '_' else None
+        derived = getattr(sys.modules.get(getattr(base, '__module__', '')), name, None)
+        if derived is not None:
+            return derived
+    raise TypeDescriptionError(f'cannot import the type {type_name!r}: no class {name}')
+
+
+def offered_qos(info: Any) -> OfferedQos:
+    """The :class:`OfferedQos` of an rclpy ``TopicEndpointInfo``."""
+    qos = info.qos_profile
+    return OfferedQos(
+        history=qos.history.name, depth=int(qos.depth), reliability=qos.reliability.name,
+        durability=qos.durability.name, deadline_ns=qos.deadline.nanoseconds,
+        lifespan_ns=qos.lifespan.nanoseconds, liveliness=qos.liveliness.name,
+        liveliness_lease_duration_ns=qos.liveliness_lease_duration.nanoseconds,
+        avoid_ros_namespace_conventions=bool(qos.avoid_ros_namespace_conventions))
+
+
+@dataclass
+class _Recorded:
+    """A topic being recorded."""
+
+    name: str
+    topic_id: int
+    end: CdrEnd
+    lost: int = 0
+    paused: int = 0
+    trimmed: int = 0
+    malformed: int = 0
+
+
+def _descriptor(description: str, **kwargs: Any) -> ParameterDescriptor:
+    return ParameterDescriptor(description=description, read_only=True, **kwargs)
+
+
+class RecorderNode(Node):
+    """Subscribes to the selected topics as they appear and writes what arrives to a bag."""
+
+    def __init__(self, overrides: dict[str, Any] | None = None) -> None:
+        super().__init__('recorder', parameter_overrides=[
+            Parameter(k, value=v) for k, v in (overrides or {}).items()])
+        self._writer: BagWriter | None = None
+        self._recorded: dict[str, _Recorded] = {}
+        self._refused: set[str] = set()
+        self._paused = False
+        self._last_message = time.monotonic()
+        p = self._declare_parameters()
+        self._selection = TopicSelection(p['topics'], p['regex'], p['exclude'])
+        for topic in self._selection.topics:
+            if self._selection.excluded(topic):
+                self.get_logger().warning(f'{topic} is named but --exclude matches it: '
+                                          'not recorded')
+        output = p['output'] or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
+        compression = p['compression'] or ('zstd' if p['storage'] == 'mcap' else 'none')
+        self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        try:
+            with SHUTDOWN.uninterrupted():  # a bag directory is made whole or not at all
+                self._writer = BagWriter(
+                    Path(output).absolute(), storage=p['storage'], compression=compression,
+                    max_file_bytes=p['max_bag_size'],
+                    max_file_duration_ns=int(round(p['max_bag_duration'] * 1e9)),
+                    ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'),
+                    custom_data=self._custom_data)
+            self._start(p, compression)
+        except BaseException:  # a stop request or an error while starting: close the bag
+            self.destroy_node()
+            raise
+
+    def _start(self, p: dict[str, Any], compression: str) -> None:
+        self._depth = p['queue_depth']
+        self.create_service(Trigger, '~/pause', self._on_pause)
+        self.create_service(Trigger, '~/resume', self._on_resume)
+        self.create_service(Trigger, '~/split', self._on_split)
+        create_steady_timer(self, p['discovery_period'], self._discover)
+        create_steady_timer(self, p['chunk_interval'], self._flush)
+        self.get_logger().info(
+            f'recording into {self._writer.bag_dir} ({p["storage"]}, compression '
+            f'{compression}): {", ".join(self._selection.topics) or "-"}'
+            + (f', regex {p["regex"]!r}' if p['regex'] else '')
+            + (f', exclude {p["exclude"]!r}' if p['exclude'] else ''))
+        self._discover()
+
+    def _declare_parameters(self) -> dict[str, Any]:
+        declared = {
+            'output': ('', _descriptor('bag directory to create; empty: rosbag2_<date>-<time>')),
+            'storage': ('mcap', _descriptor('storage format: mcap or sqlite3')),
+            'compression': ('', _descriptor('MCAP chunk compression zstd or none; empty: zstd '
+                                             'for mcap, none for sqlite3')),
+            'topics': (list(DEFAULT_TOPICS), _descriptor(
+                'topics recorded by name', type=Parameter.Type.STRING_ARRAY.value)),
+            'regex': ('', _descriptor('also record the topics this regular expression matches')),
+            'exclude': ('', _descriptor('never record the topics this regular expression '
+                                        'matches')),
+            'max_bag_size': (0, _descriptor(
+                'new file at this size [bytes]; 0: no limit',
+                integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)])),
+            'max_bag_duration': (0.0, _descriptor(
+                'new file at this time span [s]; 0: no limit',
+                floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e9)])),
+            'chunk_interval': (1.0, _descriptor(
+                'longest time a message waits in memory [s]: what a SIGKILL can lose',
+                floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)])),
+            'discovery_period': (0.5, _descriptor(
+                'how often new topics are looked for [s]',
+                floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)])),
+            'queue_depth': (1000, _descriptor(
+                'depth of each subscription queue [messages]',
+                integer_range=[IntegerRange(from_value=1, to_value=1_000_000, step=1)])),
+        }
+        return {name: self.declare_parameter(name, default, descriptor).value
+                for name, (default, descriptor) in declared.items()}
+
+    # -- topics ------------------------------------------------------------------------------
+
+    def _discover(self) -> None:
+        if self._writer is None or self._writer.closed:
+            return
+        for name, types in self.get_topic_names_and_types():
+            if name in self._recorded or name in self._refused \
+                    or not self._selection.selects(name):
+                continue
+            if len(types) != 1:
+                self._refuse(name, f'published with {len(types)} types ({", ".join(types)})')
+                continue
+            offers = self.get_publishers_info_by_topic(name)
+            if not offers:
+                continue  # no publisher yet: its QoS decides the subscription's
+            try:
+                self._record(name, types[0], offers)
+            except DamRecorderError as exc:
+                self._refuse(name, str(exc))
+
+    def _refuse(self, name: str, reason: str) -> None:
+        self._refused.add(name)
+        self.get_logger().warning(f'not recording {name}: {reason}')
+
+    def _record(self, name: str, type_name: str, offers: Sequence[Any]) -> None:
+        cls = message_class(type_name)
+        package = type_name.split('/')[0]
+        prefixes = [p for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+        prefix = install_prefix_of(sys.modules[package].__file__ or '', package)
+        message_type = load_message_type(type_name, prefixes + ([prefix] if prefix else []))
+        end = CdrEnd(message_type)
+        offered = [offered_qos(o) for o in offers]
+        request = request_for_offers(name, offered, self._depth)
+        for warning in request.warnings:
+            self.get_logger().warning(warning)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=request.depth,
+            reliability=ReliabilityPolicy.RELIABLE if request.reliable
+            else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if request.transient_local
+            else DurabilityPolicy.VOLATILE)
+        type_hash = message_type.type_hash or str(getattr(offers[0], 'topic_type_hash', ''))
+        topic_id = self._writer.add_topic(name, type_name, message_type.definition(), type_hash,
+                                          [to_rosbags_qos(o) for o in offered])
+        recorded = _Recorded(name, topic_id, end)
+        self._recorded[name] = recorded
+        self.create_subscription(
+            cls, name, self._callback(recorded), qos, raw=True,
+            event_callbacks=SubscriptionEventCallbacks(
+                message_lost=lambda status, r=recorded: self._on_lost(r, status)))
+        self.get_logger().info(
+            f'recording {name} ({type_name}, {"reliable" if request.reliable else "best_effort"}'
+            f', {"transient_local" if request.transient_local else "volatile"})')
+
+    def _callback(self, recorded: _Recorded) -> Any:
+        writer = self._writer
+
+        def on_message(data: bytes, info: dict[str, Any]) -> None:
+            self._last_message = time.monotonic()
+            if self._paused:
+                recorded.paused += 1
+                return
+            stamp = info.get('received_timestamp', 0)
+            if self._use_sim_time or not stamp:
+                stamp = self.get_clock().now().nanoseconds
+            try:
+                cut = recorded.end.trim(data)
+            except CdrError as exc:
+                if not recorded.malformed:
+                    self.get_logger().warning(f'{recorded.name}: {exc}; written as received')
+                recorded.malformed += 1
+                cut = data
+            if len(cut) != len(data):
+                recorded.trimmed += 1
+            writer.write(recorded.topic_id, stamp, cut)
+        return on_message
+
+    def _on_lost(self, recorded: _Recorded, status: Any) -> None:
+        change = int(status.total_count_change)
+        recorded.lost += change
+        self.get_logger().warning(f'{recorded.name}: the middleware reports {change} message(s) '
+                                  f'lost ({recorded.lost} in all)')
+
+    def _custom_data(self) -> dict[str, str]:
+        def counts(attribute: str) -> str:
+            return json.dumps({r.name: getattr(r, attribute) for r in self._recorded.values()
+                               if getattr(r, attribute)}, sort_keys=True)
+        return {'dam_recorder.lost_messages': counts('lost'),
+                'dam_recorder.paused_messages': counts('paused'),
+                'dam_recorder.trimmed_messages': counts('trimmed')}
+
+    # -- services and timers -----------------------------------------------------------------
+
+    def _flush(self) -> None:
+        if self._writer is not None and not self._writer.closed:
+            self._writer.flush()
+
+    def _on_pause(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        response.success = True
+        response.message = 'was paused already' if self._paused else 'paused'
+        self._paused = True
+        return response
+
+    def _on_resume(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        response.success = True
+        response.message = 'resumed' if self._paused else 'was recording already'
+        self._paused = False
+        return response
+
+    def _on_split(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        path = self._writer.split()
+        response.success = True
+        response.message = f'now writing {path.name}'
+        return response
+
+    # -- shutdown ----------------------------------------------------------------------------
+
+    def begin_shutdown(self) -> Future:
+        """On a stop request: keep taking messages until none arrived for
+        :data:`DRAIN_QUIET_S` (what was in flight is recorded), at most ``run_node``'s
+        finishing time."""
+        done = Future()
+
+        def check() -> None:
+            if not done.done() and time.monotonic() - self._last_message >= DRAIN_QUIET_S:
+                done.set_result(True)
+        create_steady_timer(self, DRAIN_QUIET_S / 2, check)
+        return done
+
+    def destroy_node(self) -> None:
+        """Close the bag (summary, index and ``metadata.yaml``), then destroy the node."""
+        writer, self._writer = self._writer, None
+        if writer is not None and not writer.closed:
+            writer.close()
+            count = sum(t.message_count for t in writer.topics)
+            lost = sum(r.lost for r in self._recorded.values())
+            self.get_logger().info(
+                f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
+                f'{len(writer.files)} file(s); the middleware reported {lost} lost')
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    argv = list(sys.argv if args is None else args)
+    overrides = parameter_overrides(remove_ros_args(argv)[1:])
+    run_node(lambda: RecorderNode(overrides), 'recorder', argv,
+             startup_errors=(DamRecorderError,))
+
+
+if __name__ == '__main__':
+    main()

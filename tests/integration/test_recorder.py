@@ -1,0 +1,230 @@
+"""The recorder in real runs: real publisher and recorder processes over DDS, the bags read back
+by two independent readers (``rosbags`` with deserialization, ``mcap`` with
+``mcap-ros2-support``) and every field checked against what was published; SIGINT, SIGTERM,
+SIGKILL with ``recover``, and the pause/resume/split services."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ros_testing import (
+    RosClient,
+    caught_signals,
+    fixture_command,
+    installed_executable,
+    node_process,
+)
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'dam_recorder'))
+import recorder_samples as samples  # noqa: E402
+from bag_readers import read_with_mcap, read_with_rosbags  # noqa: E402
+from rosbag2_format import metadata_problems  # noqa: E402
+
+pytestmark = pytest.mark.integration
+
+COUNT = 100
+RECORDER = installed_executable('dam_recorder', 'recorder')
+RECOVER = installed_executable('dam_recorder', 'recover')
+
+
+def wait_for(proc, text: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while text not in proc.output():
+        assert proc.alive(), f'exited before printing {text!r}:\n{proc.output()}'
+        assert time.monotonic() < deadline, f'no {text!r} within {timeout} s:\n{proc.output()}'
+        time.sleep(0.05)
+
+
+def stop(proc, signum: int, timeout: float = 10.0) -> int:
+    proc.process.send_signal(signum)
+    return proc.process.wait(timeout=timeout)
+
+
+def metadata(bag: Path) -> dict:
+    return yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+
+
+def indices(records: list, topic: str) -> list[int]:
+    return [samples.index_of(topic, r.values) for r in records]
+
+
+def check_values(topic: str, records: list) -> None:
+    """Every decoded message equals the sample it was made from."""
+    for record in records:
+        if record.values is not None:
+            assert record.values == samples.sample(topic, samples.index_of(topic, record.values))
+
+
+def check_both_readers_agree(bag: Path) -> tuple[dict, dict]:
+    by_rosbags, by_mcap = read_with_rosbags(bag), read_with_mcap(bag)
+    assert by_rosbags.keys() == by_mcap.keys()
+    for topic, records in by_rosbags.items():
+        other = by_mcap[topic]
+        assert [(r.timestamp, r.data) for r in records] == [(r.timestamp, r.data) for r in other]
+        for mine, theirs in zip(records, other, strict=True):
+            assert theirs.values is None or theirs.values == mine.values
+        check_values(topic, records)
+        check_values(topic, other)
+    return by_rosbags, by_mcap
+
+
+def test_sigint_closes_an_mcap_bag_both_readers_read_in_full(tmp_path: Path) -> None:
+    bag = tmp_path / 'run'
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(COUNT))) as pub:
+        wait_for(pub, 'waiting')  # the latched message is out before the recorder starts
+        with node_process([RECORDER, '-o', str(bag)]) as rec:
+            wait_for(pub, 'done')
+            time.sleep(0.3)
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+    assert 'Traceback' not in log and f'closed {bag}' in log
+    assert metadata_problems(bag) == []
+    topics, by_mcap = check_both_readers_agree(bag)
+    reliable = [t for t in samples.TOPICS if t not in samples.BEST_EFFORT_TOPICS]
+    for topic in [*reliable, samples.LATE_TOPIC]:
+        assert indices(topics[topic], topic) == list(range(COUNT)), topic
+    for topic in samples.BEST_EFFORT_TOPICS:  # best effort: what arrived, in order
+        got = indices(topics[topic], topic)
+        assert got and got == sorted(set(got)) and set(got) <= set(range(COUNT))
+    assert [r.values for r in topics[samples.LATCHED_TOPIC]] == [{'data': samples.LATCHED_TEXT}]
+    feedback = '/dam_grasp/_action/feedback'
+    assert by_mcap[feedback][0].values is None  # mcap-ros2-support refuses the type name
+    info = metadata(bag)
+    qos = {t['topic_metadata']['name']: t['topic_metadata']['offered_qos_profiles'][0]
+           for t in info['topics_with_message_count']}
+    assert qos['/sim/object_pose']['reliability'] == 'best_effort'
+    assert qos[samples.LATCHED_TOPIC]['durability'] == 'transient_local'
+    assert qos['/joint_states']['reliability'] == 'reliable'
+    assert qos['/joint_states']['durability'] == 'volatile'
+    types = {t['topic_metadata']['name']: t['topic_metadata']['type']
+             for t in info['topics_with_message_count']}
+    assert types[feedback] == 'dam_interfaces/action/DamGrasp_FeedbackMessage'
+    # The serialize_message buffers had trailing bytes: every one was cut.
+    trimmed = json.loads(info['custom_data']['dam_recorder.trimmed_messages'])
+    assert trimmed['/joint_states'] == COUNT and trimmed['/dam/status'] == COUNT
+    assert json.loads(info['custom_data']['dam_recorder.lost_messages']) == {}
+
+
+def test_sigterm_closes_a_sqlite3_bag_of_the_selected_topics(tmp_path: Path) -> None:
+    bag = tmp_path / 'selected'
+    selected = ['/joint_states', '/dam_grasp/_action/feedback']
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(COUNT),
+                                      '--wait-for', *selected, '--no-late')) as pub:
+        wait_for(pub, 'waiting')
+        with node_process([RECORDER, '-o', str(bag), '-s', 'sqlite3',
+                           '-e', '^/(joint_states|dam)', '-x', '^/dam/status$']) as rec:
+            wait_for(pub, 'done')
+            time.sleep(0.3)
+            assert stop(rec, signal.SIGTERM) == 0, rec.output()
+    assert metadata_problems(bag) == []
+    assert metadata(bag)['storage_identifier'] == 'sqlite3'
+    topics = read_with_rosbags(bag)
+    assert sorted(topics) == sorted(selected)
+    for topic in selected:
+        assert indices(topics[topic], topic) == list(range(COUNT))
+        check_values(topic, topics[topic])
+
+
+def test_sigkill_then_recover_gives_back_every_flushed_message(tmp_path: Path) -> None:
+    bag = tmp_path / 'killed'
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(COUNT))) as pub:
+        wait_for(pub, 'waiting')
+        with node_process([RECORDER, '-o', str(bag), '--chunk-interval', '0.2']) as rec:
+            wait_for(pub, 'done')
+            time.sleep(1.0)  # several chunk intervals: everything received is in the file
+            assert stop(rec, signal.SIGKILL) == -signal.SIGKILL
+    data = (bag / 'killed_0.mcap').read_bytes()
+    assert not data.endswith(b'\x89MCAP0\r\n')  # no summary, no footer
+    with pytest.raises(Exception):  # noqa: B017 - the index reader refuses it
+        read_with_mcap(bag)
+    done = subprocess.run([str(RECOVER), str(bag)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert 'killed_0.mcap' in done.stdout and 'rebuilt' in done.stdout
+    assert metadata_problems(bag) == []
+    topics, _ = check_both_readers_agree(bag)
+    for topic in [*samples.TOPICS, samples.LATE_TOPIC]:
+        if topic not in samples.BEST_EFFORT_TOPICS:
+            assert indices(topics[topic], topic) == list(range(COUNT)), topic
+    assert len(topics[samples.LATCHED_TOPIC]) == 1
+
+
+def test_pause_resume_and_split_services(tmp_path: Path) -> None:
+    from std_srvs.srv import Trigger
+
+    bag = tmp_path / 'services'
+    count = 400  # 4 s at 100 Hz
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(count),
+                                      '--rate', '100', '--no-late')) as pub:
+        wait_for(pub, 'waiting')
+        with node_process([RECORDER, '-o', str(bag)]) as rec:
+            client = RosClient()
+            try:
+                wait_for(pub, 'publishing')
+                time.sleep(0.5)
+                split = client.call(Trigger, '/recorder/split', Trigger.Request())
+                assert split.success and split.message == 'now writing services_1.mcap'
+                assert client.call(Trigger, '/recorder/pause', Trigger.Request()).success
+                again = client.call(Trigger, '/recorder/pause', Trigger.Request())
+                assert again.success and again.message == 'was paused already'
+                time.sleep(0.8)
+                assert client.call(Trigger, '/recorder/resume', Trigger.Request()).message \
+                    == 'resumed'
+            finally:
+                client.close()
+            wait_for(pub, 'done')
+            time.sleep(0.3)
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+    assert metadata_problems(bag) == []
+    info = metadata(bag)
+    assert info['relative_file_paths'] == ['services_0.mcap', 'services_1.mcap']
+    got = indices(read_with_mcap(bag)['/joint_states'], '/joint_states')
+    assert got == sorted(got) and got[0] == 0 and got[-1] == count - 1
+    missing = sorted(set(range(count)) - set(got))
+    assert missing, 'nothing was dropped while paused'
+    assert missing == list(range(missing[0], missing[-1] + 1))  # one gap: the pause
+    paused = json.loads(info['custom_data']['dam_recorder.paused_messages'])
+    assert paused['/joint_states'] == len(missing)
+    first_file = info['files'][0]['message_count']
+    assert 0 < first_file < info['message_count']
+
+
+@pytest.mark.parametrize('delay_s, signum', [(0.0, signal.SIGINT), (0.3, signal.SIGTERM),
+                                             (0.8, signal.SIGINT), (2.0, signal.SIGTERM)])
+def test_a_signal_at_any_moment_leaves_a_whole_bag_or_none(tmp_path: Path, delay_s: float,
+                                                           signum: int) -> None:
+    from dam_recorder.recovery import mcap_is_complete
+
+    bag = tmp_path / 'early'
+    with node_process([RECORDER, '-o', str(bag)]) as rec:
+        deadline = time.monotonic() + 20.0
+        while signal.SIGTERM not in caught_signals(rec.pid):  # the entry point's first line
+            assert rec.alive() and time.monotonic() < deadline, rec.output()
+            time.sleep(0.002)
+        time.sleep(delay_s)
+        started = time.monotonic()
+        assert stop(rec, signum) == 0, rec.output()
+        assert time.monotonic() - started < 3.0
+        assert 'Traceback' not in rec.output()
+    if bag.exists():  # made whole, never half
+        assert metadata_problems(bag) == []
+        assert all(mcap_is_complete(f) for f in bag.glob('*.mcap'))
+
+
+def test_help_and_an_existing_output_directory(tmp_path: Path) -> None:
+    shown = subprocess.run([str(RECORDER), '--help'], capture_output=True, text=True,
+                           timeout=60)
+    assert shown.returncode == 0 and '--output' in shown.stdout and 'recover' in shown.stdout
+    (tmp_path / 'taken').mkdir()
+    refused = subprocess.run([str(RECORDER), '-o', str(tmp_path / 'taken')],
+                             capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 1
+    assert f'cannot start: {tmp_path / "taken"} exists already' in refused.stderr
+    assert list((tmp_path / 'taken').iterdir()) == []
