@@ -51,7 +51,7 @@ def nodes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
                 [installed_executable('dam_analysis', 'check_lift_server')], env)),
             'hand_driver': es.enter_context(node_process(
                 [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args',
-                 '-p', 'backend:=sim'], env)),
+                 '-p', 'backend:=sim', '-p', 'gui:=false'], env)),  # as bringup.sh does
             'spcm_controller': es.enter_context(node_process(
                 [installed_executable('dam_spcm_controller', 'spcm_controller')], env)),
         }
@@ -176,6 +176,11 @@ def test_parameter_services_survive_a_fuzz(nodes: dict[str, Any], node: str) -> 
                                             string_array_value=['a'] * 1000))])
     answer = client.call(SetParameters, f'/{node}/set_parameters', wrong_kind)
     assert not answer.results[0].successful and answer.results[0].reason
+    undeclared = SetParameters.Request(parameters=[Parameter('no_such_param', value=1.0)
+                                                   .to_parameter_msg()])
+    answer = client.call(SetParameters, f'/{node}/set_parameters', undeclared)
+    assert not answer.results[0].successful
+    assert "'no_such_param'" in answer.results[0].reason, answer.results[0].reason
     # The node is still up and a valid request works.
     proc = nodes['procs'].get(node, nodes['procs']['hand_driver'])
     assert proc.alive(), proc.output()[-3000:]
@@ -188,6 +193,7 @@ def test_parameter_services_survive_a_fuzz(nodes: dict[str, Any], node: str) -> 
     assert Parameter.from_parameter_msg(ParameterMsg(name=declared, value=read.values[0])
                                         ).value == good_value
     assert 'Traceback' not in proc.output()
+    assert 'matches no parameter' not in proc.output()  # every override was taken
 
 
 def test_a_callback_that_raises_does_not_end_the_node(tmp_path: Path) -> None:

@@ -67,9 +67,13 @@ def _refused(reason: str) -> SetParametersResult:
 
 def _set(node: Node, parameters: list[Parameter]) -> SetParametersResult:
     """``node.set_parameters_atomically`` that answers any failure with a reason."""
+    undeclared = [p.name for p in parameters if not node.has_parameter(p.name)]
+    if undeclared:
+        return _refused(f'no parameter {", ".join(map(repr, undeclared))} on '
+                        f'{node.get_fully_qualified_name()} (`ros2 param list` lists them)')
     try:
         return node.set_parameters_atomically(parameters)
-    except ParameterException as exc:  # undeclared, read-only, wrong type, out of range
+    except ParameterException as exc:  # read-only, wrong type, out of range
         return _refused(str(exc))
     except Exception as exc:  # noqa: BLE001 - e.g. an on-set callback that raised
         node.get_logger().error(f'setting {[p.name for p in parameters]} raised {exc!r}')

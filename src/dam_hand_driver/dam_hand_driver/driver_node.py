@@ -245,6 +245,10 @@ class HandDriverNode(Node):
         if self.backend not in BACKENDS:
             raise HandDriverError(f'backend {self.backend!r} is not one of {BACKENDS}')
         self.thread_priority = declare_thread_priority(self)
+        self._gui = bool(self.declare_parameter(
+            'gui', False, ParameterDescriptor(
+                description='open the PyBullet window of a stand-in this driver starts (needs '
+                            'a display)', read_only=True)).value)
         self._scheduling = 'not started'
         self.config = load_config(config_file or None)
         dev = self.config.device
@@ -335,7 +339,8 @@ class HandDriverNode(Node):
         if not exe.is_file():
             raise HandDriverError(f'{why}, and the stand-in {str(exe)!r} does not exist')
         cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim', '-p',
-               f'thread_priority:={self.thread_priority}']
+               f'thread_priority:={self.thread_priority}', '-p',
+               f'gui:={str(self._gui).lower()}']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
         # A session of its own: Ctrl-C in the terminal reaches the driver only, which stops the

@@ -728,7 +728,8 @@ class SpcmControllerNode(Node):
         if not fresh:
             return self._finish(goal_handle, 'abort', aborted,
                                 f'no /joint_states within {_START_STATE_WAIT_S:g} s: '
-                                'cannot start the grasp', t0)
+                                'cannot start the grasp (a driver in ERROR stops them: '
+                                'see /diagnostics; /hand_driver/reset resumes)', t0)
         with self._lock:
             self._seq = DamSequence(self._params)
             self._last_phase = self._seq.phase
