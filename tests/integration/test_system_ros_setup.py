@@ -263,7 +263,8 @@ def test_setup_takes_the_system_branch(setup_output: str, repo_copy: Path,
 
 def test_overlay_is_built_on_the_system_prefix(setup_output: str, repo_copy: Path,
                                                fake_prefix: Path) -> None:
-    assert 'Summary: 6 packages finished' in setup_output
+    n_packages = len(list((REPO_ROOT / 'src').glob('*/package.xml')))
+    assert f'Summary: {n_packages} packages finished' in setup_output
     install = repo_copy / 'ros2_ws' / 'install'
     assert (install / '.dam-source-hash').is_file()
     assert (install / 'dam_analysis' / 'lib' / 'dam_analysis' / 'check_lift_server').is_file()
