@@ -24,6 +24,7 @@ setup(
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
             'hand_driver = dam_hand_driver.entry_points:hand_driver',
+            'hand_urdf = dam_hand_driver.urdf:main',
         ],
     },
 )

@@ -108,6 +108,29 @@ def system(config_file: Path) -> Iterator[tuple[object, _Observer]]:
             observer.client.close()
 
 
+def test_robot_description_is_latched_for_late_subscribers(system, cfg) -> None:
+    """A subscriber that comes after the driver published (transient local, as RViz and
+    robot_state_publisher's consumers ask) still gets the URDF, with the configured joints."""
+    from xml.etree import ElementTree as ET
+
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    _driver, obs = system
+    got: list[str] = []
+    qos = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    sub = obs.client.node.create_subscription(String, '/robot_description',
+                                              lambda m: got.append(m.data), qos)
+    try:
+        assert obs.client.spin_until(lambda: bool(got), 10.0), 'no /robot_description'
+    finally:
+        obs.client.node.destroy_subscription(sub)
+    robot = ET.fromstring(got[0])
+    joints = {j.get('name') for j in robot.findall('joint') if j.get('type') == 'revolute'}
+    assert joints == set(cfg.hand.joint_names)
+
+
 def test_joint_states_rate_and_simulator_backend(system, cfg) -> None:
     driver, obs = system
     obs.joint_states.clear()

@@ -10,6 +10,9 @@ Topics
 /joint_states : sensor_msgs/JointState (published)
     Names from the configuration; positions [rad] and velocities [rad/s] from the encoders,
     efforts [N*m] from the joint torque sensors. Not published in ERROR.
+/robot_description : std_msgs/String (published once, transient local)
+    The hand's URDF generated from the configuration (:mod:`dam_hand_driver.urdf`), for
+    ``robot_state_publisher``, RViz and Foxglove; ``hand_urdf`` prints the same document.
 /hand/command : dam_interfaces/HandCommand (subscribed)
     Mode and setpoint per named joint (and, for MODE_IMPEDANCE, stiffness and damping); joints
     not named keep their command. A malformed message (unknown or duplicate name, length
@@ -70,7 +73,9 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
@@ -82,6 +87,7 @@ from dam_hand_driver.errors import HandDriverError, ParameterError
 from dam_hand_driver.link import DeviceLink
 from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
 from dam_hand_driver.slew import CommandSlew
+from dam_hand_driver.urdf import hand_urdf
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim')
@@ -285,6 +291,11 @@ class HandDriverNode(Node):
         self._child: subprocess.Popen[bytes] | None = None
         self._running = True
 
+        # The hand's model, latched (transient local) as robot_state_publisher does.
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        self._description_pub = self.create_publisher(String, '/robot_description', latched)
+        self._description_pub.publish(String(data=hand_urdf(self.config)))
         self._js_pub = self.create_publisher(JointState, '/joint_states', 10)
         self._js_msg = JointState()
         self._js_msg.name = list(self.joint_names)
