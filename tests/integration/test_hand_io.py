@@ -409,7 +409,7 @@ def test_sim_bridge_services_and_driver_recovery(tmp_path: Path, cfg) -> None:
                     and diags[-1].status[0].level == DiagnosticStatus.ERROR, 5.0)
                 # ... and comes back: a new stand-in, then ~/reset
                 with node_process(_sim_command(), env=env):
-                    time.sleep(0.5)
+                    client.spin_until(lambda: False, 0.5)  # take what was queued before
                     states.clear()
                     client.spin_until(lambda: False, 2.0)
                     assert not states  # still in ERROR: no recovery without ~/reset

