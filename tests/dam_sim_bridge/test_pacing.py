@@ -8,6 +8,7 @@ import threading
 import time
 
 import numpy as np
+import pytest
 
 from dam_common.config import load_config
 from dam_hand_driver.protocol import FrameDecoder, FrameKind, StateFrame
@@ -33,6 +34,7 @@ def test_sleep_until_a_past_deadline_returns_at_once() -> None:
     assert time.monotonic() - start < 0.05
 
 
+@pytest.mark.flaky(reruns=1)  # real time on a shared machine
 def test_real_time_state_frames_are_stamped_one_period_apart_and_sent_on_time() -> None:
     cfg = load_config()
     n = len(cfg.hand.joint_names)

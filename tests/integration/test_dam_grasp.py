@@ -32,7 +32,9 @@ from std_srvs.srv import Trigger
 
 from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
 
-pytestmark = pytest.mark.integration
+# Real-time runs on a shared 2-core machine: a test that fails is run once more (the rerun is
+# reported as R in pytest's summary); a deterministic failure fails twice.
+pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DELTA_THETA_P = math.radians(10.0)

@@ -21,7 +21,9 @@ from ros_testing import (
     thread_policies,
 )
 
-pytestmark = pytest.mark.integration
+# Real-time runs on a shared 2-core machine: a test that fails is run once more (the rerun is
+# reported as R in pytest's summary); a deterministic failure fails twice.
+pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
 REPO = Path(__file__).resolve().parents[2]
 CONTROLLER = installed_executable('dam_spcm_controller', 'spcm_controller')
