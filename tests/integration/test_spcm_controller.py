@@ -496,6 +496,7 @@ def test_release_lets_go_and_stops_commanding(stack) -> None:
     t_release = time.monotonic()
     answer = h.ros.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
     assert answer.success, answer.message
+    h.ros.spin_until(lambda: False, 0.3)  # the last commands may follow the answer here
     during = [m for t, m in h.commands if t >= t_release]
     assert during, 'no release command'
     torques = [_torques(m) for m in during if len(_torques(m)) == 3]
