@@ -35,7 +35,9 @@ from ros_testing import (
     process_gone,
 )
 
-pytestmark = pytest.mark.integration
+# 50 real-time trials on a shared 2-core machine: a storm that fails is run once more (shown as
+# R in pytest's summary); a deterministic fault fails both.
+pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
 TRIALS = 50
 EXIT_WITHIN_S = 2.0
