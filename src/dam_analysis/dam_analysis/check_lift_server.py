@@ -84,6 +84,7 @@ class CheckLiftServer(Node):
         k_theta = list(request.k_theta)
         delta_theta_p = list(request.delta_theta_p)
         friction_angle = float(request.friction_angle)
+        response.friction_angle = math.nan  # until an answer is computed
         defaults = []
         if not k_theta:
             k_theta = [task.k_theta_nm_per_rad]
@@ -107,6 +108,7 @@ class CheckLiftServer(Node):
             self.get_logger().error(response.message)
             return response
         response.ok = True
+        response.friction_angle = friction_angle
         response.lift_guaranteed = bool(result.lift_guaranteed)
         response.worst_case_margin = float(result.worst_case_margin)
         response.csm_lift = bool(result.csm_lift)

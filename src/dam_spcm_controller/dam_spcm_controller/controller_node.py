@@ -70,6 +70,7 @@ from dam_spcm_controller.classification import (
     classify_from_joints,
 )
 from dam_spcm_controller.commands import JointCommand, JointMode
+from dam_spcm_controller.episode import EpisodeEvents
 from dam_spcm_controller.errors import InputError, StateError
 from dam_spcm_controller.release import ReleaseMotion
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
@@ -198,6 +199,7 @@ class SpcmControllerNode(Node):
 
         self._command_pub = self.create_publisher(HandCommand, '/hand/command', 10)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
+        self._episodes = EpisodeEvents(self, str(self._config.source))
         self._state_sub = self.create_subscription(
             JointState, '/joint_states', self._on_joint_state, 10)
         self._watchdog = create_steady_timer(self, 0.01, self._on_watchdog)
@@ -650,6 +652,7 @@ class SpcmControllerNode(Node):
         else:
             goal_handle.abort()
         self._publish_status()
+        self._episodes.ended(goal_handle.goal_id.uuid, goal_handle.request, result)
         # One call site per severity: rclpy refuses a call site whose severity changes
         # ("Logger severity cannot be changed between calls").
         text = f'grasp ended ({status}): {result.outcome_name}: {message}'
@@ -661,6 +664,7 @@ class SpcmControllerNode(Node):
 
     async def _execute(self, goal_handle: ServerGoalHandle) -> DamGrasp.Result:
         t0 = time.monotonic()
+        self._episodes.started(goal_handle.goal_id.uuid, goal_handle.request)
         try:
             k, dp = self._validate_goal(goal_handle.request)
         except InputError as exc:
@@ -674,6 +678,9 @@ class SpcmControllerNode(Node):
             self._busy = True
         if busy:
             return self._refuse(goal_handle, activity, t0)
+        ratios = self._layout.stiffness_ratios
+        self._episodes.running(goal_handle.goal_id.uuid, k * ratios / ratios[0],
+                               [dp] * self._layout.n_fingers)
         try:
             return await self._run_goal(goal_handle, k, dp, t0)
         except Exception as exc:  # noqa: BLE001 - the node must stay up and accept goals
@@ -695,6 +702,7 @@ class SpcmControllerNode(Node):
         feedback = DamGrasp.Feedback()
         feedback.phase = 'CHECK_LIFT'
         answer = await self._ask_check_lift(k, dp, goal_handle)
+        self._episodes.checked(goal_handle.goal_id.uuid, answer)
         if goal_handle.is_cancel_requested:
             return self._finish(goal_handle, 'canceled', aborted,
                                 'cancelled before the hand moved', t0)
