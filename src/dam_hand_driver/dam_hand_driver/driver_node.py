@@ -27,7 +27,9 @@ Topics
     (:mod:`dam_hand_driver.slew`), so that no command steps the torque faster.
 /diagnostics : diagnostic_msgs/DiagnosticArray (published, 1 Hz)
     Driver state, backend, achieved rate, frame counts by rejection reason, loop latency,
-    device watchdog state.
+    device watchdog state; ``joint_states_published`` (joint states published since start)
+    with ``joint_states_last_stamp_ns`` (the header stamp of the last one [ns]), so that a
+    recording can be checked for completeness.
 
 Services
 --------
@@ -285,7 +287,8 @@ class HandDriverNode(Node):
         self._last_frame: StateFrame | None = None
         self._rejected_commands = 0
         self._last_reject_reason = ''
-        self._published = 0
+        #: (joint states published, header stamp of the last one [ns])
+        self._published_last: tuple[int, int] = (0, 0)
         self._latencies_s: deque[float] = deque(maxlen=2000)
         self._diag_prev = (time.monotonic(), 0, 0)
         self._child: subprocess.Popen[bytes] | None = None
@@ -505,7 +508,9 @@ class HandDriverNode(Node):
         msg.velocity = array.array('d', dq.tobytes())
         msg.effort = array.array('d', tau.tobytes())
         self._js_pub.publish(msg)
-        self._published += 1
+        # One assignment: /diagnostics reads the count and the stamp that belong together.
+        self._published_last = (self._published_last[0] + 1,
+                                msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
 
     # ---------------------------------------------------------------------------------------
     # ROS callbacks
@@ -559,8 +564,9 @@ class HandDriverNode(Node):
         counters = self.link.decoder.counters
         dt = max(now - t0, 1e-9)
         state_rate = (counters.accepted - accepted0) / dt
-        js_rate = (self._published - published0) / dt
-        self._diag_prev = (now, counters.accepted, self._published)
+        published, last_stamp_ns = self._published_last
+        js_rate = (published - published0) / dt
+        self._diag_prev = (now, counters.accepted, published)
         frame = self._last_frame
         tripped = bool(frame is not None and frame.status & DeviceStatus.WATCHDOG_TRIPPED)
         simulated = bool(frame is not None and frame.status & DeviceStatus.SIMULATED)
@@ -589,6 +595,8 @@ class HandDriverNode(Node):
             'standin_pid': str(self._child.pid) if self._child is not None else '',
             'state_rate_hz': f'{state_rate:.1f}',
             'joint_states_rate_hz': f'{js_rate:.1f}',
+            'joint_states_published': str(published),
+            'joint_states_last_stamp_ns': str(last_stamp_ns),
             'target_rate_hz': f'{self.config.device.rate_hz:g}',
             'link_thread_scheduling': self._scheduling,
             'state_age_s': f'{now - last:.4f}' if last is not None else 'never',
