@@ -65,9 +65,10 @@ class _FileTarget:
         return self.file
 
 
-def storage_file_name(bag_dir: Path, index: int, storage: str) -> str:
-    """Name of the ``index``-th storage file of ``bag_dir`` (``bag_0.mcap``, ``bag_1.mcap``)."""
-    return f'{bag_dir.name}_{index}{STORAGE_SUFFIXES[storage]}'
+def storage_file_name(stem: str, index: int, storage: str) -> str:
+    """Name of the ``index``-th storage file of a bag whose files are named after ``stem``
+    (``stem_0.mcap``, ``stem_1.mcap``; ``ros2 bag record`` takes the bag directory's name)."""
+    return f'{stem}_{index}{STORAGE_SUFFIXES[storage]}'
 
 
 def qos_text(profiles: Sequence[Qos]) -> str:
@@ -131,6 +132,10 @@ class BagWriter:
         Written as ``ros_distro``.
     custom_data : callable, optional
         Returns the ``custom_data`` entries (strings) each time the metadata is written.
+    file_stem : str, optional
+        Storage files are named ``<file_stem>_<index>.<suffix>``; default: the directory's name.
+        (A bag whose directory is renamed after it is closed keeps its files' names: the
+        metadata names them relative to the directory.)
 
     Raises
     ------
@@ -143,7 +148,8 @@ class BagWriter:
     def __init__(self, bag_dir: str | os.PathLike[str], *, storage: str = 'mcap',
                  compression: str = 'zstd', max_file_bytes: int = 0,
                  max_file_duration_ns: int = 0, ros_distro: str = 'jazzy',
-                 custom_data: Callable[[], Mapping[str, str]] | None = None) -> None:
+                 custom_data: Callable[[], Mapping[str, str]] | None = None,
+                 file_stem: str | None = None) -> None:
         if storage not in STORAGE_SUFFIXES:
             raise ConfigurationError(
                 f'storage must be one of {", ".join(STORAGE_SUFFIXES)}, got {storage!r}')
@@ -164,6 +170,7 @@ class BagWriter:
         self.max_file_duration_ns = int(max_file_duration_ns)
         self.ros_distro = ros_distro
         self._custom_data = custom_data
+        self.file_stem = file_stem or self.bag_dir.name
         if self.bag_dir.exists():
             raise BagError(f'{self.bag_dir} exists already; a bag is never written over')
         try:
@@ -194,7 +201,7 @@ class BagWriter:
         return self.bag_dir / self.files[-1].path
 
     def _open_file(self) -> None:
-        name = storage_file_name(self.bag_dir, len(self.files), self.storage)
+        name = storage_file_name(self.file_stem, len(self.files), self.storage)
         try:
             self._writer = open_storage(self.bag_dir / name, self.storage, self.compression)
         except OSError as exc:

@@ -21,6 +21,11 @@ A topic is recorded when it is named or matches --regex (anywhere in the name), 
 match --exclude. Topics that appear later are picked up. The subscription asks for the QoS the
 publishers offer (reliable or best effort; transient local for latched topics).
 
+With --episodes, each /dam_grasp goal becomes one bag in the directory -o (which may exist):
+from --pre-roll seconds before the goal starts to --post-roll seconds after it ends, named by
+start time and outcome (2026_11_29-18_05_12_success), with the goal, the /check_lift answer, the
+outcome, the controller's configuration and the software version in its metadata.
+
 Services while recording (std_srvs/srv/Trigger): ~/pause, ~/resume, ~/split.
 SIGINT or SIGTERM closes the bag. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
 Every option is also a parameter of the node (see the README, section Recording)."""
@@ -48,7 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='topics to record (default: the set listed below)')
     parser.add_argument('-o', '--output', metavar='DIR',
                         help='bag directory to create (must not exist; default: '
-                             'rosbag2_<date>-<time> in the current directory)')
+                             'rosbag2_<date>-<time> in the current directory); with '
+                             '--episodes the directory of the episode bags')
     parser.add_argument('-s', '--storage', choices=sorted(STORAGE_SUFFIXES),
                         help='storage format (default: mcap)')
     parser.add_argument('--compression', choices=COMPRESSIONS,
@@ -66,6 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--chunk-interval', type=_non_negative(float), metavar='S',
                         help='write the pending chunk out at least this often: the most that '
                              'a SIGKILL can lose (default: 1.0)')
+    parser.add_argument('--episodes', action='store_true', default=None,
+                        help='one bag per /dam_grasp goal, in the directory -o')
+    parser.add_argument('--pre-roll', type=_non_negative(float), metavar='S',
+                        help='episodes: seconds kept before a goal starts (default: 3.0)')
+    parser.add_argument('--post-roll', type=_non_negative(float), metavar='S',
+                        help='episodes: seconds recorded after a goal ends (default: 2.0)')
     return parser
 
 
@@ -81,7 +93,7 @@ def parameter_overrides(argv: Sequence[str]) -> dict[str, Any]:
         # (an override of a string array parameter cannot be empty).
         overrides['topics'] = ['']
     for option in ('output', 'storage', 'compression', 'regex', 'exclude', 'max_bag_size',
-                   'max_bag_duration', 'chunk_interval'):
+                   'max_bag_duration', 'chunk_interval', 'episodes', 'pre_roll', 'post_roll'):
         value = getattr(args, option)
         if value is not None:
             overrides[option] = value

@@ -24,6 +24,11 @@ discovery_period : double [s]
     How often the recorder looks for new topics and publishers.
 queue_depth : int [messages]
     Depth of each subscription's queue.
+episodes : bool
+    Episode mode: one bag per ``/dam_grasp`` goal in the directory ``output``
+    (:mod:`~dam_recorder.episodes`), from ``pre_roll`` before the goal to ``post_roll`` after.
+pre_roll, post_roll : double [s]
+    What an episode holds before its goal starts and after it ends.
 
 Messages are taken serialized (``raw=True``: never deserialized), cut at their CDR end
 (:mod:`~dam_recorder.cdr_end`) and stamped with the time the middleware received them (the
@@ -58,7 +63,19 @@ from dam_common.shutdown import SHUTDOWN
 from dam_recorder.bag_writer import BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
-from dam_recorder.errors import CdrError, DamRecorderError, TypeDescriptionError
+from dam_recorder.episode_messages import (
+    EPISODE_TOPIC,
+    start_info,
+    stamp_ns,
+    summary_from_event,
+)
+from dam_recorder.episodes import EpisodeRecorder, TopicSpec
+from dam_recorder.errors import (
+    CdrError,
+    ConfigurationError,
+    DamRecorderError,
+    TypeDescriptionError,
+)
 from dam_recorder.qos import OfferedQos, request_for_offers, to_rosbags_qos
 from dam_recorder.selection import DEFAULT_TOPICS, TopicSelection
 from dam_recorder.type_description import install_prefix_of, load_message_type
@@ -126,6 +143,8 @@ class RecorderNode(Node):
         super().__init__('recorder', parameter_overrides=[
             Parameter(k, value=v) for k, v in (overrides or {}).items()])
         self._writer: BagWriter | None = None
+        self._episodes: EpisodeRecorder | None = None
+        self._stopped = False
         self._recorded: dict[str, _Recorded] = {}
         self._refused: set[str] = set()
         self._paused = False
@@ -139,14 +158,25 @@ class RecorderNode(Node):
         output = p['output'] or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         compression = p['compression'] or ('zstd' if p['storage'] == 'mcap' else 'none')
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+
+        def open_bag(bag_dir: Path, file_stem: str | None,
+                     custom_data: Any = self._custom_data) -> BagWriter:
+            return BagWriter(
+                bag_dir, storage=p['storage'], compression=compression,
+                max_file_bytes=p['max_bag_size'],
+                max_file_duration_ns=int(round(p['max_bag_duration'] * 1e9)),
+                ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'), custom_data=custom_data,
+                file_stem=file_stem)
         try:
-            with SHUTDOWN.uninterrupted():  # a bag directory is made whole or not at all
-                self._writer = BagWriter(
-                    Path(output).absolute(), storage=p['storage'], compression=compression,
-                    max_file_bytes=p['max_bag_size'],
-                    max_file_duration_ns=int(round(p['max_bag_duration'] * 1e9)),
-                    ros_distro=os.environ.get('ROS_DISTRO', 'jazzy'),
-                    custom_data=self._custom_data)
+            if p['episodes']:
+                out_dir = Path(output).absolute()
+                if out_dir.exists() and not out_dir.is_dir():
+                    raise ConfigurationError(f'{out_dir} exists and is not a directory')
+                self._episodes = EpisodeRecorder(out_dir, open_bag, p['pre_roll'],
+                                                 p['post_roll'], self._custom_data)
+            else:
+                with SHUTDOWN.uninterrupted():  # a bag directory is made whole or not at all
+                    self._writer = open_bag(Path(output).absolute(), None)
             self._start(p, compression)
         except BaseException:  # a stop request or an error while starting: close the bag
             self.destroy_node()
@@ -159,8 +189,18 @@ class RecorderNode(Node):
         self.create_service(Trigger, '~/split', self._on_split)
         create_steady_timer(self, p['discovery_period'], self._discover)
         create_steady_timer(self, p['chunk_interval'], self._flush)
+        if self._episodes is not None:
+            from dam_interfaces.msg import GraspEpisode  # episode mode needs the suite's types
+            self.create_subscription(GraspEpisode, EPISODE_TOPIC, self._on_episode_event,
+                                     QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                                                durability=DurabilityPolicy.VOLATILE))
+            create_steady_timer(self, 0.05, self._close_due_episodes)
+            target = (f'episodes into {self._episodes.out_dir} (pre-roll {p["pre_roll"]:g} s, '
+                      f'post-roll {p["post_roll"]:g} s)')
+        else:
+            target = str(self._writer.bag_dir)
         self.get_logger().info(
-            f'recording into {self._writer.bag_dir} ({p["storage"]}, compression '
+            f'recording {target} ({p["storage"]}, compression '
             f'{compression}): {", ".join(self._selection.topics) or "-"}'
             + (f', regex {p["regex"]!r}' if p['regex'] else '')
             + (f', exclude {p["exclude"]!r}' if p['exclude'] else ''))
@@ -192,6 +232,14 @@ class RecorderNode(Node):
             'queue_depth': (1000, _descriptor(
                 'depth of each subscription queue [messages]',
                 integer_range=[IntegerRange(from_value=1, to_value=1_000_000, step=1)])),
+            'episodes': (False, _descriptor(
+                'one bag per /dam_grasp goal, in the directory output')),
+            'pre_roll': (3.0, _descriptor(
+                'episode mode: seconds recorded before a goal starts [s]',
+                floating_point_range=[FloatingPointRange(from_value=0.0, to_value=600.0)])),
+            'post_roll': (2.0, _descriptor(
+                'episode mode: seconds recorded after a goal ends [s]',
+                floating_point_range=[FloatingPointRange(from_value=0.0, to_value=600.0)])),
         }
         return {name: self.declare_parameter(name, default, descriptor).value
                 for name, (default, descriptor) in declared.items()}
@@ -199,7 +247,7 @@ class RecorderNode(Node):
     # -- topics ------------------------------------------------------------------------------
 
     def _discover(self) -> None:
-        if self._writer is None or self._writer.closed:
+        if self._stopped:
             return
         for name, types in self.get_topic_names_and_types():
             if name in self._recorded or name in self._refused \
@@ -238,8 +286,14 @@ class RecorderNode(Node):
             durability=DurabilityPolicy.TRANSIENT_LOCAL if request.transient_local
             else DurabilityPolicy.VOLATILE)
         type_hash = message_type.type_hash or str(getattr(offers[0], 'topic_type_hash', ''))
-        topic_id = self._writer.add_topic(name, type_name, message_type.definition(), type_hash,
-                                          [to_rosbags_qos(o) for o in offered])
+        profiles = [to_rosbags_qos(o) for o in offered]
+        if self._episodes is not None:
+            topic_id = self._episodes.add_topic(TopicSpec(
+                name, type_name, message_type.definition(), type_hash, profiles,
+                latched=request.transient_local))
+        else:
+            topic_id = self._writer.add_topic(name, type_name, message_type.definition(),
+                                              type_hash, profiles)
         recorded = _Recorded(name, topic_id, end)
         self._recorded[name] = recorded
         self.create_subscription(
@@ -251,9 +305,11 @@ class RecorderNode(Node):
             f', {"transient_local" if request.transient_local else "volatile"})')
 
     def _callback(self, recorded: _Recorded) -> Any:
-        writer = self._writer
+        writer = self._writer if self._episodes is None else self._episodes
 
         def on_message(data: bytes, info: dict[str, Any]) -> None:
+            if self._stopped:
+                return
             self._last_message = time.monotonic()
             if self._paused:
                 recorded.paused += 1
@@ -276,6 +332,8 @@ class RecorderNode(Node):
     def _on_lost(self, recorded: _Recorded, status: Any) -> None:
         change = int(status.total_count_change)
         recorded.lost += change
+        if self._episodes is not None:
+            self._episodes.note_lost(recorded.topic_id, change)
         self.get_logger().warning(f'{recorded.name}: the middleware reports {change} message(s) '
                                   f'lost ({recorded.lost} in all)')
 
@@ -292,6 +350,32 @@ class RecorderNode(Node):
     def _flush(self) -> None:
         if self._writer is not None and not self._writer.closed:
             self._writer.flush()
+        if self._episodes is not None and not self._stopped:
+            self._episodes.flush()
+
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _on_episode_event(self, msg: Any) -> None:
+        if self._stopped:
+            return
+        if msg.event == msg.EVENT_STARTED:
+            path = self._episodes.started(msg.goal_id, self._now_ns(), stamp_ns(msg.header.stamp),
+                                          start_info(msg))
+            self.get_logger().info(f'episode of goal {msg.goal_id[:8]}: recording into {path}')
+        elif msg.event == msg.EVENT_ENDED:
+            if not self._episodes.ended(msg.goal_id, self._now_ns(), summary_from_event(msg)):
+                self.get_logger().warning(
+                    f'goal {msg.goal_id[:8]} ended ({msg.outcome_name}) but it started before '
+                    'the recorder did: no episode')
+        else:
+            self.get_logger().warning(f'{EPISODE_TOPIC}: unknown event {msg.event}, ignored')
+
+    def _close_due_episodes(self) -> None:
+        if self._stopped:
+            return
+        for path, outcome in self._episodes.poll(self._now_ns()):
+            self.get_logger().info(f'episode {outcome}: {path}')
 
     def _on_pause(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
         response.success = True
@@ -306,6 +390,12 @@ class RecorderNode(Node):
         return response
 
     def _on_split(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        if self._episodes is not None:
+            paths = self._episodes.split()
+            response.success = True
+            response.message = (f'now writing {", ".join(p.name for p in paths)}' if paths
+                                else 'no episode is open: nothing to split')
+            return response
         path = self._writer.split()
         response.success = True
         response.message = f'now writing {path.name}'
@@ -327,6 +417,12 @@ class RecorderNode(Node):
 
     def destroy_node(self) -> None:
         """Close the bag (summary, index and ``metadata.yaml``), then destroy the node."""
+        self._stopped = True
+        if self._episodes is not None:
+            for path, outcome in self._episodes.close_all():
+                self.get_logger().info(f'episode {outcome}: {path}')
+            self.get_logger().info(f'{len(self._episodes.finished)} episode(s) recorded in '
+                                   f'{self._episodes.out_dir}')
         writer, self._writer = self._writer, None
         if writer is not None and not writer.closed:
             writer.close()

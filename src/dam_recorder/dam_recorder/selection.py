@@ -21,6 +21,7 @@ DEFAULT_TOPICS: tuple[str, ...] = (
     '/joint_states',
     '/hand/command',
     '/dam/status',
+    '/dam/episode',
     '/dam_grasp/_action/status',
     '/dam_grasp/_action/feedback',
     '/diagnostics',

@@ -1,0 +1,288 @@
+"""Per-grasp episodes: each ``/dam_grasp`` goal becomes one bag (the core, no rclpy).
+
+The recorder keeps the last ``pre_roll`` seconds of every recorded topic in memory. When a goal
+starts (the controller's STARTED event on ``/dam/episode``) an episode bag opens with that
+pre-roll; messages go on into it until ``post_roll`` seconds after the goal's end (the ENDED
+event). Then the bag is closed with the episode's metadata in ``custom_data`` and its directory
+is renamed after the goal's start time and outcome (``2026_11_29-18_05_12_success``). Episodes
+may overlap (a goal refused while another runs): every open episode gets every message.
+
+Episode metadata (``custom_data`` of ``metadata.yaml``, strings):
+
+``dam_episode.summary``
+    JSON object: ``goal_id`` (32 hex digits), ``accepted_ns`` and ``ended_ns`` (the
+    controller's stamps of the two events [ns]), ``goal`` (``k_theta``, ``delta_theta_p`` as
+    the client sent them), ``k_theta`` [N*m/rad] and ``delta_theta_p`` [rad] per finger as run,
+    ``friction_angle`` [rad] (the one ``/check_lift`` assumed), ``check_lift`` (the answer's
+    fields, or null without an answer), ``outcome``, ``outcome_name``, ``message``,
+    ``duration_s``, ``pre_roll_s``, ``post_roll_s``. Non-finite numbers are
+    written as the strings ``"nan"``, ``"inf"`` and ``"-inf"`` (JSON has no such numbers).
+``dam_episode.config``
+    The controller's configuration file, as text.
+``dam_episode.version``
+    The software version the controller reported.
+``dam_episode.config_source``
+    Where the controller's configuration came from (a path on the controller's machine).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rosbags.interfaces import Qos
+
+from dam_recorder.bag_writer import BagWriter
+from dam_recorder.errors import ConfigurationError
+
+#: ``custom_data`` keys of an episode.
+SUMMARY_KEY = 'dam_episode.summary'
+CONFIG_KEY = 'dam_episode.config'
+VERSION_KEY = 'dam_episode.version'
+CONFIG_SOURCE_KEY = 'dam_episode.config_source'
+#: Outcome name of an episode whose goal had not ended when the recorder stopped.
+UNFINISHED = 'UNKNOWN'
+#: Suffix of an episode directory while it is being written.
+OPEN_SUFFIX = 'recording'
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float replaced by ``"nan"``, ``"inf"`` or ``"-inf"``
+    (recursively through dicts, lists and tuples), so that ``json.dumps`` writes standard JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return 'nan' if math.isnan(value) else ('inf' if value > 0 else '-inf')
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """What an episode bag needs to know of a recorded topic."""
+
+    name: str
+    type_name: str
+    definition: str
+    type_hash: str
+    offered_qos: Sequence[Qos]
+    latched: bool = False
+
+
+@dataclass
+class _Episode:
+    goal_id: str
+    bag: BagWriter
+    stem: str
+    started_ns: int
+    ids: dict[int, int] = field(default_factory=dict)  # topic key -> the bag's topic id
+    lost: dict[str, int] = field(default_factory=dict)
+    start_info: dict[str, str] = field(default_factory=dict)
+    summary: dict[str, Any] | None = None
+    close_after_ns: int | None = None
+
+
+class EpisodeRecorder:
+    """Writes one bag per goal, with pre-roll and post-roll.
+
+    Parameters
+    ----------
+    out_dir : path
+        Directory holding the episode bags (created when the first episode opens).
+    open_bag : callable
+        ``open_bag(bag_dir, file_stem, custom_data)`` returns a new :class:`BagWriter`
+        (storage, compression and split limits are the caller's choice).
+    pre_roll_s, post_roll_s : float
+        Seconds kept before a goal's start and recorded after its end [s], >= 0.
+    custom_data : callable, optional
+        Entries (e.g. the recorder's counts) added to every episode's ``custom_data``.
+
+    Raises
+    ------
+    ConfigurationError
+        For a negative or non-finite roll (the value is named).
+
+    Notes
+    -----
+    All times are the messages' receive stamps [ns since the epoch]; the caller passes the
+    events' receive stamps to :meth:`started` and :meth:`ended` and the current time to
+    :meth:`poll`. A latched topic's last message (e.g. ``/robot_description``) is written
+    into every episode, stamped at the start of the pre-roll when it is older.
+    """
+
+    def __init__(self, out_dir: str | Path,
+                 open_bag: Callable[[Path, str, Callable[[], Mapping[str, str]]], BagWriter],
+                 pre_roll_s: float = 3.0, post_roll_s: float = 2.0,
+                 custom_data: Callable[[], Mapping[str, str]] | None = None) -> None:
+        for name, value in (('pre_roll', pre_roll_s), ('post_roll', post_roll_s)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigurationError(f'{name} must be a finite number of seconds >= 0, got '
+                                         f'{value!r}')
+        self.out_dir = Path(out_dir)
+        self._open_bag = open_bag
+        self.pre_roll_ns = int(round(pre_roll_s * 1e9))
+        self.post_roll_ns = int(round(post_roll_s * 1e9))
+        self._custom_data = custom_data
+        self._topics: list[TopicSpec] = []
+        self._ring: deque[tuple[int, int, bytes]] = deque()  # (key, stamp, data), by arrival
+        self._latched: dict[int, tuple[int, bytes]] = {}
+        self._open: dict[str, _Episode] = {}
+        #: The finished episodes: (bag directory, outcome name), oldest first.
+        self.finished: list[tuple[Path, str]] = []
+
+    # -- topics and messages -----------------------------------------------------------------
+
+    @property
+    def open_goals(self) -> list[str]:
+        """Goal ids of the episodes being written."""
+        return list(self._open)
+
+    def add_topic(self, spec: TopicSpec) -> int:
+        """Register a recorded topic; return the key to :meth:`write` its messages with."""
+        self._topics.append(spec)
+        key = len(self._topics) - 1
+        for episode in self._open.values():
+            self._add_to(episode, key)
+        return key
+
+    def write(self, key: int, stamp_ns: int, data: bytes | memoryview) -> None:
+        """One message of topic ``key`` received at ``stamp_ns`` [ns]."""
+        data = bytes(data)
+        self._ring.append((key, stamp_ns, data))
+        horizon = stamp_ns - self.pre_roll_ns
+        while self._ring and self._ring[0][1] < horizon:
+            self._ring.popleft()
+        if self._topics[key].latched:
+            self._latched[key] = (stamp_ns, data)
+        for episode in self._open.values():
+            if episode.close_after_ns is None or stamp_ns <= episode.close_after_ns:
+                episode.bag.write(episode.ids[key], stamp_ns, data)
+
+    def note_lost(self, key: int, count: int) -> None:
+        """The middleware reports ``count`` messages of topic ``key`` lost."""
+        name = self._topics[key].name
+        for episode in self._open.values():
+            episode.lost[name] = episode.lost.get(name, 0) + int(count)
+
+    def flush(self) -> None:
+        """Write out what the open episodes hold in memory (:meth:`BagWriter.flush`)."""
+        for episode in self._open.values():
+            episode.bag.flush()
+
+    def split(self) -> list[Path]:
+        """Start a new file in every open episode; return the new files."""
+        return [episode.bag.split() for episode in self._open.values()]
+
+    # -- goals -------------------------------------------------------------------------------
+
+    def started(self, goal_id: str, stamp_ns: int, accepted_ns: int = 0,
+                start_info: Mapping[str, str] | None = None) -> Path:
+        """A goal started (its STARTED event arrived at ``stamp_ns`` [ns]): open its episode
+        with the pre-roll; return the (provisional) bag directory.
+
+        ``start_info`` holds the entries of the STARTED event that go into ``custom_data``
+        (:data:`CONFIG_KEY`, :data:`VERSION_KEY`); ``accepted_ns`` is the event's own stamp.
+        A goal id already open is ignored (its directory is returned).
+        """
+        if goal_id in self._open:
+            return self._open[goal_id].bag.bag_dir
+        stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(stamp_ns / 1e9))
+        bag_dir = self._free_dir(f'{stem}_{OPEN_SUFFIX}', goal_id)
+        holder: list[_Episode] = []
+        bag = self._open_bag(bag_dir, stem, lambda: self._episode_custom_data(holder[0]))
+        episode = _Episode(goal_id, bag, stem, accepted_ns or stamp_ns,
+                           start_info=dict(start_info or {}))
+        holder.append(episode)
+        self._open[goal_id] = episode
+        for key in range(len(self._topics)):
+            self._add_to(episode, key)
+        window_start = stamp_ns - self.pre_roll_ns
+        ring_start = self._ring[0][1] if self._ring else stamp_ns
+        for key, (latched_ns, data) in self._latched.items():
+            if latched_ns < ring_start:  # else it is in the ring
+                bag.write(episode.ids[key], max(latched_ns, window_start), data)
+        for key, ring_ns, data in self._ring:
+            if ring_ns >= window_start:
+                bag.write(episode.ids[key], ring_ns, data)
+        return bag_dir
+
+    def ended(self, goal_id: str, stamp_ns: int, summary: Mapping[str, Any]) -> bool:
+        """The goal ended (its ENDED event arrived at ``stamp_ns`` [ns]); the episode closes
+        ``post_roll`` later (:meth:`poll`). ``summary`` is written as :data:`SUMMARY_KEY`.
+        Returns ``False`` when no episode of this goal is open (it started before the
+        recorder did)."""
+        episode = self._open.get(goal_id)
+        if episode is None:
+            return False
+        episode.summary = dict(summary)
+        episode.close_after_ns = stamp_ns + self.post_roll_ns
+        return True
+
+    def poll(self, now_ns: int) -> list[tuple[Path, str]]:
+        """Close the episodes whose post-roll is over at ``now_ns`` [ns]; return them as
+        (bag directory, outcome name)."""
+        due = [g for g, e in self._open.items()
+               if e.close_after_ns is not None and now_ns >= e.close_after_ns]
+        return [self._close(goal_id) for goal_id in due]
+
+    def close_all(self) -> list[tuple[Path, str]]:
+        """Close every open episode now (the recorder stops); a goal that has not ended gets
+        the outcome :data:`UNFINISHED`."""
+        return [self._close(goal_id) for goal_id in list(self._open)]
+
+    # -- helpers -----------------------------------------------------------------------------
+
+    def _add_to(self, episode: _Episode, key: int) -> None:
+        spec = self._topics[key]
+        episode.ids[key] = episode.bag.add_topic(spec.name, spec.type_name, spec.definition,
+                                                 spec.type_hash, list(spec.offered_qos))
+
+    def _free_dir(self, name: str, goal_id: str) -> Path:
+        path = self.out_dir / name
+        if path.exists():
+            path = self.out_dir / f'{name}_{goal_id[:8]}'
+        index = 2
+        while path.exists():
+            path = self.out_dir / f'{name}_{goal_id[:8]}_{index}'
+            index += 1
+        return path
+
+    def _episode_custom_data(self, episode: _Episode) -> dict[str, str]:
+        data = dict(self._custom_data() if self._custom_data else {})
+        data['dam_recorder.lost_messages'] = json.dumps(episode.lost, sort_keys=True)
+        data.update(episode.start_info)
+        if episode.summary is not None:
+            summary = dict(episode.summary)
+            summary.setdefault('accepted_ns', episode.started_ns)
+            summary.setdefault('pre_roll_s', self.pre_roll_ns / 1e9)
+            summary.setdefault('post_roll_s', self.post_roll_ns / 1e9)
+            data[SUMMARY_KEY] = json.dumps(json_safe(summary), sort_keys=True,
+                                           allow_nan=False)
+        return data
+
+    def _close(self, goal_id: str) -> tuple[Path, str]:
+        episode = self._open.pop(goal_id)
+        if episode.summary is None:
+            episode.summary = unfinished_summary(goal_id, episode.started_ns)
+        outcome = str(episode.summary.get('outcome_name') or UNFINISHED)
+        episode.bag.close()
+        final = self._free_dir(f'{episode.stem}_{outcome.lower()}', goal_id)
+        episode.bag.bag_dir.rename(final)
+        self.finished.append((final, outcome))
+        return final, outcome
+
+
+def unfinished_summary(goal_id: str, accepted_ns: int) -> dict[str, Any]:
+    """The summary of an episode whose goal had not ended when the recorder stopped."""
+    return {'goal_id': goal_id, 'accepted_ns': accepted_ns, 'ended_ns': 0,
+            'goal': {'k_theta': [], 'delta_theta_p': []}, 'k_theta': [], 'delta_theta_p': [],
+            'friction_angle': math.nan, 'check_lift': None, 'outcome': 0,
+            'outcome_name': UNFINISHED, 'duration_s': math.nan,
+            'message': 'the recorder stopped before the goal ended'}

@@ -1,0 +1,188 @@
+"""Episode bags: the pre-roll and post-roll windows, latched topics, overlapping goals, the
+metadata and the directory names, read back by two readers."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from bag_readers import read_with_mcap, read_with_rosbags
+from rosbag2_format import metadata_problems
+from test_bag_writer import LATCHED, dam_status, joint_state
+
+from dam_recorder.bag_writer import BagWriter
+from dam_recorder.episodes import (
+    CONFIG_KEY,
+    SUMMARY_KEY,
+    EpisodeRecorder,
+    TopicSpec,
+    json_safe,
+)
+from dam_recorder.errors import ConfigurationError
+from dam_recorder.qos import to_rosbags_qos
+from dam_recorder.type_description import load_message_type
+
+T0 = 1_700_000_000_000_000_000  # [ns]
+MS = 1_000_000  # [ns]
+GOAL = 'ab' * 16
+
+
+def make_recorder(tmp_path: Path, pre_roll_s: float = 0.5, post_roll_s: float = 0.2,
+                  storage: str = 'mcap') -> EpisodeRecorder:
+    def open_bag(bag_dir: Path, stem: str, custom_data) -> BagWriter:
+        return BagWriter(bag_dir, storage=storage,
+                         compression='zstd' if storage == 'mcap' else 'none',
+                         custom_data=custom_data, file_stem=stem)
+    return EpisodeRecorder(tmp_path / 'episodes', open_bag, pre_roll_s, post_roll_s,
+                           custom_data=lambda: {'dam_recorder.paused_messages': '{}'})
+
+
+def specs(prefixes) -> tuple[TopicSpec, TopicSpec]:
+    js = load_message_type('sensor_msgs/msg/JointState', prefixes)
+    st = load_message_type('dam_interfaces/msg/DamStatus', prefixes)
+    return (TopicSpec('/joint_states', js.name, js.definition(), js.type_hash, []),
+            TopicSpec('/dam/status', st.name, st.definition(), st.type_hash,
+                      [to_rosbags_qos(LATCHED)], latched=True))
+
+
+def summary(outcome_name: str = 'SUCCESS') -> dict:
+    return {'goal_id': GOAL, 'ended_ns': 0, 'goal': {'k_theta': [], 'delta_theta_p': []},
+            'k_theta': [10.0, 5.0, 5.0], 'delta_theta_p': [0.17] * 3,
+            'friction_angle': math.radians(30), 'outcome': 1, 'outcome_name': outcome_name,
+            'message': 'grasp done', 'duration_s': 4.2,
+            'check_lift': {'ok': True, 'worst_case_margin': -math.inf, 'csm_margin': math.nan}}
+
+
+def frame_ids(records) -> list[int]:
+    return [int(r.values['header']['frame_id'].split('_')[1]) for r in records]
+
+
+def test_an_episode_holds_its_pre_roll_and_post_roll_and_is_named_by_outcome(
+        tmp_path: Path, prefixes, typestore) -> None:
+    rec = make_recorder(tmp_path)
+    js = rec.add_topic(specs(prefixes)[0])
+    # Joint state i arrives at T0 + i ms; the goal starts at 1000 ms and ends at 1500 ms.
+    for i in range(1000):
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    opened = rec.started(GOAL, T0 + 1000 * MS, accepted_ns=T0 + 999 * MS,
+                         start_info={CONFIG_KEY: 'hand: {}\n'})
+    assert opened.parent == tmp_path / 'episodes' and opened.name.endswith('_recording')
+    for i in range(1000, 1800):  # after 1700 ms (the post-roll's end): not in the episode
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+        if i == 1500:
+            assert rec.ended(GOAL, T0 + 1500 * MS, summary())
+        if i < 1700:
+            assert rec.poll(T0 + i * MS) == []
+    [(bag, outcome)] = rec.poll(T0 + 1800 * MS)
+    assert outcome == 'SUCCESS' and rec.open_goals == [] and not opened.exists()
+    stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime((T0 + 1000 * MS) / 1e9))
+    assert bag == tmp_path / 'episodes' / f'{stem}_success'
+    assert metadata_problems(bag) == []
+    for read in (read_with_rosbags, read_with_mcap):
+        # pre-roll 0.5 s before 1000 ms: from 500 ms; post-roll 0.2 s after 1500 ms: to 1700 ms
+        assert frame_ids(read(bag)['/joint_states']) == list(range(500, 1701))
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['relative_file_paths'] == [f'{stem}_0.mcap']
+    custom = info['custom_data']
+    assert custom[CONFIG_KEY] == 'hand: {}\n'
+    assert json.loads(custom['dam_recorder.lost_messages']) == {}
+    stored = json.loads(custom[SUMMARY_KEY])  # standard JSON: no NaN or Infinity tokens
+    assert stored['accepted_ns'] == T0 + 999 * MS
+    assert stored['pre_roll_s'] == 0.5 and stored['post_roll_s'] == 0.2
+    assert stored['check_lift'] == {'ok': True, 'worst_case_margin': '-inf', 'csm_margin': 'nan'}
+    assert stored['k_theta'] == [10.0, 5.0, 5.0] and stored['outcome_name'] == 'SUCCESS'
+
+
+def test_latched_message_older_than_the_pre_roll_is_written_at_its_start(
+        tmp_path: Path, prefixes, typestore) -> None:
+    rec = make_recorder(tmp_path, pre_roll_s=0.1, post_roll_s=0.0)
+    js_spec, status_spec = specs(prefixes)
+    status = rec.add_topic(status_spec)
+    rec.write(status, T0, dam_status(typestore, 4))  # latched, long before the goal
+    js = rec.add_topic(js_spec)
+    for i in range(1, 2000):
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    rec.started(GOAL, T0 + 2000 * MS)
+    rec.ended(GOAL, T0 + 2001 * MS, summary('FAILURE'))
+    rec.write(js, T0 + 2001 * MS, joint_state(typestore, 2001))
+    [(bag, outcome)] = rec.poll(T0 + 2001 * MS)
+    assert outcome == 'FAILURE' and bag.name.endswith('_failure')
+    for read in (read_with_rosbags, read_with_mcap):
+        topics = read(bag)
+        [latched] = topics['/dam/status']
+        assert latched.values['phase'] == 'PHASE_4'
+        assert latched.timestamp == T0 + 1900 * MS  # the start of the pre-roll
+        assert frame_ids(topics['/joint_states']) == [*range(1900, 2000), 2001]
+
+
+def test_overlapping_goals_each_get_their_own_window(tmp_path: Path, prefixes,
+                                                     typestore) -> None:
+    rec = make_recorder(tmp_path, pre_roll_s=0.05, post_roll_s=0.05)
+    js = rec.add_topic(specs(prefixes)[0])
+    other = 'cd' * 16
+    finished = []
+    for i in range(400):
+        now = T0 + i * MS
+        if i == 100:
+            rec.started(GOAL, now)
+        if i == 150:
+            rec.started(other, now)  # refused while the first runs
+        if i == 151:
+            rec.ended(other, now, dict(summary('REJECTED'), goal_id=other))
+        if i == 300:
+            rec.ended(GOAL, now, summary())
+        rec.write(js, now, joint_state(typestore, i))
+        finished += rec.poll(now)
+    assert [outcome for _bag, outcome in finished] == ['REJECTED', 'SUCCESS']
+    windows = {outcome: frame_ids(read_with_rosbags(bag)['/joint_states'])
+               for bag, outcome in finished}
+    assert windows['SUCCESS'] == list(range(50, 351))
+    assert windows['REJECTED'] == list(range(100, 202))
+    # Both started in the same second: the second name gets the goal id.
+    names = sorted(bag.name for bag, _ in finished)
+    assert names[0].endswith('_rejected') and names[1].endswith('_success')
+
+
+def test_stopping_closes_open_episodes_as_unfinished_and_counts_losses_per_episode(
+        tmp_path: Path, prefixes, typestore) -> None:
+    rec = make_recorder(tmp_path, storage='sqlite3')
+    js = rec.add_topic(specs(prefixes)[0])
+    rec.note_lost(js, 5)  # before the episode: not its loss
+    rec.started(GOAL, T0)
+    rec.write(js, T0 + MS, joint_state(typestore, 1))
+    rec.note_lost(js, 2)
+    status = rec.add_topic(specs(prefixes)[1])  # a topic that appears during the episode
+    rec.write(status, T0 + 2 * MS, dam_status(typestore, 2))
+    [(bag, outcome)] = rec.close_all()
+    assert outcome == 'UNKNOWN' and bag.name.endswith('_unknown')
+    assert metadata_problems(bag) == []
+    custom = yaml.safe_load((bag / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']['custom_data']
+    assert json.loads(custom['dam_recorder.lost_messages']) == {'/joint_states': 2}
+    stored = json.loads(custom[SUMMARY_KEY])
+    assert stored['outcome_name'] == 'UNKNOWN' and 'stopped before' in stored['message']
+    topics = read_with_rosbags(bag)
+    assert frame_ids(topics['/joint_states']) == [1]
+    assert [r.values['phase'] for r in topics['/dam/status']] == ['PHASE_2']
+
+
+def test_a_goal_that_started_before_the_recorder_has_no_episode(tmp_path: Path) -> None:
+    rec = make_recorder(tmp_path)
+    assert rec.ended(GOAL, T0, summary()) is False
+    assert rec.close_all() == [] and not (tmp_path / 'episodes').exists()
+
+
+@pytest.mark.parametrize('pre_roll, post_roll', [(-1.0, 1.0), (1.0, math.nan), (math.inf, 0)])
+def test_bad_rolls_are_refused_with_the_value(tmp_path: Path, pre_roll: float,
+                                              post_roll: float) -> None:
+    with pytest.raises(ConfigurationError, match='must be a finite number'):
+        make_recorder(tmp_path, pre_roll, post_roll)
+
+
+def test_json_safe_spells_non_finite_numbers() -> None:
+    assert json_safe({'a': [math.nan, -math.inf, 1.5], 'b': (math.inf,), 'c': 'x'}) == \
+        {'a': ['nan', '-inf', 1.5], 'b': ['inf'], 'c': 'x'}
