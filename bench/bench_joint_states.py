@@ -28,7 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -91,10 +91,12 @@ def _realtime_client() -> RosClient:
         return RosClient()
 
 
-def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndarray]:
+def _joint_state_periods(config_file: Path, seconds: float,
+                         beside: Sequence[Sequence[str | Path]] = ()) -> dict[str, np.ndarray]:
     """Periods [s] of /joint_states seen by this (separate) process: by the middleware's
     receive time (``received``), by the time the callback ran (``callback``) and by the
-    publisher's send time (``source``)."""
+    publisher's send time (``source``). ``beside``: commands of processes that run meanwhile
+    (e.g. a recorder)."""
     from sensor_msgs.msg import JointState
 
     received: list[int] = []
@@ -108,7 +110,10 @@ def _joint_state_periods(config_file: Path, seconds: float) -> dict[str, np.ndar
 
     cmd = [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args', '-p',
            'backend:=sim']
-    with node_process(cmd, env={'DAM_CONFIG': str(config_file)}):
+    with contextlib.ExitStack() as others, \
+            node_process(cmd, env={'DAM_CONFIG': str(config_file)}):
+        for other in beside:
+            others.enter_context(node_process(other, env={'DAM_CONFIG': str(config_file)}))
         client = _realtime_client()
         try:
             client.node.create_subscription(JointState, '/joint_states', on_joint_state, 500)

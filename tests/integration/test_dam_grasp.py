@@ -12,6 +12,10 @@ open):
 3. after a world reset, a grasp cancelled mid-way: the controller commands zero torque on the
    compliant joints and the simulated joints report zero torque.
 
+A recorder in episode mode runs beside the stack, as a researcher would run it; the last test
+checks that every goal became one episode bag with the goal's result, the /check_lift answer,
+the configuration and the recorded signals.
+
 The compliant joints run in the device's IMPEDANCE mode (the law at the stand-in's 1 kHz physics
 rate), so the grasp no longer depends on the ROS latency: every scenario runs once, no retries.
 Timing asserts are loose (a loaded 2-core machine).
@@ -67,6 +71,9 @@ class _Grasper:
                                  lambda m: setattr(self, 'joint_state', m), 10)
         self.action = ActionClient(node, DamGrasp, '/dam_grasp')
         self.goal_type = DamGrasp.Goal
+        #: (goal id as 32 hex digits, goal, result) of every goal that got a result
+        self.goals: list[tuple[str, object, object]] = []
+        self.sent: dict[str, dict[str, list[float]]] = {}  # goal id -> the goal as sent
 
     def z(self) -> float:
         return self.poses[-1][1]
@@ -87,6 +94,8 @@ class _Grasper:
         assert self.client.wait_future(future, 10.0), 'no answer to the goal'
         handle = future.result()
         assert handle.accepted
+        self.sent[bytes(bytearray(handle.goal_id.uuid)).hex()] = {
+            'k_theta': [k_theta], 'delta_theta_p': [delta_theta_p]}
         return handle
 
     def result(self, handle, timeout: float = 30.0):
@@ -96,7 +105,10 @@ class _Grasper:
             log = controller.output()[-4000:] if controller is not None else ''
             raise AssertionError(f'no result within {timeout} s (goal status '
                                  f'{handle.status}); controller log:\n{log}')
-        return future.result()
+        answer = future.result()
+        self.goals.append((bytes(bytearray(handle.goal_id.uuid)).hex(), handle,
+                           answer.result))
+        return answer
 
     def close(self) -> None:
         self.action.destroy()
@@ -113,9 +125,17 @@ def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope='module')
-def stack(config_file: Path) -> Iterator[_Grasper]:
+def episodes_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp('episodes') / 'grasps'
+
+
+@pytest.fixture(scope='module')
+def stack(config_file: Path, episodes_dir: Path) -> Iterator[_Grasper]:
     env = {'DAM_CONFIG': str(config_file)}
-    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+    with node_process([installed_executable('dam_recorder', 'recorder'), '--episodes',
+                       '-o', str(episodes_dir), '--pre-roll', '2', '--post-roll', '1'],
+                      env=env) as recorder, \
+            node_process([installed_executable('dam_hand_driver', 'hand_driver'),
                        '--ros-args', '-p', 'backend:=sim'], env=env) as driver, \
             node_process([installed_executable('dam_analysis', 'check_lift_server')],
                          env=env) as analysis, \
@@ -132,11 +152,17 @@ def stack(config_file: Path) -> Iterator[_Grasper]:
                 grasper.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
             assert ready, driver.output()
             assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
+            deadline = time.monotonic() + 30.0
+            while not all(f'recording {t} ' in recorder.output()
+                          for t in ('/joint_states', '/dam/episode', '/robot_description')):
+                assert time.monotonic() < deadline, recorder.output()
+                time.sleep(0.1)
             grasper.controller = controller
+            grasper.recorder = recorder
             yield grasper
         finally:
             grasper.close()
-            for proc in (controller, analysis, driver):
+            for proc in (controller, analysis, driver, recorder):
                 assert proc.alive(), proc.output()
 
 
@@ -276,3 +302,72 @@ def test_dam_grasp_executable_exit_codes(stack: _Grasper) -> None:
                         '1', env={'ROS_DOMAIN_ID': other_domain})
     assert lonely.returncode == 1, lonely.stdout + lonely.stderr
     assert 'no action server' in lonely.stderr
+
+
+def test_every_goal_became_an_episode(stack: _Grasper, episodes_dir: Path,
+                                      config_file: Path) -> None:
+    """Runs last: the goals above, each one bag named by its outcome, holding the goal's result,
+    the /check_lift answer (compared with a call of our own), the configuration, and the
+    signals from before the goal to after its end."""
+    import json
+    import sys
+
+    from dam_interfaces.srv import CheckLift
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'dam_recorder'))
+    from bag_readers import read_with_mcap, read_with_rosbags
+    from rosbag2_format import metadata_problems
+
+    assert stack.goals, 'no goal got a result'
+    deadline = time.monotonic() + 15.0  # the post-roll (1 s) of the last goal
+    while True:
+        bags = [p for p in episodes_dir.iterdir() if not p.name.endswith('_recording')]
+        summaries = {}
+        for bag in bags:
+            custom = yaml.safe_load((bag / 'metadata.yaml').read_text())[
+                'rosbag2_bagfile_information']['custom_data']
+            summaries[json.loads(custom['dam_episode.summary'])['goal_id']] = (bag, custom)
+        if all(goal_id in summaries for goal_id, _h, _r in stack.goals):
+            break
+        assert time.monotonic() < deadline, (sorted(p.name for p in episodes_dir.iterdir()),
+                                             stack.recorder.output()[-3000:])
+        time.sleep(0.2)
+    request = CheckLift.Request(k_theta=[10.0], delta_theta_p=[DELTA_THETA_P])
+    expected_answer = stack.client.call(CheckLift, '/check_lift', request)
+    config_text = config_file.read_text(encoding='utf-8')
+    for goal_id, handle, result in stack.goals:
+        bag, custom = summaries[goal_id]
+        summary = json.loads(custom['dam_episode.summary'])
+        assert bag.name.endswith('_' + result.outcome_name.lower()), bag.name
+        assert summary['outcome'] == result.outcome
+        assert summary['message'] == result.message
+        assert summary['duration_s'] == pytest.approx(result.duration)
+        assert custom['dam_episode.config'] == config_text
+        assert custom['dam_episode.version'].startswith('dam_common ')
+        assert metadata_problems(bag) == []
+        assert summary['goal'] == stack.sent[goal_id]
+        if summary['check_lift'] is not None and summary['k_theta'][0] == 10.0:
+            answer = summary['check_lift']
+            assert answer['lift_guaranteed'] == expected_answer.lift_guaranteed
+            assert answer['worst_case_margin'] == pytest.approx(
+                expected_answer.worst_case_margin)
+            assert answer['csm_margin'] == pytest.approx(expected_answer.csm_margin)
+            assert summary['friction_angle'] == pytest.approx(expected_answer.friction_angle)
+            assert summary['delta_theta_p'] == pytest.approx([DELTA_THETA_P] * 3)
+        topics = read_with_rosbags(bag)
+        stamps = [r.timestamp for r in topics['/joint_states']]
+        # From the pre-roll (2 s) before the goal to the post-roll (1 s) after its end; the
+        # events are stamped by the controller, the messages at their arrival here.
+        assert stamps[0] < summary['accepted_ns'] - 1.5e9
+        assert stamps[-1] > summary['ended_ns'] + 0.7e9
+        assert len(stamps) > 0.8 * 500 * (stamps[-1] - stamps[0]) / 1e9  # 500 Hz, in full
+        [description] = topics['/robot_description']
+        assert description.values['data'].startswith('<?xml')
+        events = [r.values for r in topics['/dam/episode'] if r.values['goal_id'] == goal_id]
+        assert [e['event'] for e in events] == [0, 1]  # STARTED, ENDED
+        mcap_topics = read_with_mcap(bag)
+        assert [r.data for r in mcap_topics['/dam/status']] == \
+            [r.data for r in topics['/dam/status']]
+        if result.outcome_name == 'SUCCESS':
+            phases = {r.values['phase'] for r in topics['/dam/status']}
+            assert {'APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'} <= phases, phases

@@ -6,10 +6,12 @@ SIGKILL with ``recover``, and the pause/resume/split services."""
 from __future__ import annotations
 
 import json
+import random
 import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -196,26 +198,47 @@ def test_pause_resume_and_split_services(tmp_path: Path) -> None:
     assert 0 < first_file < info['message_count']
 
 
-@pytest.mark.parametrize('delay_s, signum', [(0.0, signal.SIGINT), (0.3, signal.SIGTERM),
-                                             (0.8, signal.SIGINT), (2.0, signal.SIGTERM)])
-def test_a_signal_at_any_moment_leaves_a_whole_bag_or_none(tmp_path: Path, delay_s: float,
-                                                           signum: int) -> None:
+def test_100_signals_at_random_moments_each_leave_a_whole_bag_or_none(tmp_path: Path) -> None:
+    """SIGINT or SIGTERM (at random) at a random moment from the entry point's first line to
+    well into recording, while messages flow: exit status 0 within 2 s, no traceback, and the
+    bag either not made yet or whole (footer, summary, metadata.yaml that agrees with it)."""
+    from test_shutdown_signals import run_trial
+
     from dam_recorder.recovery import mcap_is_complete
 
-    bag = tmp_path / 'early'
-    with node_process([RECORDER, '-o', str(bag)]) as rec:
-        deadline = time.monotonic() + 20.0
-        while signal.SIGTERM not in caught_signals(rec.pid):  # the entry point's first line
-            assert rec.alive() and time.monotonic() < deadline, rec.output()
-            time.sleep(0.002)
-        time.sleep(delay_s)
-        started = time.monotonic()
-        assert stop(rec, signum) == 0, rec.output()
-        assert time.monotonic() - started < 3.0
-        assert 'Traceback' not in rec.output()
-    if bag.exists():  # made whole, never half
-        assert metadata_problems(bag) == []
-        assert all(mcap_is_complete(f) for f in bag.glob('*.mcap'))
+    rng = random.Random('recorder storm')
+    plans = [(rng.uniform(0.0, 2.5), rng.choice((signal.SIGINT, signal.SIGTERM)))
+             for _ in range(100)]
+
+    def one(i: int):
+        bag = tmp_path / f'bag{i}'
+        delay_s, signum = plans[i]
+        return bag, run_trial([str(RECORDER), '-o', str(bag)], None, delay_s, signum)
+
+    with node_process(fixture_command('recorder_publishers.py', '--count', '100000000',
+                                      '--wait-for', '--no-late')):
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            trials = list(pool.map(one, range(len(plans))))
+    problems = []
+    with_messages = 0
+    for bag, trial in trials:
+        why = trial.problem()
+        if not why and bag.exists():
+            why = '; '.join(metadata_problems(bag))
+            if not why and not all(mcap_is_complete(f) for f in bag.glob('*.mcap')):
+                why = 'an MCAP file without footer and summary'
+            if not why:
+                counts = {t: len(r) for t, r in read_with_rosbags(bag).items()}
+                listed = {t['topic_metadata']['name']: t['message_count']
+                          for t in metadata(bag)['topics_with_message_count']}
+                if {t: n for t, n in listed.items() if n} != counts:
+                    why = f'metadata counts {listed} but the files hold {counts}'
+                with_messages += sum(counts.values()) > 0
+        if why:
+            problems.append(f'{trial.signal_name} after {trial.delay_s:.3f} s: {why}\n'
+                            f'{trial.output[-1000:]}')
+    assert not problems, f'{len(problems)} of 100 not clean:\n' + '\n'.join(problems[:3])
+    assert with_messages >= 30  # the moments cover recording, not only starting
 
 
 def test_help_and_an_existing_output_directory(tmp_path: Path) -> None:
