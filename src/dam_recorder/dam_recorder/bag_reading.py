@@ -315,6 +315,7 @@ class BagReader:
         self.metadata = read_bag_metadata(self.path)
         self._reader: Any = None
         self._store: Any = None
+        self._field_names: dict[str, tuple[str, ...]] = {}
 
     def __enter__(self) -> BagReader:
         from rosbags.rosbag2 import Reader
@@ -346,6 +347,15 @@ class BagReader:
     def topics(self) -> dict[str, str]:
         """Topic -> type name, for every topic of the bag."""
         return {c.topic: c.msgtype for c in self._reader.connections}
+
+    def field_names(self, msgtype: str) -> tuple[str, ...]:
+        """The fields of ``msgtype`` in order (its constants, which ``rosbags`` also keeps as
+        attributes of a message, left out)."""
+        names = self._field_names.get(msgtype)
+        if names is None:
+            names = tuple(name for name, _kind in self._store.fielddefs[msgtype][1])
+            self._field_names[msgtype] = names
+        return names
 
     def _connections(self, topics: Collection[str] | None) -> list[Any]:
         connections = self._reader.connections
