@@ -256,7 +256,7 @@ def read_bag_metadata(bag_dir: str | os.PathLike[str]) -> BagMetadata:
 def typestore_of(connections: Sequence[Any]) -> Any:
     """A ``rosbags`` type store of the types the bag's connections define (``ros2msg`` or
     ``ros2idl`` definitions stored in the bag), plus Jazzy's standard types for connections
-    stored without a definition.
+    stored without one (or with an empty one).
 
     Unlike ``rosbags``' ``AnyReader``, which builds its store the same way, this does not
     refuse a type whose stored hash differs from the one computed from its definition: the
@@ -271,7 +271,9 @@ def typestore_of(connections: Sequence[Any]) -> Any:
     undefined = False
     for connection in connections:
         definition = connection.msgdef
-        if definition.format == MessageDefinitionFormat.MSG:
+        if not definition.data.strip():
+            undefined = True
+        elif definition.format == MessageDefinitionFormat.MSG:
             types.update(get_types_from_msg(definition.data, connection.msgtype))
         elif definition.format == MessageDefinitionFormat.IDL:
             sep = '=' * 80 + '\n'
@@ -281,7 +283,7 @@ def typestore_of(connections: Sequence[Any]) -> Any:
                 types.update(get_types_from_idl(part.split('\n', 1)[1]
                                                 if part.startswith('IDL: ') else part))
         else:
-            undefined = True
+            undefined = True  # stored without a definition
     store = get_typestore(Stores.EMPTY)
     store.register(types)
     if undefined:
