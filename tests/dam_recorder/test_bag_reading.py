@@ -4,6 +4,9 @@ bag's definitions (Jazzy's standard types where a bag has none), damaged storage
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import grasp_bags as gb
@@ -87,3 +90,17 @@ def test_a_damaged_storage_file_is_an_error_naming_the_bag(tmp_path: Path, types
             tmp_path / 'neg', typestore, prefixes, topics=('/dam/status',),
             custom={'dam_recorder.lost_messages': meta}).path).counts(
                 'dam_recorder.lost_messages')
+
+
+def test_the_bag_tools_do_not_import_rclpy() -> None:
+    code = ('import sys\n'
+            'import dam_recorder.bag_cli, dam_recorder.bag_export, dam_recorder.bag_info\n'
+            'import dam_recorder.bag_plot, dam_recorder.bag_reading, dam_recorder.episode\n'
+            'print(sorted(m for m in sys.modules if m.split(".")[0] == "rclpy"))\n')
+    src = Path(__file__).resolve().parents[2] / 'src'
+    env_path = f'{src / "dam_recorder"}:{src / "dam_common"}'
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          env={**os.environ, 'PYTHONPATH': env_path + ':' +
+                               os.environ.get('PYTHONPATH', '')}, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == '[]'

@@ -34,7 +34,13 @@ from dam_recorder.bag_reading import (
     locate,
     read_bag_metadata,
 )
-from dam_recorder.episode import OUTCOME_NAMES, OUTCOME_ORDER, Episode, format_floats
+from dam_recorder.episode import (
+    OUTCOME_NAMES,
+    OUTCOME_ORDER,
+    Episode,
+    format_floats,
+    parse_episode_name,
+)
 from dam_recorder.errors import BagReadError
 
 STATUS_TOPIC = '/dam/status'
@@ -107,7 +113,30 @@ class Grasp:
 
 @dataclass(frozen=True)
 class BagInfo:
-    """The answer of ``bag info`` for one bag (see the module)."""
+    """The answer of ``bag info`` for one bag.
+
+    Attributes
+    ----------
+    path : Path
+        The bag directory.
+    storage : str
+        Storage identifier (``mcap``, ``sqlite3``).
+    files : list of str
+        Storage files, relative to the bag directory.
+    start_ns, end_ns : int or None
+        Receive times of the first and the last message [ns since the epoch] (``None``
+        without messages).
+    message_count : int
+        Messages read from the files.
+    topics : list of TopicStats
+        One per topic, sorted by name.
+    lost, paused, trimmed : dict
+        The recorder's counts per topic (``custom_data``), topics not in the bag included.
+    episode : Episode or None
+        The episode metadata.
+    grasps : list of Grasp
+        The grasps ``/dam/status`` shows, in time order.
+    """
 
     path: Path
     storage: str
@@ -170,7 +199,8 @@ class EpisodeRow:
 
 @dataclass(frozen=True)
 class EpisodesInfo:
-    """The answer of ``bag info`` for a directory of episode bags."""
+    """The answer of ``bag info`` for a directory of episode bags: its path and one
+    :class:`EpisodeRow` per bag, in name (so time) order."""
 
     path: Path
     rows: list[EpisodeRow]
@@ -268,8 +298,6 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
 def episode_row(bag_dir: Path) -> EpisodeRow:
     """The table row of one episode bag, from its ``metadata.yaml`` alone; a bag that cannot
     be read gives a row with outcome ``ERROR`` and the reason in ``error``."""
-    from dam_recorder.episode import parse_episode_name
-
     try:
         meta = read_bag_metadata(bag_dir)
         episode = meta.episode()
