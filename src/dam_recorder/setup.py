@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'recorder = dam_recorder.entry_points:recorder',
             'recover = dam_recorder.recover_cli:main',
+            'bag = dam_recorder.bag_cli:main',
         ],
     },
 )

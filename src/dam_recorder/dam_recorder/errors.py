@@ -28,3 +28,17 @@ class BagError(DamRecorderError):
 
 class RecoveryError(DamRecorderError):
     """A bag cannot be recovered: no bag directory, no storage file, no readable record."""
+
+
+class BagReadError(DamRecorderError):
+    """A bag cannot be read: no bag at the path, a malformed ``metadata.yaml``, a storage file
+    or a message that cannot be decoded, an unknown topic. The message names the path."""
+
+
+class EpisodeError(DamRecorderError, ValueError):
+    """The episode metadata of a bag (``custom_data['dam_episode.*']``) is malformed; the
+    message names the key and the value."""
+
+
+class ExportError(DamRecorderError):
+    """A bag's signals cannot be written out (the output directory, a file)."""

@@ -1,0 +1,161 @@
+"""``bag``: look into recorded bags (no rclpy).
+
+::
+
+    ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episodes
+    ros2 run dam_recorder bag info EPISODES_DIR      # one row per episode bag, totals
+    ros2 run dam_recorder bag plot BAG [-o grasp.png]
+    ros2 run dam_recorder bag export BAG [-o DIR] [--topics /joint_states /dam/status]
+
+Exit status 0 on success, 1 when a bag cannot be read or an output cannot be written (one line
+on standard error naming the path and the cause), 2 for a malformed command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from dam_recorder.errors import DamRecorderError
+
+PROG = 'bag'
+
+
+def _topics(text: str) -> list[str]:
+    names = [t for t in text.split(',') if t]
+    for name in names:
+        if not name.startswith('/'):
+            raise argparse.ArgumentTypeError(f'{name!r} is not a topic name (it starts with /)')
+    return names
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``bag`` and its subcommands."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description='Look into bags the recorder wrote: describe them (info), draw a grasp '
+                    '(plot), write their signals as CSV (export). BAG is a bag directory '
+                    '(it holds metadata.yaml); info also takes a directory of episode bags.')
+    sub = parser.add_subparsers(dest='command', metavar='{info,plot,export}', required=True)
+
+    info = sub.add_parser(
+        'info', help='topics, counts, rates, gaps, losses and episodes of a bag',
+        description='For one bag: each topic with its type, message count, mean rate [Hz], '
+                    'the largest gap between consecutive messages and when it began '
+                    '[s from the bag start], the messages the recorder counted lost, paused '
+                    'and trimmed, the episode metadata (outcome, k_theta, delta_theta_p, '
+                    'check_lift margins) and the grasps /dam/status shows. For a directory '
+                    'of episode bags: one row per episode (start, durations, outcome, '
+                    'k_theta, delta_theta_p, lift guaranteed) and the totals per outcome.')
+    info.add_argument('bag', metavar='BAG', help='a bag directory or a directory of bags')
+    info.add_argument('--json', action='store_true',
+                      help='print JSON instead of text (non-finite numbers as "nan", "inf")')
+
+    plot = sub.add_parser(
+        'plot', help='draw a grasp: joint angles and torques, phases, object rise, margins',
+        description='Draw the grasp recorded in BAG: per finger the compliant and position '
+                    'joint angles [deg] and torques [N*m] (/joint_states), the controller '
+                    'phases (/dam/status) as shaded spans, the object rise [mm] '
+                    '(/sim/object_pose) and the check_lift margins (episode metadata, or '
+                    'the action feedback). What the bag lacks is listed in the picture.')
+    plot.add_argument('bag', metavar='BAG', help='the bag directory')
+    plot.add_argument('-o', '--output', metavar='FILE', type=Path,
+                      help='picture to write; the suffix picks the format (.png, .pdf, .svg); '
+                           'default <bag name>.png in the current directory')
+    plot.add_argument('--dpi', type=int, default=110, help='resolution of a PNG (default 110)')
+
+    export = sub.add_parser(
+        'export', help='write the signals as CSV, one file per topic',
+        description='Write one CSV file per topic: time_s [s from the bag start], time_ns '
+                    '[ns since the epoch], then every field flattened (header.stamp.sec, '
+                    'position.finger1_compliant_joint, status.0.name). Existing files of '
+                    'the same name are written over.')
+    export.add_argument('bag', metavar='BAG', help='the bag directory')
+    export.add_argument('-o', '--output', metavar='DIR', type=Path,
+                        help='output directory (created); default <bag name>_csv in the '
+                             'current directory')
+    export.add_argument('-t', '--topics', metavar='TOPIC', nargs='+', type=_topics,
+                        help='topics to export (names, or one comma-separated list); '
+                             'default every topic')
+    return parser
+
+
+def _one_bag(path: str) -> None:
+    """Refuse a directory of episode bags where one bag is needed."""
+    from dam_recorder.bag_reading import locate
+
+    kind, bags = locate(path)
+    if kind == 'episodes':
+        raise DamRecorderError(
+            f'{path}: a directory of {len(bags)} bags, not one bag; give one of them, '
+            f'e.g. {bags[0]}')
+
+
+def run_info(args: argparse.Namespace) -> int:
+    from dam_recorder import bag_info as core
+    from dam_recorder.bag_reading import locate
+
+    kind, _bags = locate(args.bag)
+    if kind == 'bag':
+        info = core.bag_info(args.bag)
+        print(json.dumps(core.bag_info_json(info), indent=1) if args.json
+              else core.format_bag_info(info))
+        return 0
+    episodes = core.episodes_info(args.bag)
+    print(json.dumps(core.episodes_json(episodes), indent=1) if args.json
+          else core.format_episodes(episodes))
+    for error in episodes.errors:
+        print(f'{PROG} info: {error}', file=sys.stderr)
+    return 1 if episodes.errors else 0
+
+
+def run_plot(args: argparse.Namespace) -> int:
+    from dam_recorder.bag_plot import plot_bag
+
+    _one_bag(args.bag)
+    if args.dpi <= 0:
+        raise DamRecorderError(f'--dpi must be positive, got {args.dpi}')
+    output = args.output or Path(f'{Path(args.bag).resolve().name}.png')
+    result = plot_bag(args.bag, output, dpi=args.dpi)
+    data = result.data
+    print(f'{output}: {data.title()}')
+    print(f'  {len(data.joints)} joints, {len(data.phases)} phase spans'
+          + (', check_lift margins' if data.margins else ''))
+    for item in data.missing:
+        print(f'  missing: {item}')
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    from dam_recorder.bag_export import export_bag
+
+    _one_bag(args.bag)
+    topics = [t for group in args.topics for t in group] if args.topics else None
+    for exported in export_bag(args.bag, args.output, topics):
+        print(f'{exported.path}: {exported.rows} rows, {len(exported.columns)} columns '
+              f'({exported.topic})')
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``bag`` with ``argv`` (default: the process's arguments); return the exit status."""
+    args = build_parser().parse_args(sys.argv[1:] if argv is None else list(argv))
+    commands = {'info': run_info, 'plot': run_plot, 'export': run_export}
+    try:
+        return commands[args.command](args)
+    except DamRecorderError as exc:
+        print(f'{PROG} {args.command}: {exc}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    except BrokenPipeError:  # the reader of our output went away (| head)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,468 @@
+"""``bag info``: what a bag holds, or what a directory of episode bags holds (no rclpy).
+
+For one bag (:func:`bag_info`): its topics with types, message counts, mean rates [Hz], the
+largest gap between consecutive messages per topic and when it began, the recorder's counts of
+lost, paused and trimmed messages (``custom_data``), the episode metadata when it is an
+episode bag, and the grasps ``/dam/status`` shows (from the phase leaving ``IDLE`` to ``DONE``,
+``ABORTED`` or ``FAILED``, with the outcome it then reports).
+
+For a directory of episode bags (:func:`episodes_info`): one row per episode (name, start,
+durations, outcome, ``k_theta``, ``delta_theta_p``, whether the lift is guaranteed) read from
+the metadata only, and the number of episodes per outcome.
+
+Times are receive times; "s" columns are seconds since the bag's first message.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from collections import Counter
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dam_recorder.bag_reading import (
+    LOST_KEY,
+    PAUSED_KEY,
+    TRIMMED_KEY,
+    BagReader,
+    locate,
+    read_bag_metadata,
+)
+from dam_recorder.episode import (
+    OUTCOME_NAMES,
+    OUTCOME_ORDER,
+    Episode,
+    format_floats,
+    parse_episode_name,
+)
+from dam_recorder.errors import BagReadError
+
+STATUS_TOPIC = '/dam/status'
+#: Phases of a running grasp, and the phases a grasp ends in.
+ACTIVE_PHASES = frozenset({'APPROACH', 'ROLLING_UP', 'ENVELOPE'})
+END_PHASES = frozenset({'DONE', 'ABORTED', 'FAILED'})
+
+
+@dataclass(frozen=True)
+class TopicStats:
+    """One topic of a bag.
+
+    Attributes
+    ----------
+    name, type : str
+        Topic and type name.
+    count : int
+        Messages in the bag.
+    rate_hz : float or None
+        Mean rate, (count - 1) / (last - first) [Hz]; ``None`` below two messages or when all
+        share one time.
+    first_ns, last_ns : int or None
+        Receive times of the first and the last message [ns since the epoch].
+    max_gap_ns : int or None
+        Largest time between consecutive messages [ns]; ``None`` below two messages.
+    max_gap_at_ns : int or None
+        Receive time of the message before that gap [ns since the epoch].
+    lost, paused, trimmed : int
+        The recorder's counts (``custom_data``) for the topic.
+    """
+
+    name: str
+    type: str
+    count: int
+    rate_hz: float | None
+    first_ns: int | None
+    last_ns: int | None
+    max_gap_ns: int | None
+    max_gap_at_ns: int | None
+    lost: int = 0
+    paused: int = 0
+    trimmed: int = 0
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A grasp seen on ``/dam/status``.
+
+    Attributes
+    ----------
+    start_ns : int
+        First status message of the grasp (phase ``APPROACH``, ``ROLLING_UP`` or ``ENVELOPE``
+        after any other phase) [ns since the epoch].
+    end_ns : int or None
+        First status message in an end phase [ns]; ``None`` when the bag ends first.
+    end_phase : str
+        ``DONE``, ``ABORTED``, ``FAILED``, or the last phase seen when the bag ends first.
+    outcome : str
+        The outcome name the end message reports (``UNKNOWN`` while running).
+    message : str
+        The end message's text.
+    """
+
+    start_ns: int
+    end_ns: int | None
+    end_phase: str
+    outcome: str
+    message: str
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """The answer of ``bag info`` for one bag.
+
+    Attributes
+    ----------
+    path : Path
+        The bag directory.
+    storage : str
+        Storage identifier (``mcap``, ``sqlite3``).
+    files : list of str
+        Storage files, relative to the bag directory.
+    start_ns, end_ns : int or None
+        Receive times of the first and the last message [ns since the epoch] (``None``
+        without messages).
+    message_count : int
+        Messages read from the files.
+    topics : list of TopicStats
+        One per topic, sorted by name.
+    lost, paused, trimmed : dict
+        The recorder's counts per topic (``custom_data``), topics not in the bag included.
+    episode : Episode or None
+        The episode metadata.
+    grasps : list of Grasp
+        The grasps ``/dam/status`` shows, in time order.
+    """
+
+    path: Path
+    storage: str
+    files: list[str]
+    start_ns: int | None
+    end_ns: int | None
+    message_count: int
+    topics: list[TopicStats]
+    lost: dict[str, int]
+    paused: dict[str, int]
+    trimmed: dict[str, int]
+    episode: Episode | None
+    grasps: list[Grasp]
+
+    @property
+    def duration_ns(self) -> int:
+        """From the first to the last message [ns] (0 without messages)."""
+        if self.start_ns is None or self.end_ns is None:
+            return 0
+        return self.end_ns - self.start_ns
+
+
+@dataclass(frozen=True)
+class EpisodeRow:
+    """One episode bag of a directory.
+
+    Attributes
+    ----------
+    name : str
+        Directory name.
+    start_ns : int or None
+        First message [ns since the epoch] (``None`` when unreadable or empty).
+    bag_duration_s : float or None
+        From the first to the last message [s].
+    grasp_duration_s : float or None
+        From goal acceptance to the end [s] (the summary's ``duration_s``).
+    outcome : str
+        The summary's outcome name; without a summary the directory name's suffix in upper
+        case; ``ERROR`` when the bag cannot be read.
+    k_theta : tuple of float
+        As run [N*m/rad].
+    delta_theta_p : tuple of float
+        As run [rad].
+    lift_guaranteed : bool or None
+        ``/check_lift``'s answer; ``None`` without one.
+    error : str or None
+        Why the bag could not be read.
+    """
+
+    name: str
+    start_ns: int | None
+    bag_duration_s: float | None
+    grasp_duration_s: float | None
+    outcome: str
+    k_theta: tuple[float, ...] = ()
+    delta_theta_p: tuple[float, ...] = ()
+    lift_guaranteed: bool | None = None
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class EpisodesInfo:
+    """The answer of ``bag info`` for a directory of episode bags: its path and one
+    :class:`EpisodeRow` per bag, in name (so time) order."""
+
+    path: Path
+    rows: list[EpisodeRow]
+
+    @property
+    def totals(self) -> dict[str, int]:
+        """Episodes per outcome, in :data:`OUTCOME_ORDER` (other names after)."""
+        counts = Counter(r.outcome for r in self.rows)
+        order = [o for o in OUTCOME_ORDER if o in counts]
+        order += sorted(o for o in counts if o not in OUTCOME_ORDER)
+        return {o: counts[o] for o in order}
+
+    @property
+    def errors(self) -> list[str]:
+        """The messages of the episodes that could not be read."""
+        return [r.error for r in self.rows if r.error]
+
+
+def topic_stats(name: str, type_name: str, times_ns: np.ndarray) -> TopicStats:
+    """Count, mean rate and largest gap of one topic from its receive times [ns]."""
+    times = np.sort(np.asarray(times_ns, dtype=np.int64))
+    count = int(times.size)
+    if count == 0:
+        return TopicStats(name, type_name, 0, None, None, None, None, None)
+    first, last = int(times[0]), int(times[-1])
+    if count < 2:
+        return TopicStats(name, type_name, 1, None, first, last, None, None)
+    gaps = np.diff(times)
+    worst = int(np.argmax(gaps))
+    rate = (count - 1) / ((last - first) * 1e-9) if last > first else None
+    return TopicStats(name, type_name, count, rate, first, last, int(gaps[worst]),
+                      int(times[worst]))
+
+
+def grasps_from_status(phases: list[tuple[int, str, int, str]]) -> list[Grasp]:
+    """The grasps in a sequence of ``/dam/status`` messages.
+
+    Parameters
+    ----------
+    phases : list of (time [ns], phase, outcome code, message)
+        The status messages in time order.
+    """
+    grasps: list[Grasp] = []
+    start: int | None = None
+    last_phase = ''
+    for time_ns, phase, outcome, message in phases:
+        if start is None and phase in ACTIVE_PHASES:
+            start = time_ns
+        elif start is not None and phase in END_PHASES:
+            name = OUTCOME_NAMES[outcome] if 0 <= outcome < len(OUTCOME_NAMES) else str(outcome)
+            grasps.append(Grasp(start, time_ns, phase, name, message))
+            start = None
+        last_phase = phase
+    if start is not None:
+        grasps.append(Grasp(start, None, last_phase, 'UNKNOWN', 'the bag ends during the grasp'))
+    return grasps
+
+
+def bag_info(path: str | os.PathLike[str]) -> BagInfo:
+    """Read one bag and describe it (see the module).
+
+    Raises
+    ------
+    BagReadError
+        If ``path`` is no readable bag, or its recorder counts or episode metadata are
+        malformed.
+    """
+    meta = read_bag_metadata(path)
+    lost, paused, trimmed = (meta.counts(k) for k in (LOST_KEY, PAUSED_KEY, TRIMMED_KEY))
+    episode = meta.episode()
+    with BagReader(meta.path) as bag:
+        types = bag.topics
+        for name, type_name in meta.topics.items():
+            types.setdefault(name, type_name)  # topics without messages
+        times = bag.receive_times()
+        status: list[tuple[int, str, int, str]] = []
+        if types.get(STATUS_TOPIC) == 'dam_interfaces/msg/DamStatus':
+            status = [(m.time_ns, str(m.message.phase), int(m.message.outcome),
+                       str(m.message.message)) for m in bag.messages([STATUS_TOPIC])]
+    topics = []
+    for name in sorted(types):
+        stats = topic_stats(name, types[name], times.get(name, np.zeros(0, np.int64)))
+        topics.append(dataclasses.replace(stats, lost=lost.get(name, 0),
+                                          paused=paused.get(name, 0),
+                                          trimmed=trimmed.get(name, 0)))
+    firsts = [t.first_ns for t in topics if t.first_ns is not None]
+    lasts = [t.last_ns for t in topics if t.last_ns is not None]
+    return BagInfo(
+        path=meta.path, storage=meta.storage, files=meta.files,
+        start_ns=min(firsts) if firsts else None, end_ns=max(lasts) if lasts else None,
+        message_count=sum(t.count for t in topics), topics=topics, lost=lost, paused=paused,
+        trimmed=trimmed, episode=episode, grasps=grasps_from_status(status))
+
+
+def episode_row(bag_dir: Path) -> EpisodeRow:
+    """The table row of one episode bag, from its ``metadata.yaml`` alone; a bag that cannot
+    be read gives a row with outcome ``ERROR`` and the reason in ``error``."""
+    try:
+        meta = read_bag_metadata(bag_dir)
+        episode = meta.episode()
+    except BagReadError as exc:
+        return EpisodeRow(bag_dir.name, None, None, None, 'ERROR', error=str(exc))
+    has_messages = meta.message_count > 0
+    start = meta.start_ns if has_messages else None
+    duration = meta.duration_ns * 1e-9 if has_messages else None
+    if episode is None:
+        named = parse_episode_name(bag_dir.name)
+        outcome = named[1].upper() if named else 'UNKNOWN'
+        return EpisodeRow(bag_dir.name, start, duration, None, outcome)
+    summary = episode.summary
+    check = summary.check_lift
+    return EpisodeRow(bag_dir.name, start, duration, summary.duration_s, summary.outcome_name,
+                      summary.k_theta, summary.delta_theta_p,
+                      check.lift_guaranteed if check is not None else None)
+
+
+def episodes_info(path: str | os.PathLike[str]) -> EpisodesInfo:
+    """Describe every episode bag in the directory ``path`` (see the module).
+
+    Raises
+    ------
+    BagReadError
+        If ``path`` holds no bag directories.
+    """
+    kind, bags = locate(path)
+    if kind != 'episodes':
+        raise BagReadError(f'{path}: is one bag, not a directory of episode bags')
+    return EpisodesInfo(Path(path), [episode_row(b) for b in bags])
+
+
+# -- text ------------------------------------------------------------------------------------
+
+def local_time(time_ns: int | None) -> str:
+    """``YYYY-MM-DD HH:MM:SS.mmm`` in local time (``-`` for ``None``)."""
+    if time_ns is None:
+        return '-'
+    return datetime.fromtimestamp(time_ns * 1e-9).strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]
+
+
+def _num(value: float | None, spec: str) -> str:
+    return '-' if value is None else format(value, spec)
+
+
+def _margin(value: float) -> str:
+    return f'{value:+.4g} N' if math.isfinite(value) else f'{value} N'
+
+
+def _yes(value: bool | None) -> str:
+    return '-' if value is None else ('yes' if value else 'no')
+
+
+def _table(header: list[str], rows: list[list[str]], right: set[int]) -> list[str]:
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    lines = []
+    for row in [header, *rows]:
+        cells = [c.rjust(w) if i in right else c.ljust(w)
+                 for i, (c, w) in enumerate(zip(row, widths, strict=True))]
+        lines.append('  '.join(cells).rstrip())
+    return lines
+
+
+def episode_lines(episode: Episode) -> list[str]:
+    """The episode metadata as text lines."""
+    s = episode.summary
+    lines = [f'episode:    {s.outcome_name} ({s.message})',
+             f'  goal id {s.goal_id}, grasp {s.duration_s:.3f} s, pre-roll {s.pre_roll_s:g} s, '
+             f'post-roll {s.post_roll_s:g} s',
+             f'  k_theta [N*m/rad] {format_floats(s.k_theta)}   delta_theta_p [deg] '
+             f'{format_floats(s.delta_theta_p, math.degrees(1.0))}   friction angle '
+             f'{math.degrees(s.friction_angle):.4g} deg',
+             f'  goal as sent: k_theta {format_floats(s.goal_k_theta)}, delta_theta_p [rad] '
+             f'{format_floats(s.goal_delta_theta_p)}']
+    c = s.check_lift
+    if c is None:
+        lines.append('  check_lift: none')
+    else:
+        lines.append(f'  check_lift: lift guaranteed {_yes(c.lift_guaranteed)} '
+                     f'(worst-case margin {_margin(c.worst_case_margin)}), contact stiffness '
+                     f'model {_yes(c.csm_lift)} (margin {_margin(c.csm_margin)})')
+    config = 'none' if episode.config_text is None else \
+        f'{len(episode.config_text.splitlines())} lines'
+    lines.append(f'  config: {config}; version: {episode.version or "none"}')
+    return lines
+
+
+def format_bag_info(info: BagInfo) -> str:
+    """``info`` as the text ``bag info`` prints."""
+    start = info.start_ns
+    lines = [f'bag:        {info.path}',
+             f'storage:    {info.storage} ({len(info.files)} file'
+             f'{"" if len(info.files) == 1 else "s"}: {", ".join(info.files)})',
+             f'start:      {local_time(start)}',
+             f'duration:   {info.duration_ns * 1e-9:.3f} s',
+             f'messages:   {info.message_count}']
+    rows = []
+    for t in info.topics:
+        gap = '-' if t.max_gap_ns is None or start is None or t.max_gap_at_ns is None else \
+            f'{t.max_gap_ns * 1e-9:.3f} at {(t.max_gap_at_ns - start) * 1e-9:.3f}'
+        rows.append([t.name, t.type, str(t.count), _num(t.rate_hz, '.2f'), gap,
+                     str(t.lost), str(t.paused), str(t.trimmed)])
+    header = ['topic', 'type', 'count', 'rate [Hz]', 'largest gap [s] at [s]', 'lost',
+              'paused', 'trimmed']
+    lines += ['', *_table(header, rows, {2, 3, 4, 5, 6, 7})]
+    others = sorted({*info.lost, *info.paused, *info.trimmed} - {t.name for t in info.topics})
+    for name in others:
+        lines.append(f'(not in the bag) {name}: lost {info.lost.get(name, 0)}, paused '
+                     f'{info.paused.get(name, 0)}, trimmed {info.trimmed.get(name, 0)}')
+    lines.append('')
+    lines += episode_lines(info.episode) if info.episode else ['episode:    none']
+    if info.grasps:
+        lines.append(f'grasps on {STATUS_TOPIC}:')
+        for i, g in enumerate(info.grasps, 1):
+            t0 = (g.start_ns - start) * 1e-9 if start is not None else 0.0
+            t1 = '-' if g.end_ns is None or start is None else f'{(g.end_ns - start) * 1e-9:.3f}'
+            lines.append(f'  {i}: {t0:.3f} s to {t1} s: {g.end_phase}, outcome {g.outcome}'
+                         + (f' ({g.message})' if g.message else ''))
+    else:
+        lines.append(f'grasps on {STATUS_TOPIC}: none')
+    return '\n'.join(lines)
+
+
+def format_episodes(info: EpisodesInfo) -> str:
+    """``info`` as the table ``bag info`` prints for a directory of episodes."""
+    rows = []
+    for r in info.rows:
+        rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
+                     _num(r.grasp_duration_s, '.3f'), r.outcome, format_floats(r.k_theta),
+                     format_floats(r.delta_theta_p, math.degrees(1.0)),
+                     _yes(r.lift_guaranteed)])
+    header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'k_theta [N*m/rad]',
+              'delta_theta_p [deg]', 'lift guaranteed']
+    lines = [f'{info.path}: {len(info.rows)} episode{"" if len(info.rows) == 1 else "s"}', '',
+             *_table(header, rows, {2, 3}), '', 'totals:']
+    lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
+    return '\n'.join(lines)
+
+
+# -- JSON ------------------------------------------------------------------------------------
+
+def jsonable(value: Any) -> Any:
+    """``value`` (dataclasses, paths, tuples, floats) as JSON-ready Python; non-finite floats
+    become the strings ``"nan"``, ``"inf"``, ``"-inf"``."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return 'nan' if math.isnan(value) else ('inf' if value > 0 else '-inf')
+    return value
+
+
+def bag_info_json(info: BagInfo) -> dict[str, Any]:
+    """``info`` for ``--json``: every field, plus ``duration_ns``."""
+    data = jsonable(info)
+    data['duration_ns'] = info.duration_ns
+    return data
+
+
+def episodes_json(info: EpisodesInfo) -> dict[str, Any]:
+    """``info`` for ``--json``: the rows and the totals per outcome."""
+    return {'path': str(info.path), 'episodes': jsonable(info.rows), 'totals': info.totals}

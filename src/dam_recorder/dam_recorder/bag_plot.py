@@ -1,0 +1,393 @@
+"""``bag plot``: a grasp as one picture (no rclpy; matplotlib with the Agg backend).
+
+Per finger, the compliant and the position joint's angle [deg] and torque [N*m] from
+``/joint_states``; the controller's phases from ``/dam/status`` shaded as labelled spans on
+every time axis; the object's rise above its first height [mm] from ``/sim/object_pose``; the
+``/check_lift`` margins from the episode metadata or, without it, from the last
+``/dam_grasp/_action/feedback`` that carries them. The title names the bag, the outcome,
+``k_theta`` and ``delta_theta_p``. Time runs in seconds from the bag's first message.
+
+What is missing (a topic, a joint, a torque) is plotted as far as it is there and listed in
+the figure and in :attr:`GraspData.missing`.
+
+:func:`read_grasp_data` collects the signals (plain numpy arrays), :func:`grasp_figure` draws
+them, :func:`plot_bag` does both and saves the picture.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dam_common.config import JOINT_ROLES
+from dam_recorder.bag_info import STATUS_TOPIC, grasps_from_status
+from dam_recorder.bag_reading import BagReader, read_bag_metadata
+from dam_recorder.episode import Episode, format_floats
+from dam_recorder.errors import BagReadError
+
+JOINT_STATES_TOPIC = '/joint_states'
+OBJECT_POSE_TOPIC = '/sim/object_pose'
+FEEDBACK_TOPIC = '/dam_grasp/_action/feedback'
+#: The fingers drawn when the joint states name none (finger1..finger3).
+DEFAULT_FINGERS: tuple[str, ...] = ('finger1', 'finger2', 'finger3')
+#: The joint roles drawn per finger (the locked joint does not move).
+PLOTTED_ROLES: tuple[str, ...] = tuple(r for r in JOINT_ROLES if r != 'locked')
+#: Fill colour of each phase span (``IDLE`` is not shaded).
+PHASE_COLOURS: dict[str, str] = {
+    'APPROACH': '#9ecae1', 'ROLLING_UP': '#fdd0a2', 'ENVELOPE': '#a1d99b', 'DONE': '#d9d9d9',
+    'ABORTED': '#fcbba1', 'FAILED': '#fb6a4a', 'RELEASING': '#dadaeb', 'CHECK_LIFT': '#fff7bc'}
+_JOINT_NAME = re.compile(r'^(?P<finger>.+)_(?P<role>' + '|'.join(JOINT_ROLES) + r')_joint$')
+
+
+@dataclass(frozen=True)
+class JointSeries:
+    """One joint's samples.
+
+    Attributes
+    ----------
+    time_s : ndarray
+        Receive time [s since the bag's first message].
+    angle_rad : ndarray
+        Joint angle [rad].
+    torque_nm : ndarray
+        Joint torque [N*m] (``nan`` where a message carried no effort).
+    """
+
+    time_s: np.ndarray
+    angle_rad: np.ndarray
+    torque_nm: np.ndarray
+
+
+@dataclass(frozen=True)
+class PhaseSpan:
+    """A phase of the controller: from its first ``/dam/status`` message to the first message
+    of the next phase (the last one to the bag's last message) [s since the bag's start]."""
+
+    phase: str
+    start_s: float
+    end_s: float
+
+
+@dataclass(frozen=True)
+class Margins:
+    """The ``/check_lift`` answer shown in the plot.
+
+    Attributes
+    ----------
+    source : str
+        ``'episode metadata'`` or ``'action feedback'``.
+    lift_guaranteed, csm_lift : bool
+        Sufficient condition (eq. 18); contact stiffness model.
+    worst_case_margin, csm_margin : float
+        Their margins [N].
+    """
+
+    source: str
+    lift_guaranteed: bool
+    worst_case_margin: float
+    csm_lift: bool
+    csm_margin: float
+
+    def text(self) -> str:
+        """Two lines of text for the figure."""
+        def margin(value: float) -> str:
+            return f'{value:+.4g} N' if math.isfinite(value) else f'{value} N'
+
+        yes = {True: 'yes', False: 'no'}
+        return (f'lift guaranteed (eq. 18): {yes[self.lift_guaranteed]}, worst-case margin '
+                f'{margin(self.worst_case_margin)}\ncontact stiffness model: '
+                f'{yes[self.csm_lift]}, margin {margin(self.csm_margin)}  '
+                f'(from the {self.source})')
+
+
+@dataclass
+class GraspData:
+    """The signals of a grasp bag (see the module).
+
+    Attributes
+    ----------
+    bag : Path
+        The bag directory.
+    start_ns : int
+        The bag's first message [ns since the epoch]; time 0 of every series.
+    end_s : float
+        The bag's last message [s].
+    fingers : list of str
+        Finger names, in order.
+    joints : dict
+        Joint name -> :class:`JointSeries`, for the compliant and position joints found.
+    phases : list of PhaseSpan
+    height_time_s, height_rise_mm : ndarray or None
+        Object pose times [s] and the rise of ``position.z`` above its first value [mm].
+    margins : Margins or None
+    episode : Episode or None
+    outcome : str
+        Outcome name from the episode metadata, else from the last grasp on ``/dam/status``,
+        else ``'outcome unknown'``.
+    missing : list of str
+        What the picture lacks, one phrase each.
+    """
+
+    bag: Path
+    start_ns: int
+    end_s: float
+    fingers: list[str]
+    joints: dict[str, JointSeries]
+    phases: list[PhaseSpan]
+    height_time_s: np.ndarray | None
+    height_rise_mm: np.ndarray | None
+    margins: Margins | None
+    episode: Episode | None
+    outcome: str
+    missing: list[str] = field(default_factory=list)
+
+    def title(self) -> str:
+        """``<bag>: <outcome>, k_theta = [...] N*m/rad, delta_theta_p = [...] deg``."""
+        if self.episode is not None:
+            s = self.episode.summary
+            pair = (f'k_theta = {format_floats(s.k_theta)} N*m/rad, delta_theta_p = '
+                    f'{format_floats(s.delta_theta_p, math.degrees(1.0))} deg')
+        else:
+            pair = 'k_theta and delta_theta_p unknown (no episode metadata)'
+        return f'{self.bag.name}: {self.outcome}, {pair}'
+
+
+def joint_name(finger: str, role: str) -> str:
+    """``<finger>_<role>_joint``."""
+    return f'{finger}_{role}_joint'
+
+
+def phase_spans(status: Sequence[tuple[float, str]], end_s: float) -> list[PhaseSpan]:
+    """Runs of equal phases in ``(time [s], phase)`` status samples (time order)."""
+    spans: list[PhaseSpan] = []
+    for time_s, phase in status:
+        if spans and spans[-1].phase == phase:
+            continue
+        if spans:
+            spans[-1] = PhaseSpan(spans[-1].phase, spans[-1].start_s, time_s)
+        spans.append(PhaseSpan(phase, time_s, time_s))
+    if spans:
+        spans[-1] = PhaseSpan(spans[-1].phase, spans[-1].start_s, max(end_s, spans[-1].start_s))
+    return spans
+
+
+def _joint_series(samples: dict[str, list[tuple[float, float, float]]]
+                  ) -> dict[str, JointSeries]:
+    out = {}
+    for name, rows in samples.items():
+        data = np.asarray(rows, dtype=float).reshape(-1, 3)
+        out[name] = JointSeries(data[:, 0], data[:, 1], data[:, 2])
+    return out
+
+
+def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
+    """Collect the signals :func:`grasp_figure` draws from one bag.
+
+    Raises
+    ------
+    BagReadError
+        If the bag cannot be read or its episode metadata is malformed.
+    """
+    meta = read_bag_metadata(bag_dir)
+    episode = meta.episode()
+    wanted = [JOINT_STATES_TOPIC, STATUS_TOPIC, OBJECT_POSE_TOPIC, FEEDBACK_TOPIC]
+    samples: dict[str, list[tuple[float, float, float]]] = {}
+    status: list[tuple[int, str, int, str]] = []
+    heights: list[tuple[float, float]] = []
+    feedback: Margins | None = None
+    index_cache: dict[tuple[str, ...], dict[str, int]] = {}
+    with BagReader(meta.path) as bag:
+        present = bag.topics
+        times = bag.receive_times()
+        nonempty = [t for t, v in times.items() if v.size]
+        start_ns = min((int(times[t][0]) for t in nonempty), default=meta.start_ns)
+        end_ns = max((int(times[t][-1]) for t in nonempty), default=start_ns)
+        for item in bag.messages([t for t in wanted if t in present]):
+            t_s = (item.time_ns - start_ns) * 1e-9
+            msg = item.message
+            if item.topic == JOINT_STATES_TOPIC:
+                names = tuple(msg.name)
+                index = index_cache.setdefault(names, {n: i for i, n in enumerate(names)})
+                for name, i in index.items():
+                    if _JOINT_NAME.match(name) is None:
+                        continue
+                    angle = float(msg.position[i]) if i < len(msg.position) else math.nan
+                    torque = float(msg.effort[i]) if i < len(msg.effort) else math.nan
+                    samples.setdefault(name, []).append((t_s, angle, torque))
+            elif item.topic == STATUS_TOPIC:
+                status.append((item.time_ns, str(msg.phase), int(msg.outcome),
+                               str(msg.message)))
+            elif item.topic == OBJECT_POSE_TOPIC:
+                heights.append((t_s, float(msg.pose.position.z)))
+            elif item.topic == FEEDBACK_TOPIC and bool(msg.feedback.lift_checked):
+                fb = msg.feedback
+                feedback = Margins('action feedback', bool(fb.lift_guaranteed),
+                                   float(fb.worst_case_margin), bool(fb.csm_lift),
+                                   float(fb.csm_margin))
+    end_s = (end_ns - start_ns) * 1e-9
+    missing: list[str] = []
+    for topic in wanted:
+        if topic not in present:
+            missing.append(f'{topic}: not in the bag')
+        elif not times[topic].size:
+            missing.append(f'{topic}: no messages')
+    joints = _joint_series(samples)
+    fingers = list(DEFAULT_FINGERS)
+    for name in joints:
+        finger = _JOINT_NAME.match(name)
+        if finger and finger['finger'] not in fingers:
+            fingers.append(finger['finger'])
+    if JOINT_STATES_TOPIC in present and times[JOINT_STATES_TOPIC].size:
+        for finger in fingers:
+            for role in PLOTTED_ROLES:
+                name = joint_name(finger, role)
+                if name not in joints:
+                    missing.append(f'{name}: not in {JOINT_STATES_TOPIC}')
+                elif np.all(np.isnan(joints[name].torque_nm)):
+                    missing.append(f'{name}: no effort (torque)')
+    margins = feedback
+    if episode is not None:
+        check = episode.summary.check_lift
+        margins = None if check is None else Margins(
+            'episode metadata', check.lift_guaranteed, check.worst_case_margin,
+            check.csm_lift, check.csm_margin)
+    if margins is None:
+        missing.append('check_lift margins: none recorded')
+    if episode is not None:
+        outcome = episode.summary.outcome_name
+    else:
+        grasps = grasps_from_status(status)
+        outcome = grasps[-1].outcome if grasps else 'outcome unknown'
+    height_t = height_mm = None
+    if heights:
+        h = np.asarray(heights, dtype=float)
+        height_t, height_mm = h[:, 0], (h[:, 1] - h[0, 1]) * 1000.0
+    return GraspData(
+        bag=meta.path, start_ns=start_ns, end_s=end_s, fingers=fingers, joints=joints,
+        phases=phase_spans([((t - start_ns) * 1e-9, p) for t, p, _, _ in status], end_s),
+        height_time_s=height_t, height_rise_mm=height_mm, margins=margins, episode=episode,
+        outcome=outcome, missing=missing)
+
+
+def _shade_phases(ax: Any, phases: Sequence[PhaseSpan], label: bool) -> None:
+    for span in phases:
+        if span.phase == 'IDLE':
+            continue
+        ax.axvspan(span.start_s, span.end_s, color=PHASE_COLOURS.get(span.phase, '#eeeeee'),
+                   alpha=0.6, lw=0, label=f'phase {span.phase}', gid='phase', zorder=0)
+        if label:
+            ax.text((span.start_s + span.end_s) / 2, 1.02, span.phase, rotation=0,
+                    ha='center', va='bottom', fontsize=7, transform=ax.get_xaxis_transform(),
+                    gid='phase_label')
+
+
+def _legend(ax: Any) -> None:
+    """A legend of the lines only (the phases are labelled above the top axes), by role."""
+    lines = ax.get_lines()
+    if lines:
+        names = [_JOINT_NAME.match(str(line.get_label())) for line in lines]
+        ax.legend(lines, [m['role'] if m else line.get_label()
+                          for m, line in zip(names, lines, strict=True)],
+                  loc='upper left', fontsize=7)
+
+
+def _say_missing(ax: Any, text: str) -> None:
+    ax.text(0.5, 0.5, text, ha='center', va='center', transform=ax.transAxes, color='0.4',
+            gid='missing')
+
+
+def grasp_figure(data: GraspData) -> Any:
+    """Draw ``data`` into a new matplotlib Figure (Agg canvas) and return it.
+
+    Every line carries its joint name (or ``object rise``) as label: angle axes in deg,
+    torque axes in N*m, the height axis in mm. Phase spans are patches with ``gid='phase'``
+    and ``label='phase <NAME>'``.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = len(data.fingers) + 1
+    fig = Figure(figsize=(13, 2.6 * rows + 0.8), layout='constrained')
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 2, sharex=True, squeeze=False)
+    fig.suptitle(data.title(), fontsize=11)
+    for row, finger in enumerate(data.fingers):
+        angle_ax, torque_ax = axes[row]
+        angle_ax.set_ylabel(f'{finger}\nangle [deg]')
+        torque_ax.set_ylabel('torque [N*m]')
+        drawn = False
+        for role in PLOTTED_ROLES:
+            name = joint_name(finger, role)
+            series = data.joints.get(name)
+            if series is None:
+                continue
+            drawn = True
+            angle_ax.plot(series.time_s, np.degrees(series.angle_rad), label=name, lw=1.2)
+            if not np.all(np.isnan(series.torque_nm)):
+                torque_ax.plot(series.time_s, series.torque_nm, label=name, lw=1.2)
+        for ax in (angle_ax, torque_ax):
+            _shade_phases(ax, data.phases, label=row == 0)
+            if drawn:
+                _legend(ax)
+            else:
+                _say_missing(ax, f'no {finger} joints in {JOINT_STATES_TOPIC}')
+            ax.grid(True, lw=0.3)
+    height_ax, text_ax = axes[-1]
+    height_ax.set_ylabel('object rise [mm]')
+    height_ax.set_xlabel('time [s] from the bag start')
+    _shade_phases(height_ax, data.phases, label=False)
+    if data.height_time_s is not None and data.height_rise_mm is not None:
+        height_ax.plot(data.height_time_s, data.height_rise_mm, label='object rise',
+                       color='k', lw=1.2)
+        _legend(height_ax)
+    else:
+        _say_missing(height_ax, f'no {OBJECT_POSE_TOPIC} in the bag')
+    height_ax.grid(True, lw=0.3)
+    axes[-2][1].tick_params(labelbottom=True)  # the text panel below has no time axis
+    axes[-2][1].set_xlabel('time [s] from the bag start')
+    text_ax.axis('off')
+    lines = ['check_lift:', data.margins.text() if data.margins else 'no margins recorded']
+    if data.missing:
+        lines += ['', 'missing:', *data.missing]
+    text_ax.text(0.0, 1.0, '\n'.join(lines), ha='left', va='top', fontsize=8,
+                 family='monospace', transform=text_ax.transAxes, gid='margins', wrap=True)
+    if data.end_s > 0:
+        axes[0][0].set_xlim(0.0, data.end_s)
+    return fig
+
+
+@dataclass(frozen=True)
+class PlotResult:
+    """What :func:`plot_bag` made: the figure and the data it shows."""
+
+    figure: Any
+    data: GraspData
+
+
+def plot_bag(bag_dir: str | os.PathLike[str],
+             output: str | os.PathLike[str] | None = None, dpi: int = 110) -> PlotResult:
+    """Read ``bag_dir``, draw the grasp and save it to ``output`` (PNG, PDF, SVG by its
+    suffix) when given.
+
+    Raises
+    ------
+    BagReadError
+        If the bag cannot be read, or the picture cannot be written (naming the file).
+    """
+    data = read_grasp_data(bag_dir)
+    figure = grasp_figure(data)
+    if output is not None:
+        path = Path(output)
+        try:
+            figure.savefig(path, dpi=dpi)
+        except (OSError, ValueError) as exc:
+            raise BagReadError(f'{path}: cannot write the picture: '
+                               f'{" ".join(str(exc).split())}') from None
+    return PlotResult(figure, data)
