@@ -24,8 +24,8 @@ import time
 from pathlib import Path
 
 import yaml
-
 from bench_joint_states import _config_copy, _joint_state_periods, _period_stats
+
 from ros_testing import installed_executable, node_process
 
 _PUBLISHER = """

@@ -11,13 +11,14 @@ with each other and with ``recorder_samples``, and ``data`` the serialized messa
 
 ``mcap-ros2-support`` (0.6) refuses to build a decoder for a type whose name has an underscore
 (its copy of rosidl's name rule ``^[A-Z][A-Za-z0-9]*$``), which every type derived from an
-action has (``DamGrasp_FeedbackMessage``); for those its ``values`` are ``None`` and only the
-stored bytes and time stamps can be compared.
+action has (``DamGrasp_FeedbackMessage``); for those the reader hands it the schema with the
+underscores taken out of the derived names (:func:`without_underscores`): the same layout.
 """
 
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -71,6 +72,24 @@ def read_with_rosbags(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]
     return out
 
 
+_DERIVED_TYPE = re.compile(r'\b([a-z][a-z0-9_]*)/(?:action|srv)/([A-Za-z][A-Za-z0-9_]*)')
+
+
+def without_underscores(schema: Any) -> Any:
+    """``schema`` with every type derived from an action or a service renamed without its
+    underscores (``pkg/action/Name_Feedback`` -> ``pkg/NameFeedback``), in its name and its
+    definition: ``mcap-ros2-support`` refuses such names, the layout is unchanged."""
+    from mcap.records import Schema
+
+    def rename(match: re.Match[str]) -> str:
+        return f'{match.group(1)}/{match.group(2).replace("_", "")}'
+    name = _DERIVED_TYPE.sub(rename, schema.name)
+    package, _, type_name = name.partition('/')
+    data = _DERIVED_TYPE.sub(rename, schema.data.decode())
+    return Schema(id=schema.id, name=f'{package}/msg/{type_name}', encoding=schema.encoding,
+                  data=data.encode())
+
+
 def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
     """Every message of an MCAP bag, decoded by ``mcap-ros2-support``."""
     from mcap.reader import make_reader
@@ -90,7 +109,8 @@ def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
                         decoders[schema.id] = factory.decoder_for(channel.message_encoding,
                                                                   schema)
                     except InvalidResourceName:
-                        decoders[schema.id] = None
+                        decoders[schema.id] = factory.decoder_for(
+                            channel.message_encoding, without_underscores(schema))
                 decoder = decoders[schema.id]
                 values = plain(decoder(message.data)) if decoder is not None else None
                 out.setdefault(channel.topic, []).append(

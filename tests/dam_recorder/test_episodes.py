@@ -68,14 +68,16 @@ def test_an_episode_holds_its_pre_roll_and_post_roll_and_is_named_by_outcome(
     # Joint state i arrives at T0 + i ms; the goal starts at 1000 ms and ends at 1500 ms.
     for i in range(1000):
         rec.write(js, T0 + i * MS, joint_state(typestore, i))
-    opened = rec.started(GOAL, T0 + 1000 * MS, accepted_ns=T0 + 999 * MS,
+    # The event is stamped at 999 ms (the controller) and taken at 1200 ms (a busy recorder):
+    # the pre-roll counts from the earlier.
+    opened = rec.started(GOAL, T0 + 1200 * MS, accepted_ns=T0 + 1000 * MS,
                          start_info={CONFIG_KEY: 'hand: {}\n'})
     assert opened.parent == tmp_path / 'episodes' and opened.name.endswith('_recording')
-    for i in range(1000, 1800):  # after 1700 ms (the post-roll's end): not in the episode
+    for i in range(1000, 1800):  # after 1690 ms (the post-roll's end): not in the episode
         rec.write(js, T0 + i * MS, joint_state(typestore, i))
-        if i == 1500:
-            assert rec.ended(GOAL, T0 + 1500 * MS, summary())
-        if i < 1700:
+        if i == 1500:  # taken at 1500 ms, stamped by the controller at 1490 ms
+            assert rec.ended(GOAL, T0 + 1500 * MS, summary(), ended_ns=T0 + 1490 * MS)
+        if i <= 1690:
             assert rec.poll(T0 + i * MS) == []
     [(bag, outcome)] = rec.poll(T0 + 1800 * MS)
     assert outcome == 'SUCCESS' and rec.open_goals == [] and not opened.exists()
@@ -83,15 +85,15 @@ def test_an_episode_holds_its_pre_roll_and_post_roll_and_is_named_by_outcome(
     assert bag == tmp_path / 'episodes' / f'{stem}_success'
     assert metadata_problems(bag) == []
     for read in (read_with_rosbags, read_with_mcap):
-        # pre-roll 0.5 s before 1000 ms: from 500 ms; post-roll 0.2 s after 1500 ms: to 1700 ms
-        assert frame_ids(read(bag)['/joint_states']) == list(range(500, 1701))
+        # pre-roll 0.5 s before 1000 ms: from 500 ms; post-roll 0.2 s after 1490 ms: to 1690 ms
+        assert frame_ids(read(bag)['/joint_states']) == list(range(500, 1691))
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert info['relative_file_paths'] == [f'{stem}_0.mcap']
     custom = info['custom_data']
     assert custom[CONFIG_KEY] == 'hand: {}\n'
     assert json.loads(custom['dam_recorder.lost_messages']) == {}
     stored = json.loads(custom[SUMMARY_KEY])  # standard JSON: no NaN or Infinity tokens
-    assert stored['accepted_ns'] == T0 + 999 * MS
+    assert stored['accepted_ns'] == T0 + 1000 * MS
     assert stored['pre_roll_s'] == 0.5 and stored['post_roll_s'] == 0.2
     assert stored['check_lift'] == {'ok': True, 'worst_case_margin': '-inf', 'csm_margin': 'nan'}
     assert stored['k_theta'] == [10.0, 5.0, 5.0] and stored['outcome_name'] == 'SUCCESS'
@@ -109,7 +111,9 @@ def test_latched_message_older_than_the_pre_roll_is_written_at_its_start(
     rec.started(GOAL, T0 + 2000 * MS)
     rec.ended(GOAL, T0 + 2001 * MS, summary('FAILURE'))
     rec.write(js, T0 + 2001 * MS, joint_state(typestore, 2001))
-    [(bag, outcome)] = rec.poll(T0 + 2001 * MS)
+    # No later message: it closes a second (CATCH_UP_NS) after the post-roll.
+    assert rec.poll(T0 + 2999 * MS) == []
+    [(bag, outcome)] = rec.poll(T0 + 3001 * MS)
     assert outcome == 'FAILURE' and bag.name.endswith('_failure')
     for read in (read_with_rosbags, read_with_mcap):
         topics = read(bag)

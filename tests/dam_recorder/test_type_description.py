@@ -62,18 +62,23 @@ def test_action_feedback_message_is_found_in_the_action_description(prefixes) ->
     message_type = load_message_type('dam_interfaces/action/DamGrasp_FeedbackMessage',
                                      prefixes)
     lines = message_type.definition().splitlines()
+    # The nested type derived from the action keeps its full name: read as pkg/Name, a parser
+    # would place it in pkg/msg and compute another hash than the one stored.
     assert lines[:2] == ['unique_identifier_msgs/UUID goal_id',
-                         'dam_interfaces/DamGrasp_Feedback feedback']
+                         'dam_interfaces/action/DamGrasp_Feedback feedback']
     assert 'MSG: unique_identifier_msgs/UUID' in lines
     assert 'uint8[16] uuid' in lines
-    assert 'MSG: dam_interfaces/DamGrasp_Feedback' in lines
+    assert 'MSG: dam_interfaces/action/DamGrasp_Feedback' in lines
     assert 'float64[] compliant_torque' in lines
-    # rosbags builds a type from it with the fields of DamGrasp.action's feedback section.
-    store = get_typestore(Stores.ROS2_JAZZY)
+    # rosbags builds a type from it with the fields of DamGrasp.action's feedback section, and
+    # computes the hash the recorder stores (what rosbags' AnyReader checks).
+    store = get_typestore(Stores.EMPTY)
     store.register(get_types_from_msg(message_type.definition(), message_type.name))
-    feedback = [name for name, _ in store.fielddefs['dam_interfaces/msg/DamGrasp_Feedback'][1]]
+    feedback = [name for name, _ in
+                store.fielddefs['dam_interfaces/action/DamGrasp_Feedback'][1]]
     assert feedback == ['phase', 'progress', 'lift_checked', 'lift_guaranteed',
                         'worst_case_margin', 'csm_lift', 'csm_margin', 'compliant_torque']
+    assert store.hash_rihs01(message_type.name) == message_type.type_hash
 
 
 def test_dam_status_has_the_fields_of_its_msg_file(prefixes, typestore) -> None:

@@ -1,7 +1,7 @@
 """Reading rosbag2 bags for the bag tools (no rclpy): where the bags are, their metadata, and
 their messages, read with ``rosbags``' rosbag2 reader and decoded with a type store built from
 the definitions stored in the bag (:func:`typestore_of`, as ``rosbags.highlevel.AnyReader``
-builds its own, but without refusing the recorder's action-derived types).
+builds its own, but tolerant of a stored type hash that differs from the computed one).
 
 A path given to the tools is either one bag directory (it holds ``metadata.yaml``) or a
 directory of episode bags (it holds no ``metadata.yaml`` but bag directories).
@@ -259,10 +259,10 @@ def typestore_of(connections: Sequence[Any]) -> Any:
     stored without one (or with an empty one).
 
     Unlike ``rosbags``' ``AnyReader``, which builds its store the same way, this does not
-    refuse a type whose stored hash differs from the one computed from its definition: the
-    recorder's definitions of types derived from an action (``pkg/action/Name_Feedback``)
-    name their nested types ``pkg/Name_Feedback``, which the parser places in ``pkg/msg``, so
-    the computed hash differs although the layout, all that decoding needs, is right.
+    refuse a type whose stored hash differs from the one computed from its definition: bags
+    of other writers (and of this recorder before it spelt action-derived nested types in
+    full) name such nested types ``pkg/Name_Feedback``, which the parser places in
+    ``pkg/msg``; the layout, all that decoding needs, is right all the same.
     """
     from rosbags.interfaces import MessageDefinitionFormat
     from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore

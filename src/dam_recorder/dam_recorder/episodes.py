@@ -50,6 +50,8 @@ CONFIG_SOURCE_KEY = 'dam_episode.config_source'
 UNFINISHED = 'UNKNOWN'
 #: Suffix of an episode directory while it is being written.
 OPEN_SUFFIX = 'recording'
+#: How long after its post-roll an episode waits for a later message before it closes [ns].
+CATCH_UP_NS = 1_000_000_000
 
 
 def json_safe(value: Any) -> Any:
@@ -87,6 +89,7 @@ class _Episode:
     start_info: dict[str, str] = field(default_factory=dict)
     summary: dict[str, Any] | None = None
     close_after_ns: int | None = None
+    caught_up: bool = False  # a message stamped after close_after_ns has arrived
 
 
 class EpisodeRecorder:
@@ -164,6 +167,8 @@ class EpisodeRecorder:
         for episode in self._open.values():
             if episode.close_after_ns is None or stamp_ns <= episode.close_after_ns:
                 episode.bag.write(episode.ids[key], stamp_ns, data)
+            else:
+                episode.caught_up = True
 
     def note_lost(self, key: int, count: int) -> None:
         """The middleware reports ``count`` messages of topic ``key`` lost."""
@@ -193,17 +198,20 @@ class EpisodeRecorder:
         """
         if goal_id in self._open:
             return self._open[goal_id].bag.bag_dir
-        stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(stamp_ns / 1e9))
+        # The earlier of the two: a recorder that takes the event late (a busy machine) still
+        # keeps the seconds before the goal; clocks of two machines may differ either way.
+        start_ns = min(stamp_ns, accepted_ns) if accepted_ns else stamp_ns
+        stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(start_ns / 1e9))
         bag_dir = self._free_dir(f'{stem}_{OPEN_SUFFIX}', goal_id)
-        holder: list[_Episode] = []
-        bag = self._open_bag(bag_dir, stem, lambda: self._episode_custom_data(holder[0]))
-        episode = _Episode(goal_id, bag, stem, accepted_ns or stamp_ns,
+        episode = _Episode(goal_id, None, stem, accepted_ns or stamp_ns,  # type: ignore[arg-type]
                            start_info=dict(start_info or {}))
-        holder.append(episode)
+        # The writer calls custom_data as soon as it writes metadata.yaml, on opening.
+        bag = self._open_bag(bag_dir, stem, lambda: self._episode_custom_data(episode))
+        episode.bag = bag
         self._open[goal_id] = episode
         for key in range(len(self._topics)):
             self._add_to(episode, key)
-        window_start = stamp_ns - self.pre_roll_ns
+        window_start = start_ns - self.pre_roll_ns
         ring_start = self._ring[0][1] if self._ring else stamp_ns
         for key, (latched_ns, data) in self._latched.items():
             if latched_ns < ring_start:  # else it is in the ring
@@ -213,23 +221,28 @@ class EpisodeRecorder:
                 bag.write(episode.ids[key], ring_ns, data)
         return bag_dir
 
-    def ended(self, goal_id: str, stamp_ns: int, summary: Mapping[str, Any]) -> bool:
-        """The goal ended (its ENDED event arrived at ``stamp_ns`` [ns]); the episode closes
-        ``post_roll`` later (:meth:`poll`). ``summary`` is written as :data:`SUMMARY_KEY`.
-        Returns ``False`` when no episode of this goal is open (it started before the
-        recorder did)."""
+    def ended(self, goal_id: str, stamp_ns: int, summary: Mapping[str, Any],
+              ended_ns: int = 0) -> bool:
+        """The goal ended (its ENDED event arrived at ``stamp_ns`` [ns]; ``ended_ns`` is the
+        event's own stamp, the earlier of the two counts); the episode takes the messages
+        stamped up to ``post_roll`` later and closes (:meth:`poll`). ``summary`` is written as
+        :data:`SUMMARY_KEY`. Returns ``False`` when no episode of this goal is open (it started
+        before the recorder did)."""
         episode = self._open.get(goal_id)
         if episode is None:
             return False
         episode.summary = dict(summary)
-        episode.close_after_ns = stamp_ns + self.post_roll_ns
+        end_ns = min(stamp_ns, ended_ns) if ended_ns else stamp_ns
+        episode.close_after_ns = end_ns + self.post_roll_ns
         return True
 
     def poll(self, now_ns: int) -> list[tuple[Path, str]]:
-        """Close the episodes whose post-roll is over at ``now_ns`` [ns]; return them as
-        (bag directory, outcome name)."""
+        """Close the episodes whose post-roll is over: a message stamped after it has been
+        written (so every earlier one was taken), or, when messages stopped, at ``now_ns``
+        [ns] :data:`CATCH_UP_NS` after its end. Return them as (bag directory, outcome)."""
         due = [g for g, e in self._open.items()
-               if e.close_after_ns is not None and now_ns >= e.close_after_ns]
+               if e.close_after_ns is not None
+               and (e.caught_up or now_ns >= e.close_after_ns + CATCH_UP_NS)]
         return [self._close(goal_id) for goal_id in due]
 
     def close_all(self) -> list[tuple[Path, str]]:

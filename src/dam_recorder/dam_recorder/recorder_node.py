@@ -43,13 +43,13 @@ import json
 import os
 import sys
 import time
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -65,8 +65,8 @@ from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
 from dam_recorder.episode_messages import (
     EPISODE_TOPIC,
-    start_info,
     stamp_ns,
+    start_info,
     summary_from_event,
 )
 from dam_recorder.episodes import EpisodeRecorder, TopicSpec
@@ -78,10 +78,15 @@ from dam_recorder.errors import (
 )
 from dam_recorder.qos import OfferedQos, request_for_offers, to_rosbags_qos
 from dam_recorder.selection import DEFAULT_TOPICS, TopicSelection
+from dam_recorder.taker import SerializedTaker
 from dam_recorder.type_description import install_prefix_of, load_message_type
 
 #: Longest time [s] a stop request waits for messages still arriving (see begin_shutdown).
 DRAIN_QUIET_S = 0.1
+#: How often the taker thread takes what is queued [s].
+TAKE_PERIOD_S = 0.005
+#: How often the executor's thread writes what the taker took [s].
+WRITE_PERIOD_S = 0.02
 
 
 def message_class(type_name: str) -> type:
@@ -145,6 +150,11 @@ class RecorderNode(Node):
         self._writer: BagWriter | None = None
         self._episodes: EpisodeRecorder | None = None
         self._stopped = False
+        self._taker: SerializedTaker | None = None
+        #: What the taker's thread took, for the executor's thread to write: ('message',
+        #: recorded, data, info) or ('lost', recorded, count). Only the executor's thread
+        #: touches the writer (sqlite3 connections belong to the thread that opened them).
+        self._inbox: deque[tuple[Any, ...]] = deque()
         self._recorded: dict[str, _Recorded] = {}
         self._refused: set[str] = set()
         self._paused = False
@@ -184,11 +194,13 @@ class RecorderNode(Node):
 
     def _start(self, p: dict[str, Any], compression: str) -> None:
         self._depth = p['queue_depth']
+        self._taker = SerializedTaker(self, TAKE_PERIOD_S)
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
         self.create_service(Trigger, '~/split', self._on_split)
         create_steady_timer(self, p['discovery_period'], self._discover)
         create_steady_timer(self, p['chunk_interval'], self._flush)
+        create_steady_timer(self, WRITE_PERIOD_S, self._write_inbox)
         if self._episodes is not None:
             from dam_interfaces.msg import GraspEpisode  # episode mode needs the suite's types
             self.create_subscription(GraspEpisode, EPISODE_TOPIC, self._on_episode_event,
@@ -296,41 +308,52 @@ class RecorderNode(Node):
                                               type_hash, profiles)
         recorded = _Recorded(name, topic_id, end)
         self._recorded[name] = recorded
-        self.create_subscription(
-            cls, name, self._callback(recorded), qos, raw=True,
-            event_callbacks=SubscriptionEventCallbacks(
-                message_lost=lambda status, r=recorded: self._on_lost(r, status)))
+        self._taker.subscribe(
+            cls, name, qos, self._callback(recorded),
+            on_lost=lambda change, r=recorded: self._inbox.append(('lost', r, change)))
         self.get_logger().info(
             f'recording {name} ({type_name}, {"reliable" if request.reliable else "best_effort"}'
             f', {"transient_local" if request.transient_local else "volatile"})')
 
     def _callback(self, recorded: _Recorded) -> Any:
-        writer = self._writer if self._episodes is None else self._episodes
+        inbox = self._inbox
 
-        def on_message(data: bytes, info: dict[str, Any]) -> None:
-            if self._stopped:
-                return
+        def on_message(data: bytes, info: dict[str, Any]) -> None:  # the taker's thread
             self._last_message = time.monotonic()
-            if self._paused:
-                recorded.paused += 1
-                return
-            stamp = info.get('received_timestamp', 0)
-            if self._use_sim_time or not stamp:
-                stamp = self.get_clock().now().nanoseconds
-            try:
-                cut = recorded.end.trim(data)
-            except CdrError as exc:
-                if not recorded.malformed:
-                    self.get_logger().warning(f'{recorded.name}: {exc}; written as received')
-                recorded.malformed += 1
-                cut = data
-            if len(cut) != len(data):
-                recorded.trimmed += 1
-            writer.write(recorded.topic_id, stamp, cut)
+            inbox.append(('message', recorded, data, info))
         return on_message
 
-    def _on_lost(self, recorded: _Recorded, status: Any) -> None:
-        change = int(status.total_count_change)
+    def _write_inbox(self) -> None:
+        """Write what the taker took (in the executor's thread)."""
+        inbox = self._inbox
+        writer = self._writer if self._episodes is None else self._episodes
+        while inbox and not self._stopped:
+            item = inbox.popleft()
+            if item[0] == 'lost':
+                self._on_lost(item[1], item[2])
+            else:
+                self._write(writer, item[1], item[2], item[3])
+
+    def _write(self, writer: Any, recorded: _Recorded, data: bytes,
+               info: dict[str, Any]) -> None:
+        if self._paused:
+            recorded.paused += 1
+            return
+        stamp = info.get('received_timestamp', 0)
+        if self._use_sim_time or not stamp:
+            stamp = self.get_clock().now().nanoseconds
+        try:
+            cut = recorded.end.trim(data)
+        except CdrError as exc:
+            if not recorded.malformed:
+                self.get_logger().warning(f'{recorded.name}: {exc}; written as received')
+            recorded.malformed += 1
+            cut = data
+        if len(cut) != len(data):
+            recorded.trimmed += 1
+        writer.write(recorded.topic_id, stamp, cut)
+
+    def _on_lost(self, recorded: _Recorded, change: int) -> None:
         recorded.lost += change
         if self._episodes is not None:
             self._episodes.note_lost(recorded.topic_id, change)
@@ -357,6 +380,9 @@ class RecorderNode(Node):
         return self.get_clock().now().nanoseconds
 
     def _on_episode_event(self, msg: Any) -> None:
+        self._episode_event(msg)
+
+    def _episode_event(self, msg: Any) -> None:
         if self._stopped:
             return
         if msg.event == msg.EVENT_STARTED:
@@ -364,7 +390,9 @@ class RecorderNode(Node):
                                           start_info(msg))
             self.get_logger().info(f'episode of goal {msg.goal_id[:8]}: recording into {path}')
         elif msg.event == msg.EVENT_ENDED:
-            if not self._episodes.ended(msg.goal_id, self._now_ns(), summary_from_event(msg)):
+            summary = summary_from_event(msg)
+            if not self._episodes.ended(msg.goal_id, self._now_ns(), summary,
+                                        ended_ns=summary['ended_ns']):
                 self.get_logger().warning(
                     f'goal {msg.goal_id[:8]} ended ({msg.outcome_name}) but it started before '
                     'the recorder did: no episode')
@@ -374,7 +402,8 @@ class RecorderNode(Node):
     def _close_due_episodes(self) -> None:
         if self._stopped:
             return
-        for path, outcome in self._episodes.poll(self._now_ns()):
+        closed = self._episodes.poll(self._now_ns())
+        for path, outcome in closed:
             self.get_logger().info(f'episode {outcome}: {path}')
 
     def _on_pause(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
@@ -390,6 +419,9 @@ class RecorderNode(Node):
         return response
 
     def _on_split(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
+        return self._split(response)
+
+    def _split(self, response: Trigger.Response) -> Any:
         if self._episodes is not None:
             paths = self._episodes.split()
             response.success = True
@@ -416,8 +448,20 @@ class RecorderNode(Node):
         return done
 
     def destroy_node(self) -> None:
-        """Close the bag (summary, index and ``metadata.yaml``), then destroy the node."""
+        """Take what reached the process, close the bag (summary, index and
+        ``metadata.yaml``) or every open episode, then destroy the node."""
+        taker, self._taker = self._taker, None
+        if taker is not None:
+            taker.stop()
+            taker.drain()
+        self._write_inbox()
         self._stopped = True
+        self._close_bags()
+        if taker is not None:
+            taker.destroy()
+        super().destroy_node()
+
+    def _close_bags(self) -> None:
         if self._episodes is not None:
             for path, outcome in self._episodes.close_all():
                 self.get_logger().info(f'episode {outcome}: {path}')
@@ -431,7 +475,6 @@ class RecorderNode(Node):
             self.get_logger().info(
                 f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
                 f'{len(writer.files)} file(s); the middleware reported {lost} lost')
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> None:

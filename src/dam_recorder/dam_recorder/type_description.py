@@ -125,8 +125,13 @@ class MessageType:
 
 
 def short_name(type_name: str) -> str:
-    """``'pkg/msg/Name'`` -> ``'pkg/Name'``: how a ``.msg`` file spells a nested type."""
+    """How a definition spells a nested type: ``'pkg/msg/Name'`` -> ``'pkg/Name'`` (as a
+    ``.msg`` file does); a type derived from an action or a service keeps its full name
+    (``'pkg/action/Name_Feedback'``), because a reader takes ``pkg/Name`` for
+    ``pkg/msg/Name`` and would compute another type hash than the one stored."""
     parts = type_name.split('/')
+    if len(parts) == 3 and parts[1] != 'msg':
+        return type_name
     return f'{parts[0]}/{parts[-1]}'
 
 
