@@ -93,7 +93,6 @@ def without_underscores(schema: Any) -> Any:
 def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
     """Every message of an MCAP bag, decoded by ``mcap-ros2-support``."""
     from mcap.reader import make_reader
-    from mcap_ros2._vendor.rosidl_adapter.parser import InvalidResourceName
     from mcap_ros2.decoder import DecoderFactory
 
     factory = DecoderFactory()
@@ -105,12 +104,10 @@ def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
             reader = make_reader(stream)
             for schema, channel, message in reader.iter_messages(log_time_order=True):
                 if schema.id not in decoders:
-                    try:
-                        decoders[schema.id] = factory.decoder_for(channel.message_encoding,
-                                                                  schema)
-                    except InvalidResourceName:
-                        decoders[schema.id] = factory.decoder_for(
-                            channel.message_encoding, without_underscores(schema))
+                    if _DERIVED_TYPE.search(schema.name + schema.data.decode()):
+                        schema = without_underscores(schema)
+                    decoders[schema.id] = factory.decoder_for(channel.message_encoding,
+                                                              schema)
                 decoder = decoders[schema.id]
                 values = plain(decoder(message.data)) if decoder is not None else None
                 out.setdefault(channel.topic, []).append(

@@ -190,3 +190,22 @@ def test_bad_rolls_are_refused_with_the_value(tmp_path: Path, pre_roll: float,
 def test_json_safe_spells_non_finite_numbers() -> None:
     assert json_safe({'a': [math.nan, -math.inf, 1.5], 'b': (math.inf,), 'c': 'x'}) == \
         {'a': ['nan', '-inf', 1.5], 'b': ['inf'], 'c': 'x'}
+
+
+def test_messages_handed_over_late_go_by_their_stamps(tmp_path: Path, prefixes,
+                                                      typestore) -> None:
+    """A recorder behind its queue: the goal's events are handled before the messages around
+    them are written. The episode still holds exactly its window."""
+    rec = make_recorder(tmp_path, pre_roll_s=0.1, post_roll_s=0.1)
+    js = rec.add_topic(specs(prefixes)[0])
+    for i in range(100):  # written before the start event is handled
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    rec.started(GOAL, T0 + 900 * MS, accepted_ns=T0 + 500 * MS)
+    rec.ended(GOAL, T0 + 950 * MS, summary(), ended_ns=T0 + 700 * MS)
+    finished = []
+    for i in range(100, 1000):  # the backlog: older and newer than the window
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+        finished += rec.poll(T0 + 1000 * MS)
+    [(bag, outcome)] = finished
+    assert outcome == 'SUCCESS'
+    assert frame_ids(read_with_rosbags(bag)['/joint_states']) == list(range(400, 801))

@@ -90,6 +90,7 @@ class _Episode:
     summary: dict[str, Any] | None = None
     close_after_ns: int | None = None
     caught_up: bool = False  # a message stamped after close_after_ns has arrived
+    window_start_ns: int = 0  # messages stamped before are not the episode's
 
 
 class EpisodeRecorder:
@@ -115,9 +116,11 @@ class EpisodeRecorder:
     Notes
     -----
     All times are the messages' receive stamps [ns since the epoch]; the caller passes the
-    events' receive stamps to :meth:`started` and :meth:`ended` and the current time to
-    :meth:`poll`. A latched topic's last message (e.g. ``/robot_description``) is written
-    into every episode, stamped at the start of the pre-roll when it is older.
+    events' receive stamps (and their own stamps) to :meth:`started` and :meth:`ended` and
+    the current time to :meth:`poll`. An episode takes the messages by their stamps, not by
+    when they are handed over, so messages and events may come late and in either order. A
+    latched topic's last message (e.g. ``/robot_description``) is written into every
+    episode, stamped at the start of the pre-roll when it is older.
     """
 
     def __init__(self, out_dir: str | Path,
@@ -165,6 +168,8 @@ class EpisodeRecorder:
         if self._topics[key].latched:
             self._latched[key] = (stamp_ns, data)
         for episode in self._open.values():
+            if stamp_ns < episode.window_start_ns:
+                continue  # taken late (a backlog): older than the episode's pre-roll
             if episode.close_after_ns is None or stamp_ns <= episode.close_after_ns:
                 episode.bag.write(episode.ids[key], stamp_ns, data)
             else:
@@ -212,6 +217,7 @@ class EpisodeRecorder:
         for key in range(len(self._topics)):
             self._add_to(episode, key)
         window_start = start_ns - self.pre_roll_ns
+        episode.window_start_ns = window_start
         ring_start = self._ring[0][1] if self._ring else stamp_ns
         for key, (latched_ns, data) in self._latched.items():
             if latched_ns < ring_start:  # else it is in the ring

@@ -24,6 +24,9 @@ discovery_period : double [s]
     How often the recorder looks for new topics and publishers.
 queue_depth : int [messages]
     Depth of each subscription's queue.
+thread_priority : int
+    ``SCHED_FIFO`` priority of every thread of the recorder (default 40, below the controller
+    and the driver; 0: normal scheduling).
 episodes : bool
     Episode mode: one bag per ``/dam_grasp`` goal in the directory ``output``
     (:mod:`~dam_recorder.episodes`), from ``pre_roll`` before the goal to ``post_roll`` after.
@@ -58,7 +61,8 @@ from rclpy.utilities import remove_ros_args
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
-from dam_common.node import run_node
+from dam_common.node import declare_thread_priority, run_node
+from dam_common.realtime import set_process_priority
 from dam_common.shutdown import SHUTDOWN
 from dam_recorder.bag_writer import BagWriter
 from dam_recorder.cdr_end import CdrEnd
@@ -87,6 +91,8 @@ DRAIN_QUIET_S = 0.1
 TAKE_PERIOD_S = 0.005
 #: How often the executor's thread writes what the taker took [s].
 WRITE_PERIOD_S = 0.02
+#: SCHED_FIFO priority of the recorder's threads: below the controller (45) and the driver (50).
+THREAD_PRIORITY = 40
 
 
 def message_class(type_name: str) -> type:
@@ -160,6 +166,8 @@ class RecorderNode(Node):
         self._paused = False
         self._last_message = time.monotonic()
         p = self._declare_parameters()
+        self._thread_priority = declare_thread_priority(
+            self, default=THREAD_PRIORITY, what='every thread of the recorder')
         self._selection = TopicSelection(p['topics'], p['regex'], p['exclude'])
         for topic in self._selection.topics:
             if self._selection.excluded(topic):
@@ -217,6 +225,14 @@ class RecorderNode(Node):
             + (f', regex {p["regex"]!r}' if p['regex'] else '')
             + (f', exclude {p["exclude"]!r}' if p['exclude'] else ''))
         self._discover()
+        # The middleware's threads (they acknowledge what reliable publishers send) and the
+        # taker: real-time where permitted, below the nodes of the control loop, so that the
+        # recorder keeps up and its publishers never resend to it.
+        refused = set_process_priority(self._thread_priority)
+        if refused:
+            self.get_logger().warning(
+                f'{refused}: the recorder runs with normal scheduling; on a busy machine it may '
+                'fall behind real-time publishers (thread_priority:=0 silences this)')
 
     def _declare_parameters(self) -> dict[str, Any]:
         declared = {
