@@ -2,6 +2,8 @@
 # The main job: bring the DAM suite up (on the PyBullet stand-in when no hand answers), ask
 # /check_lift about the (k_theta, delta_theta_p) pair, grasp the cylinder by Detaching Assist
 # Motion through the /dam_grasp action, print the outcome, and stop everything it started.
+# The grasp is recorded as an episode bag (bags/episodes/<time>_<outcome>, or under
+# $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed.
 #
 #   bash scripts/run.sh                                   # the pair configured in config/dam.yaml
 #   bash scripts/run.sh --k-theta 0.5 --delta-theta-p 10deg   # any other pair
@@ -10,6 +12,8 @@
 # Exit status: that of the grasp client (0 success, 3 another outcome, 2 rejected, 1 no answer).
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
+BAG_DIR=${DAM_BAG_DIR:-$REPO_ROOT/bags}
 
 k_theta=""
 delta_theta_p=""
@@ -21,7 +25,7 @@ while [ $# -gt 0 ]; do
     --delta-theta-p) delta_theta_p=${2:?--delta-theta-p needs a value}; shift 2 ;;
     --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
     --keep) keep=true; shift ;;
-    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
     *) echo "run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -43,11 +47,33 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
 fi
 
 bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend"
-if [ "$keep" != true ]; then
-  trap 'bash "$REPO_ROOT/scripts/stop.sh"' EXIT
-fi
-
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
+
+# The recorder, in episode mode: this grasp becomes one bag.
+recorder_log="$RUN_DIR/recorder.log"
+PYTHONUNBUFFERED=1 "$(exe dam_recorder recorder)" --episodes -o "$BAG_DIR/episodes" \
+  >"$recorder_log" 2>&1 </dev/null &
+recorder_pid=$!
+echo "$recorder_pid" >"$RUN_DIR/recorder.pid"
+stop_recorder() {
+  if kill -0 "$recorder_pid" 2>/dev/null; then
+    kill -INT "$recorder_pid"
+    wait "$recorder_pid" 2>/dev/null || true
+  fi
+  rm -f "$RUN_DIR/recorder.pid"
+}
+if [ "$keep" != true ]; then
+  trap 'stop_recorder; bash "$REPO_ROOT/scripts/stop.sh"' EXIT
+else
+  trap 'stop_recorder' EXIT
+fi
+echo "    recorder: PID $recorder_pid, log $recorder_log"
+for _ in $(seq 300); do  # the recorder follows the controller's goals and the hand's topics
+  if grep -q 'recording /dam/episode ' "$recorder_log" \
+      && grep -q 'recording /joint_states ' "$recorder_log"; then break; fi
+  kill -0 "$recorder_pid" 2>/dev/null || { cat "$recorder_log" >&2; exit 1; }
+  sleep 0.1
+done
 echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_theta_p"
 "$(exe dam_analysis check_lift)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
   --timeout 30 || true
@@ -57,4 +83,23 @@ set +e
   --server-timeout 30
 status=$?
 set -e
+
+# The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
+episode=""
+for _ in $(seq 150); do
+  episode=$(sed -n 's/.*\] \[recorder\]: episode [A-Z_]*: //p' "$recorder_log" | tail -n 1)
+  [ -n "$episode" ] && break
+  sleep 0.1
+done
+stop_recorder
+if [ -z "$episode" ]; then
+  echo "run.sh: the recorder wrote no episode (log: $recorder_log)" >&2
+else
+  mkdir -p "$REPO_ROOT/out"
+  picture="$REPO_ROOT/out/$(basename "$episode").png"
+  echo "==> Recorded"
+  echo "    bag:     $episode"
+  "$(exe dam_recorder bag)" plot "$episode" -o "$picture" | sed 's/^/    /'
+  echo "    picture: $picture"
+fi
 exit "$status"

@@ -6,8 +6,8 @@ REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
 shopt -s nullglob
 stopped=0
-# Controller first (it relaxes the hand), the driver last.
-for name in spcm_controller check_lift_server hand_driver; do
+# The recorder first (it closes its bag), the controller (it relaxes the hand), the driver last.
+for name in recorder spcm_controller check_lift_server hand_driver; do
   pid_file="$RUN_DIR/$name.pid"
   [ -f "$pid_file" ] || continue
   pid=$(cat "$pid_file")

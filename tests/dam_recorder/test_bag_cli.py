@@ -86,6 +86,9 @@ def test_in_process_subcommands(bags, tmp_path: Path, capsys) -> None:
     assert data['totals'] == {'SUCCESS': 1, 'FAILURE': 1}
     assert main(['plot', str(bags['grasp']), '-o', str(tmp_path / 'g.png')]) == 0
     assert (tmp_path / 'g.png').stat().st_size > 10_000
+    # The rise printed: from the first pose to the last and to the highest (here the last).
+    rise_mm = (gb.pose_z(gb.POSE_COUNT - 1) - gb.pose_z(0)) * 1e3
+    assert f'at the end {rise_mm:.2f} mm, highest {rise_mm:.2f} mm' in capsys.readouterr().out
     assert main(['export', str(bags['grasp']), '-o', str(tmp_path / 'csv'), '--topics',
                  '/dam/status', '/sim/object_pose']) == 0
     assert sorted(p.name for p in (tmp_path / 'csv').iterdir()) == \

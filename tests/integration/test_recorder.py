@@ -252,6 +252,35 @@ def test_100_signals_at_random_moments_each_leave_a_whole_bag_or_none(tmp_path: 
     assert with_messages >= 30  # the moments cover recording, not only starting
 
 
+def test_losses_the_middleware_reports_are_logged_and_stored(tmp_path: Path) -> None:
+    """Provoked: the recorder is stopped (SIGSTOP) for a second while reliable publishers
+    with a history of 5 messages send at 500 Hz; they drop what the recorder has not
+    acknowledged, and the middleware tells the recorder when it resumes."""
+    bag = tmp_path / 'lossy'
+    count = 2500  # 5 s at 500 Hz
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(count),
+                                      '--rate', '500', '--depth', '5', '--wait-for',
+                                      '/joint_states', '--no-late')) as pub:
+        wait_for(pub, 'waiting')
+        with node_process([RECORDER, '-o', str(bag), '/joint_states',
+                           '--ros-args', '-p', 'queue_depth:=5']) as rec:
+            wait_for(pub, 'publishing')
+            time.sleep(0.5)
+            rec.process.send_signal(signal.SIGSTOP)
+            time.sleep(3.0)
+            rec.process.send_signal(signal.SIGCONT)
+            wait_for(pub, 'done')
+            time.sleep(0.5)
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+    lost = json.loads(metadata(bag)['custom_data']['dam_recorder.lost_messages'])
+    recorded = len(read_with_rosbags(bag)['/joint_states'])
+    assert lost.get('/joint_states', 0) > 0, (recorded, log[-2000:])
+    assert '/joint_states: the middleware reports' in log
+    assert recorded + lost['/joint_states'] <= count  # what is recorded was not counted lost
+    assert recorded < count
+
+
 def test_help_and_an_existing_output_directory(tmp_path: Path) -> None:
     shown = subprocess.run([str(RECORDER), '--help'], capture_output=True, text=True,
                            timeout=60)

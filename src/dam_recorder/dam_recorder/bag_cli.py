@@ -125,6 +125,10 @@ def run_plot(args: argparse.Namespace) -> int:
     print(f'{output}: {data.title()}')
     print(f'  {len(data.joints)} joints, {len(data.phases)} phase spans'
           + (', check_lift margins' if data.margins else ''))
+    if data.height_rise_mm is not None and len(data.height_rise_mm):
+        rise = data.height_rise_mm
+        print(f'  object rise (/sim/object_pose, from the bag\'s first pose): at the end '
+              f'{rise[-1]:.2f} mm, highest {rise.max():.2f} mm')
     for item in data.missing:
         print(f'  missing: {item}')
     return 0
