@@ -159,6 +159,15 @@ def test_negative_friction_angle_means_the_configured_one(client: RosClient) -> 
     assert configured.csm_margin == pytest.approx(explicit.csm_margin)
 
 
+def test_the_answer_names_the_friction_angle_it_assumed(client: RosClient) -> None:
+    dp = [math.radians(12.0)]
+    assert _call(client, _request([6.5], dp, -1.0)).friction_angle == pytest.approx(
+        CONFIG.contact.friction_angle_rad)
+    assert _call(client, _request([6.5], dp, 0.3)).friction_angle == 0.3
+    rejected = _call(client, _request([6.5], dp, math.pi))
+    assert not rejected.ok and math.isnan(rejected.friction_angle)
+
+
 def test_the_request_defaults_are_the_idl_defaults() -> None:
     from dam_interfaces.srv import CheckLift
 

@@ -83,7 +83,15 @@ def test_interfaces_are_generated_for_python() -> None:
     assert response_fields == {
         'ok': 'boolean', 'message': 'string', 'lift_guaranteed': 'boolean',
         'worst_case_margin': 'double', 'csm_lift': 'boolean', 'csm_margin': 'double',
-        'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>'}
+        'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>',
+        'friction_angle': 'double'}
+    from dam_interfaces.msg import GraspEpisode, LiftAnswer
+
+    answer_fields = LiftAnswer.get_fields_and_field_types()
+    assert answer_fields == response_fields  # the same answer, as a message of its own
+    episode_fields = GraspEpisode.get_fields_and_field_types()
+    assert episode_fields['check_lift'] == 'dam_interfaces/LiftAnswer'
+    assert (GraspEpisode.EVENT_STARTED, GraspEpisode.EVENT_ENDED) == (0, 1)
 
 
 def test_config_is_installed_with_dam_analysis() -> None:
