@@ -74,6 +74,22 @@ for _ in $(seq 300); do  # the recorder follows the controller's goals and the h
   kill -0 "$recorder_pid" 2>/dev/null || { cat "$recorder_log" >&2; exit 1; }
   sleep 0.1
 done
+# A device stream that stalled while everything started (a busy machine) leaves the driver in
+# ERROR; its ~/reset brings it back (it answers 'already ACTIVE' otherwise).
+python - <<'PY' || true
+import rclpy
+from std_srvs.srv import Trigger
+rclpy.init()
+node = rclpy.create_node('run_sh_reset')
+client = node.create_client(Trigger, '/hand_driver/reset')
+if client.wait_for_service(timeout_sec=10.0):
+    future = client.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(node, future, timeout_sec=10.0)
+    if future.result() is not None and future.result().message != 'already ACTIVE':
+        print(f'    driver reset: {future.result().message}')
+node.destroy_node()
+rclpy.shutdown()
+PY
 echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_theta_p"
 "$(exe dam_analysis check_lift)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
   --timeout 30 || true

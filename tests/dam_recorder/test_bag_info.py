@@ -126,6 +126,16 @@ def test_grasps_from_status_sequences() -> None:
         (9, None, 'APPROACH', 'UNKNOWN')]
 
 
+def test_an_end_phase_entered_before_the_outcome_takes_the_outcome_reported_next() -> None:
+    # The controller publishes DONE at once and its outcome once it has classified the grasp.
+    status = [(1, 'APPROACH', 0, ''), (2, 'DONE', 0, ''), (3, 'DONE', 1, 'lifted'),
+              (4, 'DONE', 1, 'lifted'), (5, 'APPROACH', 0, ''), (6, 'DONE', 0, ''),
+              (7, 'IDLE', 0, ''), (8, 'IDLE', 2, 'late')]
+    grasps = grasps_from_status(status)
+    assert [(g.end_ns, g.outcome, g.message) for g in grasps] == [
+        (2, 'SUCCESS', 'lifted'), (6, 'UNKNOWN', '')]
+
+
 def make_episode_dir(root: Path, typestore, prefixes) -> dict[str, dict]:
     """Four episode bags (one with no summary) and a directory that is no bag."""
     runs = {

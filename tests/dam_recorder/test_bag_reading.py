@@ -104,3 +104,18 @@ def test_the_bag_tools_do_not_import_rclpy() -> None:
                                os.environ.get('PYTHONPATH', '')}, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == '[]'
+
+
+def test_a_file_without_its_end_points_to_recover(tmp_path: Path, prefixes, typestore) -> None:
+    import shutil
+
+    from test_bag_writer import add_topics, write_messages
+
+    writer = BagWriter(tmp_path / 'live')
+    write_messages(writer, add_topics(writer, prefixes), typestore, 50)
+    writer.flush()  # the chunks are in the file; the summary and footer are not (a SIGKILL)
+    killed = tmp_path / 'killed'
+    shutil.copytree(tmp_path / 'live', killed)
+    writer.close()
+    with pytest.raises(BagReadError, match='`recover` rebuilds it'), BagReader(killed):
+        pass

@@ -156,9 +156,11 @@ def test_stopping_closes_open_episodes_as_unfinished_and_counts_losses_per_episo
     rec = make_recorder(tmp_path, storage='sqlite3')
     js = rec.add_topic(specs(prefixes)[0])
     rec.note_lost(js, 5)  # before the episode: not its loss
+    rec.write(js, T0 - MS, joint_state(typestore, 0), trimmed=True)  # in the pre-roll ring
     rec.started(GOAL, T0)
-    rec.write(js, T0 + MS, joint_state(typestore, 1))
+    rec.write(js, T0 + MS, joint_state(typestore, 1), trimmed=True)
     rec.note_lost(js, 2)
+    rec.note_paused(js)
     status = rec.add_topic(specs(prefixes)[1])  # a topic that appears during the episode
     rec.write(status, T0 + 2 * MS, dam_status(typestore, 2))
     [(bag, outcome)] = rec.close_all()
@@ -167,10 +169,13 @@ def test_stopping_closes_open_episodes_as_unfinished_and_counts_losses_per_episo
     custom = yaml.safe_load((bag / 'metadata.yaml').read_text())[
         'rosbag2_bagfile_information']['custom_data']
     assert json.loads(custom['dam_recorder.lost_messages']) == {'/joint_states': 2}
+    assert json.loads(custom['dam_recorder.paused_messages']) == {'/joint_states': 1}
+    # The trimmed ones written into the episode (from its pre-roll, and live).
+    assert json.loads(custom['dam_recorder.trimmed_messages']) == {'/joint_states': 2}
     stored = json.loads(custom[SUMMARY_KEY])
     assert stored['outcome_name'] == 'UNKNOWN' and 'stopped before' in stored['message']
     topics = read_with_rosbags(bag)
-    assert frame_ids(topics['/joint_states']) == [1]
+    assert frame_ids(topics['/joint_states']) == [0, 1]
     assert [r.values['phase'] for r in topics['/dam/status']] == ['PHASE_2']
 
 

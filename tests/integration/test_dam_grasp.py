@@ -393,3 +393,11 @@ def test_every_goal_became_an_episode(stack: _Grasper, episodes_dir: Path,
         if result.outcome_name == 'SUCCESS':
             phases = {r.values['phase'] for r in topics['/dam/status']}
             assert {'APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'} <= phases, phases
+    # The picture of the last episode, drawn by the installed bag tool.
+    picture = episodes_dir.parent / 'last.png'
+    drawn = subprocess.run([str(installed_executable('dam_recorder', 'bag')), 'plot', str(bag),
+                            '-o', str(picture)], capture_output=True, text=True, timeout=120)
+    assert drawn.returncode == 0, drawn.stderr
+    assert '9 joints' in drawn.stdout, drawn.stdout
+    assert ('check_lift margins' in drawn.stdout) == (summary['check_lift'] is not None)
+    assert 'object rise' in drawn.stdout and picture.stat().st_size > 20_000

@@ -281,6 +281,26 @@ def test_losses_the_middleware_reports_are_logged_and_stored(tmp_path: Path) -> 
     assert recorded < count
 
 
+def test_record_sh_records_beside_a_session_until_stopped(tmp_path: Path) -> None:
+    """scripts/record.sh: the default topics into $DAM_BAG_DIR/rosbag2_<time> until SIGINT."""
+    import os
+
+    script = Path(__file__).resolve().parents[2] / 'scripts' / 'record.sh'
+    env = dict(os.environ, DAM_BAG_DIR=str(tmp_path / 'bags'))
+    with node_process(fixture_command('recorder_publishers.py', '--count', str(COUNT),
+                                      '--wait-for', '/joint_states', '--no-late')) as pub:
+        wait_for(pub, 'waiting')
+        with node_process(['bash', str(script)], env=env) as rec:
+            wait_for(pub, 'done')
+            time.sleep(0.5)
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+    [bag] = list((tmp_path / 'bags').iterdir())
+    assert bag.name.startswith('rosbag2_')
+    assert metadata_problems(bag) == []
+    topics = read_with_rosbags(bag)
+    assert indices(topics['/joint_states'], '/joint_states') == list(range(COUNT))
+
+
 def test_help_and_an_existing_output_directory(tmp_path: Path) -> None:
     shown = subprocess.run([str(RECORDER), '--help'], capture_output=True, text=True,
                            timeout=60)

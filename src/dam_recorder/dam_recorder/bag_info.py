@@ -19,7 +19,7 @@ import dataclasses
 import math
 import os
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -99,9 +99,11 @@ class Grasp:
     end_phase : str
         ``DONE``, ``ABORTED``, ``FAILED``, or the last phase seen when the bag ends first.
     outcome : str
-        The outcome name the end message reports (``UNKNOWN`` while running).
+        The outcome name the status messages of the end phase report (the controller enters
+        the phase before it has classified the grasp, so the first of them may still say
+        ``UNKNOWN``; the first known outcome counts).
     message : str
-        The end message's text.
+        The text that comes with that outcome.
     """
 
     start_ns: int
@@ -177,9 +179,9 @@ class EpisodeRow:
         The summary's outcome name; without a summary the directory name's suffix in upper
         case; ``ERROR`` when the bag cannot be read.
     k_theta : tuple of float
-        As run [N*m/rad].
+        As run [N*m/rad]; for a goal that never ran (refused), as the client sent it.
     delta_theta_p : tuple of float
-        As run [rad].
+        As run [rad]; likewise.
     lift_guaranteed : bool or None
         ``/check_lift``'s answer; ``None`` without one.
     error : str or None
@@ -246,13 +248,21 @@ def grasps_from_status(phases: list[tuple[int, str, int, str]]) -> list[Grasp]:
     grasps: list[Grasp] = []
     start: int | None = None
     last_phase = ''
+    settling = False  # in the end phase of the last grasp, its outcome not yet reported
     for time_ns, phase, outcome, message in phases:
+        name = OUTCOME_NAMES[outcome] if 0 <= outcome < len(OUTCOME_NAMES) else str(outcome)
         if start is None and phase in ACTIVE_PHASES:
             start = time_ns
+            settling = False
         elif start is not None and phase in END_PHASES:
-            name = OUTCOME_NAMES[outcome] if 0 <= outcome < len(OUTCOME_NAMES) else str(outcome)
             grasps.append(Grasp(start, time_ns, phase, name, message))
             start = None
+            settling = outcome == 0
+        elif settling and phase == last_phase and outcome != 0:
+            grasps[-1] = replace(grasps[-1], outcome=name, message=message)
+            settling = False
+        elif phase != last_phase:
+            settling = False
         last_phase = phase
     if start is not None:
         grasps.append(Grasp(start, None, last_phase, 'UNKNOWN', 'the bag ends during the grasp'))
@@ -312,8 +322,10 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
         return EpisodeRow(bag_dir.name, start, duration, None, outcome)
     summary = episode.summary
     check = summary.check_lift
+    ran = bool(summary.k_theta or summary.delta_theta_p)  # else refused: what was asked
     return EpisodeRow(bag_dir.name, start, duration, summary.duration_s, summary.outcome_name,
-                      summary.k_theta, summary.delta_theta_p,
+                      summary.k_theta if ran else summary.goal_k_theta,
+                      summary.delta_theta_p if ran else summary.goal_delta_theta_p,
                       check.lift_guaranteed if check is not None else None)
 
 
@@ -371,8 +383,9 @@ def episode_lines(episode: Episode) -> list[str]:
              f'  k_theta [N*m/rad] {format_floats(s.k_theta)}   delta_theta_p [deg] '
              f'{format_floats(s.delta_theta_p, math.degrees(1.0))}   friction angle '
              f'{math.degrees(s.friction_angle):.4g} deg',
-             f'  goal as sent: k_theta {format_floats(s.goal_k_theta)}, delta_theta_p [rad] '
-             f'{format_floats(s.goal_delta_theta_p)}']
+             f'  goal as sent: k_theta [N*m/rad] {format_floats(s.goal_k_theta)}   '
+             f'delta_theta_p [deg] {format_floats(s.goal_delta_theta_p, math.degrees(1.0))}'
+             ' (empty: the configured value)']
     c = s.check_lift
     if c is None:
         lines.append('  check_lift: none')

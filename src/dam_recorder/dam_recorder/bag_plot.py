@@ -152,8 +152,13 @@ class GraspData:
         """``<bag>: <outcome>, k_theta = [...] N*m/rad, delta_theta_p = [...] deg``."""
         if self.episode is not None:
             s = self.episode.summary
-            pair = (f'k_theta = {format_floats(s.k_theta)} N*m/rad, delta_theta_p = '
-                    f'{format_floats(s.delta_theta_p, math.degrees(1.0))} deg')
+            if s.k_theta or s.delta_theta_p:
+                pair = (f'k_theta = {format_floats(s.k_theta)} N*m/rad, delta_theta_p = '
+                        f'{format_floats(s.delta_theta_p, math.degrees(1.0))} deg')
+            else:  # it never ran (refused): what was asked
+                pair = (f'asked k_theta = {format_floats(s.goal_k_theta)} N*m/rad, '
+                        f'delta_theta_p = {format_floats(s.goal_delta_theta_p, math.degrees(1.0))}'
+                        ' deg')
         else:
             pair = 'k_theta and delta_theta_p unknown (no episode metadata)'
         return f'{self.bag.name}: {self.outcome}, {pair}'
@@ -277,12 +282,15 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
 
 
 def _shade_phases(ax: Any, phases: Sequence[PhaseSpan], label: bool) -> None:
+    total_s = max((span.end_s for span in phases), default=0.0)
     for span in phases:
         if span.phase == 'IDLE':
             continue
         ax.axvspan(span.start_s, span.end_s, color=PHASE_COLOURS.get(span.phase, '#eeeeee'),
                    alpha=0.6, lw=0, label=f'phase {span.phase}', gid='phase', zorder=0)
-        if label:
+        # A label only where it fits (7-point capitals: about 6 % of the axis for ROLLING_UP).
+        wide = span.end_s - span.start_s >= 0.006 * len(span.phase) * total_s
+        if label and wide:
             ax.text((span.start_s + span.end_s) / 2, 1.02, span.phase, rotation=0,
                     ha='center', va='bottom', fontsize=7, transform=ax.get_xaxis_transform(),
                     gid='phase_label')
@@ -347,6 +355,13 @@ def grasp_figure(data: GraspData) -> Any:
         height_ax.plot(data.height_time_s, data.height_rise_mm, label='object rise',
                        color='k', lw=1.2)
         _legend(height_ax)
+        # Millimetres as they are (no offset), at least 1 mm of axis: a still object's
+        # micrometre noise must not look like a lift.
+        height_ax.ticklabel_format(axis='y', useOffset=False, style='plain')
+        finite = data.height_rise_mm[np.isfinite(data.height_rise_mm)]
+        if finite.size and float(finite.max() - finite.min()) < 1.0:
+            middle = 0.5 * float(finite.max() + finite.min())
+            height_ax.set_ylim(middle - 0.5, middle + 0.5)
     else:
         _say_missing(height_ax, f'no {OBJECT_POSE_TOPIC} in the bag')
     height_ax.grid(True, lw=0.3)
@@ -354,6 +369,8 @@ def grasp_figure(data: GraspData) -> Any:
     axes[-2][1].set_xlabel('time [s] from the bag start')
     text_ax.axis('off')
     lines = ['check_lift:', data.margins.text() if data.margins else 'no margins recorded']
+    if data.episode is not None and data.episode.summary.message:
+        lines += ['', f'{data.episode.summary.outcome_name}: {data.episode.summary.message}']
     if data.missing:
         lines += ['', 'missing:', *data.missing]
     text_ax.text(0.0, 1.0, '\n'.join(lines), ha='left', va='top', fontsize=8,

@@ -326,8 +326,11 @@ class BagReader:
             reader = Reader(self.path)
             reader.open()
         except Exception as exc:  # noqa: BLE001 - rosbags raises many kinds; all mean unreadable
-            raise BagReadError(f'{self.path}: cannot open the bag: '
-                               f'{one_line(str(exc)) or type(exc).__name__}') from None
+            text = one_line(str(exc)) or type(exc).__name__
+            if 'magic' in text.lower() or 'footer' in text.lower() or 'summary' in text.lower():
+                text += ('; a file without its end (a recorder killed while writing?): '
+                         '`recover` rebuilds it')
+            raise BagReadError(f'{self.path}: cannot open the bag: {text}') from None
         self._reader = reader
         try:
             self._store = typestore_of(reader.connections)

@@ -86,6 +86,8 @@ class _Episode:
     started_ns: int
     ids: dict[int, int] = field(default_factory=dict)  # topic key -> the bag's topic id
     lost: dict[str, int] = field(default_factory=dict)
+    trimmed: dict[str, int] = field(default_factory=dict)
+    paused: dict[str, int] = field(default_factory=dict)
     start_info: dict[str, str] = field(default_factory=dict)
     summary: dict[str, Any] | None = None
     close_after_ns: int | None = None
@@ -137,7 +139,8 @@ class EpisodeRecorder:
         self.post_roll_ns = int(round(post_roll_s * 1e9))
         self._custom_data = custom_data
         self._topics: list[TopicSpec] = []
-        self._ring: deque[tuple[int, int, bytes]] = deque()  # (key, stamp, data), by arrival
+        #: (key, stamp, data, trimmed), by arrival
+        self._ring: deque[tuple[int, int, bytes, bool]] = deque()
         self._latched: dict[int, tuple[int, bytes]] = {}
         self._open: dict[str, _Episode] = {}
         #: The finished episodes: (bag directory, outcome name), oldest first.
@@ -158,10 +161,12 @@ class EpisodeRecorder:
             self._add_to(episode, key)
         return key
 
-    def write(self, key: int, stamp_ns: int, data: bytes | memoryview) -> None:
-        """One message of topic ``key`` received at ``stamp_ns`` [ns]."""
+    def write(self, key: int, stamp_ns: int, data: bytes | memoryview,
+              trimmed: bool = False) -> None:
+        """One message of topic ``key`` received at ``stamp_ns`` [ns] (``trimmed``: cut at its
+        CDR end, counted per episode)."""
         data = bytes(data)
-        self._ring.append((key, stamp_ns, data))
+        self._ring.append((key, stamp_ns, data, trimmed))
         horizon = stamp_ns - self.pre_roll_ns
         while self._ring and self._ring[0][1] < horizon:
             self._ring.popleft()
@@ -171,7 +176,7 @@ class EpisodeRecorder:
             if stamp_ns < episode.window_start_ns:
                 continue  # taken late (a backlog): older than the episode's pre-roll
             if episode.close_after_ns is None or stamp_ns <= episode.close_after_ns:
-                episode.bag.write(episode.ids[key], stamp_ns, data)
+                self._write_to(episode, key, stamp_ns, data, trimmed)
             else:
                 episode.caught_up = True
 
@@ -180,6 +185,12 @@ class EpisodeRecorder:
         name = self._topics[key].name
         for episode in self._open.values():
             episode.lost[name] = episode.lost.get(name, 0) + int(count)
+
+    def note_paused(self, key: int) -> None:
+        """A message of topic ``key`` arrived while the recorder was paused (not written)."""
+        name = self._topics[key].name
+        for episode in self._open.values():
+            episode.paused[name] = episode.paused.get(name, 0) + 1
 
     def flush(self) -> None:
         """Write out what the open episodes hold in memory (:meth:`BagWriter.flush`)."""
@@ -222,9 +233,9 @@ class EpisodeRecorder:
         for key, (latched_ns, data) in self._latched.items():
             if latched_ns < ring_start:  # else it is in the ring
                 bag.write(episode.ids[key], max(latched_ns, window_start), data)
-        for key, ring_ns, data in self._ring:
+        for key, ring_ns, data, trimmed in self._ring:
             if ring_ns >= window_start:
-                bag.write(episode.ids[key], ring_ns, data)
+                self._write_to(episode, key, ring_ns, data, trimmed)
         return bag_dir
 
     def ended(self, goal_id: str, stamp_ns: int, summary: Mapping[str, Any],
@@ -258,6 +269,13 @@ class EpisodeRecorder:
 
     # -- helpers -----------------------------------------------------------------------------
 
+    def _write_to(self, episode: _Episode, key: int, stamp_ns: int, data: bytes,
+                  trimmed: bool) -> None:
+        episode.bag.write(episode.ids[key], stamp_ns, data)
+        if trimmed:
+            name = self._topics[key].name
+            episode.trimmed[name] = episode.trimmed.get(name, 0) + 1
+
     def _add_to(self, episode: _Episode, key: int) -> None:
         spec = self._topics[key]
         episode.ids[key] = episode.bag.add_topic(spec.name, spec.type_name, spec.definition,
@@ -275,7 +293,10 @@ class EpisodeRecorder:
 
     def _episode_custom_data(self, episode: _Episode) -> dict[str, str]:
         data = dict(self._custom_data() if self._custom_data else {})
+        # The recorder's counts, of this episode's messages.
         data['dam_recorder.lost_messages'] = json.dumps(episode.lost, sort_keys=True)
+        data['dam_recorder.trimmed_messages'] = json.dumps(episode.trimmed, sort_keys=True)
+        data['dam_recorder.paused_messages'] = json.dumps(episode.paused, sort_keys=True)
         data.update(episode.start_info)
         if episode.summary is not None:
             summary = dict(episode.summary)

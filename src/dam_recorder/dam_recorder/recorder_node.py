@@ -91,6 +91,8 @@ DRAIN_QUIET_S = 0.1
 TAKE_PERIOD_S = 0.005
 #: How often the executor's thread writes what the taker took [s].
 WRITE_PERIOD_S = 0.02
+#: Bytes after a message's CDR end that are its final alignment (kept; more is cut).
+MAX_ALIGNMENT_PADDING = 3
 #: SCHED_FIFO priority of the recorder's threads: below the controller (45) and the driver (50).
 THREAD_PRIORITY = 40
 
@@ -173,6 +175,9 @@ class RecorderNode(Node):
             if self._selection.excluded(topic):
                 self.get_logger().warning(f'{topic} is named but --exclude matches it: '
                                           'not recorded')
+        if not p['episodes'] and (p['pre_roll'] != 3.0 or p['post_roll'] != 2.0):
+            self.get_logger().warning('pre_roll and post_roll apply to episodes only '
+                                      '(--episodes): ignored')
         output = p['output'] or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
         compression = p['compression'] or ('zstd' if p['storage'] == 'mcap' else 'none')
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
@@ -354,20 +359,27 @@ class RecorderNode(Node):
                info: dict[str, Any]) -> None:
         if self._paused:
             recorded.paused += 1
+            if self._episodes is not None:
+                self._episodes.note_paused(recorded.topic_id)
             return
         stamp = info.get('received_timestamp', 0)
         if self._use_sim_time or not stamp:
             stamp = self.get_clock().now().nanoseconds
         try:
             cut = recorded.end.trim(data)
+            if len(data) - len(cut) <= MAX_ALIGNMENT_PADDING:
+                cut = data  # the final alignment: part of a CDR message, kept as received
         except CdrError as exc:
             if not recorded.malformed:
                 self.get_logger().warning(f'{recorded.name}: {exc}; written as received')
             recorded.malformed += 1
             cut = data
-        if len(cut) != len(data):
-            recorded.trimmed += 1
-        writer.write(recorded.topic_id, stamp, cut)
+        trimmed = len(cut) != len(data)
+        recorded.trimmed += trimmed
+        if self._episodes is not None:
+            writer.write(recorded.topic_id, stamp, cut, trimmed)
+        else:
+            writer.write(recorded.topic_id, stamp, cut)
 
     def _on_lost(self, recorded: _Recorded, change: int) -> None:
         recorded.lost += change
