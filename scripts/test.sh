@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Run the whole test suite: set up and build (scripts/setup.sh), then pytest over tests/.
 #
-#   bash scripts/test.sh                 # everything
+#   bash scripts/test.sh                 # everything: unit tests (with the system-ROS setup
+#                                        # test beside them), then the integration tests
 #   bash scripts/test.sh -k config -x    # extra arguments go to pytest
 #   bash scripts/test.sh tests/dam_common -q   # only these paths (they replace the default)
 #
@@ -33,18 +34,54 @@ for arg in "$@"; do
     *) if [ -e "${arg%%::*}" ]; then paths_given=true; fi ;;
   esac
 done
-test_dirs=()
-if [ "$paths_given" = false ]; then
-  test_dirs=(tests)
-  for pkg_tests in src/*/test; do
-    if [ -d "$pkg_tests" ]; then test_dirs+=("$pkg_tests"); fi
-  done
-fi
+run_pytest() {  # pytest with the common options; its exit status (5: no test collected)
+  python -m pytest -p no:cacheprovider -ra "$@"
+}
 set +e
-python -m pytest -p no:cacheprovider -ra "${test_dirs[@]}" "$@"
-status=$?
+if [ "$paths_given" = true ]; then
+  run_pytest "$@"
+  status=$?
+  [ "$status" = 5 ] && { echo "test.sh: pytest collected no tests" >&2; exit 1; }
+  exit "$status"
+fi
+
+# Every test, in two phases (each prints pytest's summary line):
+# 1. the unit tests (pure cores, installed executables without DDS timing), while the
+#    system-ROS setup test (two pip installs and a build in a copy) runs beside them;
+# 2. the integration tests over DDS with real-time nodes, one at a time.
+system_ros=tests/integration/test_system_ros_setup.py
+unit=(tests/dam_* tests/integration/test_package_layout.py tests/integration/test_env_script.py)
+for pkg_tests in src/*/test; do
+  if [ -d "$pkg_tests" ]; then unit+=("$pkg_tests"); fi
+done
+echo "==> Phase 1: unit tests, and $system_ros beside them"
+system_ros_log=$(mktemp)
+run_pytest "$system_ros" "$@" >"$system_ros_log" 2>&1 &
+system_ros_pid=$!
+run_pytest "${unit[@]}" "$@"
+unit_status=$?
+wait "$system_ros_pid"
+system_ros_status=$?
+cat "$system_ros_log"
+rm -f "$system_ros_log"
+echo "==> Phase 2: integration tests"
+integration=()
+for t in tests/integration/test_*.py; do
+  case " ${unit[*]} $system_ros " in *" $t "*) ;; *) integration+=("$t") ;; esac
+done
+run_pytest --durations=12 "${integration[@]}" "$@"
+integration_status=$?
 set -e
-if [ "$status" = 5 ]; then
+status=0
+collected=0
+for s in "$unit_status" "$system_ros_status" "$integration_status"; do
+  case "$s" in
+    0) collected=1 ;;
+    5) ;;
+    *) collected=1; status=1 ;;
+  esac
+done
+if [ "$collected" = 0 ]; then
   echo "test.sh: pytest collected no tests" >&2
   exit 1
 fi

@@ -218,7 +218,7 @@ def test_100_signals_at_random_moments_each_leave_a_whole_bag_or_none(tmp_path: 
     from dam_recorder.recovery import mcap_is_complete
 
     rng = random.Random('recorder storm')
-    plans = [(rng.uniform(0.0, 2.0), rng.choice((signal.SIGINT, signal.SIGTERM)))
+    plans = [(rng.uniform(0.0, 1.5), rng.choice((signal.SIGINT, signal.SIGTERM)))
              for _ in range(100)]
 
     def one(i: int):
@@ -249,7 +249,7 @@ def test_100_signals_at_random_moments_each_leave_a_whole_bag_or_none(tmp_path: 
             problems.append(f'{trial.signal_name} after {trial.delay_s:.3f} s: {why}\n'
                             f'{trial.output[-1000:]}')
     assert not problems, f'{len(problems)} of 100 not clean:\n' + '\n'.join(problems[:3])
-    assert with_messages >= 30  # the moments cover recording, not only starting
+    assert with_messages >= 25  # the moments cover recording, not only starting
 
 
 def test_losses_the_middleware_reports_are_logged_and_stored(tmp_path: Path) -> None:
