@@ -35,7 +35,7 @@ for arg in "$@"; do
   esac
 done
 run_pytest() {  # pytest with the common options; its exit status (5: no test collected)
-  python -m pytest -p no:cacheprovider -ra "$@"
+  python -m pytest -p no:cacheprovider -ra -rR "$@"  # R: why a rerun test failed first
 }
 set +e
 if [ "$paths_given" = true ]; then

