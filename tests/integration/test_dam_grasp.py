@@ -66,9 +66,6 @@ class _Grasper:
         self.watch(True)
         self.action = ActionClient(node, DamGrasp, '/dam_grasp')
         self.goal_type = DamGrasp.Goal
-        #: (goal id as 32 hex digits, goal, result) of every goal that got a result
-        self.goals: list[tuple[str, object, object]] = []
-        self.sent: dict[str, dict[str, list[float]]] = {}  # goal id -> the goal as sent
 
     def watch(self, on: bool) -> None:
         """Follow /hand/command and /joint_states (500 Hz each: a fifth of a core for this
@@ -104,8 +101,6 @@ class _Grasper:
         assert self.client.wait_future(future, 10.0), 'no answer to the goal'
         handle = future.result()
         assert handle.accepted
-        self.sent[bytes(bytearray(handle.goal_id.uuid)).hex()] = {
-            'k_theta': [k_theta], 'delta_theta_p': [delta_theta_p]}
         return handle
 
     def result(self, handle, timeout: float = 30.0):
@@ -115,10 +110,7 @@ class _Grasper:
             log = controller.output()[-4000:] if controller is not None else ''
             raise AssertionError(f'no result within {timeout} s (goal status '
                                  f'{handle.status}); controller log:\n{log}')
-        answer = future.result()
-        self.goals.append((bytes(bytearray(handle.goal_id.uuid)).hex(), handle,
-                           answer.result))
-        return answer
+        return future.result()
 
     def close(self) -> None:
         self.action.destroy()

@@ -408,9 +408,6 @@ class RecorderNode(Node):
         return self.get_clock().now().nanoseconds
 
     def _on_episode_event(self, msg: Any) -> None:
-        self._episode_event(msg)
-
-    def _episode_event(self, msg: Any) -> None:
         if self._stopped:
             return
         if msg.event == msg.EVENT_STARTED:

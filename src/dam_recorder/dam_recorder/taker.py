@@ -59,7 +59,6 @@ class SerializedTaker:
         self._lost_handlers: list[tuple[Any, Callable[[int], None]]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._failures = 0
         self._thread = threading.Thread(target=self._run, name='serialized_taker', daemon=True)
         self._thread.start()
 
@@ -102,7 +101,6 @@ class SerializedTaker:
                 try:
                     on_message(taken_message[0], taken_message[1])
                 except Exception as exc:  # noqa: BLE001 - the thread goes on with the others
-                    self._failures += 1
                     self._owner.get_logger().error(
                         f'{subscription.topic_name}: a message was not recorded: {exc!r}',
                         throttle_duration_sec=5.0)
