@@ -14,6 +14,8 @@ Topics
     The hand's URDF generated from the configuration (:mod:`dam_hand_driver.urdf`), for
     ``robot_state_publisher``, RViz and Foxglove; ``hand_urdf`` prints the same document.
 /hand/command : dam_interfaces/HandCommand (subscribed)
+    Taken in a thread of its own by the side node ``hand_driver_hand_command``
+    (:mod:`dam_common.intake`; the node's remapping rules apply).
     Mode and setpoint per named joint (and, for MODE_IMPEDANCE, stiffness and damping); joints
     not named keep their command. A malformed message (unknown or duplicate name, length
     mismatch, unknown mode, NaN/inf, a torque beyond ``device.torque_limit_nm``, an angle or
@@ -47,7 +49,8 @@ backend : string, read-only, one of auto, hardware, sim
     ``hardware`` never falls back; ``sim`` always starts the stand-in.
 thread_priority : int, read-only, in [0, 99], default 50
     ``SCHED_FIFO`` priority of the device-link thread, also passed to a stand-in it starts
-    (0: normal scheduling); without the permission the node warns once and runs on.
+    (0: normal scheduling); the node's other threads (executor, middleware) run one below it.
+    Without the permission the node warns once and runs on.
 
 States
 ------
@@ -82,8 +85,14 @@ from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
+from dam_common.intake import SubscriptionThread
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
-from dam_common.realtime import SWITCH_INTERVAL_S, die_with_parent, set_thread_priority
+from dam_common.realtime import (
+    SWITCH_INTERVAL_S,
+    die_with_parent,
+    set_process_priority,
+    set_thread_priority,
+)
 from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.errors import HandDriverError, ParameterError
 from dam_hand_driver.link import DeviceLink
@@ -303,8 +312,12 @@ class HandDriverNode(Node):
         self._js_msg = JointState()
         self._js_msg.name = list(self.joint_names)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self._cmd_sub = self.create_subscription(HandCommand, '/hand/command',
-                                                 self._on_command, 10)
+        # /hand/command (500 Hz during a grasp) has a thread and a wait set of its own
+        # (dam_common.intake): through the executor each message would cost about a
+        # millisecond of interpreter time.
+        self._intake = SubscriptionThread(self, 'hand_command')
+        self._cmd_sub = self._intake.create_subscription(HandCommand, '/hand/command',
+                                                         self._on_command, 10)
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self._diag_timer = create_steady_timer(self, 1.0, self._publish_diagnostics)
 
@@ -313,12 +326,15 @@ class HandDriverNode(Node):
         except BaseException:
             self.destroy_node()  # a stand-in already started goes with it
             raise
+        # The executor thread shares the interpreter lock with the timed thread, and the
+        # middleware's threads deliver /hand/command to it: all of them one priority below the
+        # timed thread, so that no ordinary process delays a command or holds the lock (the
+        # timed thread warns if real-time scheduling is refused). Before the timed thread
+        # starts: it raises itself above them.
+        self._intake.start()
+        set_process_priority(max(0, self.thread_priority - 1))
         self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
         self._thread.start()
-        # The executor thread shares the interpreter lock with the timed thread: one priority
-        # below it, no ordinary process can preempt it while it holds the lock (the timed thread
-        # warns if real-time scheduling is refused).
-        set_thread_priority(max(0, self.thread_priority - 1))
 
     # ---------------------------------------------------------------------------------------
     # Backend
@@ -619,6 +635,9 @@ class HandDriverNode(Node):
         """Stop the link thread, the stand-in (by PID) and close the socket."""
         self._signal_standin()  # first: both shut down at the same time
         self._running = False
+        intake = getattr(self, '_intake', None)
+        if intake is not None:
+            intake.stop()
         thread = getattr(self, '_thread', None)
         if thread is not None and thread.is_alive():
             thread.join(timeout=2.0)

@@ -34,8 +34,9 @@ publish_clock : bool, read-only
 pose_rate_hz : double [Hz], in [1, 1000]
     Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
 thread_priority : int, read-only, in [0, 99], default 50
-    ``SCHED_FIFO`` priority of the simulated device's thread (0: normal scheduling); without
-    the permission the node warns once and runs on with normal scheduling.
+    ``SCHED_FIFO`` priority of the simulated device's thread (0: normal scheduling); the
+    node's other threads (executor, middleware) run one below it. Without the permission the
+    node warns once and runs on with normal scheduling.
 """
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
-from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
+from dam_common.realtime import SWITCH_INTERVAL_S, set_process_priority, set_thread_priority
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
@@ -122,11 +123,13 @@ class SimBridgeNode(Node):
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self._friction_srv = self.create_service(
             SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
+        # The executor thread shares the interpreter lock with the timed thread, and it holds
+        # the lock while it publishes, which may wait for the middleware's threads: all of them
+        # one priority below the timed thread, so that no ordinary process holds up the lock
+        # (no priority inversion; the timed thread warns if real-time scheduling is refused).
+        # Before the timed thread starts: it raises itself above them.
+        set_process_priority(max(0, self._thread_priority - 1))
         self._thread.start()
-        # The executor thread shares the interpreter lock with the timed thread: one priority
-        # below it, no ordinary process can preempt it while it holds the lock (the timed thread
-        # warns if real-time scheduling is refused).
-        set_thread_priority(max(0, self._thread_priority - 1))
         dev = self._config.device
         self.get_logger().info(
             f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '

@@ -7,6 +7,8 @@ Topics and services
 /joint_states : sensor_msgs/JointState, subscribed
     Measured angles [rad], velocities [rad/s] and torques [N*m], reordered by joint name.
     Messages with missing names, wrong array lengths or NaN/inf are dropped (throttled log).
+    Taken in a thread of its own by the side node ``spcm_controller_joint_states``
+    (:mod:`dam_common.intake`; the node's remapping rules apply), the control step included.
 /hand/command : dam_interfaces/HandCommand, published
     One command per received joint state while a grasp runs or its result is held (DONE keeps
     the envelope commands); ABORTED/FAILED ramp the torque to zero and stop publishing with
@@ -58,6 +60,7 @@ from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
+from dam_common.intake import SubscriptionThread
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
@@ -200,7 +203,11 @@ class SpcmControllerNode(Node):
         self._command_pub = self.create_publisher(HandCommand, '/hand/command', 10)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
         self._episodes = EpisodeEvents(self, str(self._config.source))
-        self._state_sub = self.create_subscription(
+        # /joint_states (500 Hz) has a thread and a wait set of its own: through this node's
+        # executor, with its action server, services and timers, each message would cost
+        # about a millisecond of interpreter time.
+        self._intake = SubscriptionThread(self, 'joint_states')
+        self._state_sub = self._intake.create_subscription(
             JointState, '/joint_states', self._on_joint_state, 10)
         self._watchdog = create_steady_timer(self, 0.01, self._on_watchdog)
         self._status_timer = create_steady_timer(self, 1.0 / self._values['status_rate'],
@@ -214,8 +221,9 @@ class SpcmControllerNode(Node):
         self._release_srv = self.create_service(Trigger, '~/release', self._on_release,
                                                 callback_group=MutuallyExclusiveCallbackGroup())
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        # The control loop is this process's middleware threads plus its executor: all of
-        # them real-time where permitted, below the driver's device thread (50).
+        self._intake.start()
+        # The control loop is this process's middleware threads, its intake thread and its
+        # executor: all of them real-time where permitted, below the driver's device thread.
         refused = set_process_priority(self._thread_priority)
         if refused:
             self.get_logger().warning(
@@ -322,6 +330,13 @@ class SpcmControllerNode(Node):
         if phase_changed:
             self._publish_status()
         self._advance(feedback=phase_changed)
+
+    def destroy_node(self) -> None:
+        """Stop the /joint_states intake thread, then destroy the node."""
+        intake = getattr(self, '_intake', None)
+        if intake is not None:
+            intake.stop()
+        super().destroy_node()
 
     def begin_shutdown(self) -> Future | None:
         """Called by ``run_node`` on SIGINT/SIGTERM before the node is destroyed: a grasp in

@@ -1,0 +1,147 @@
+"""A fast subscription: its callback runs in a thread of its own, on a wait set of its own.
+
+An rclpy executor rebuilds its wait set in Python before every wait, from every subscription,
+timer, service, client, guard condition and action entity of its nodes, and wraps each callback
+in a task: taking one ``/joint_states`` message at 500 Hz through the executor of a node with an
+action server, parameter services and timers costs most of a core, and even an executor of its
+own about half a core, on this project's two-core reference machine. Beside the real-time
+stand-in and driver that load delays everything else (the middleware's threads, the recorder).
+
+:class:`SubscriptionThread` puts the high-rate subscription on a side node that no executor
+spins. Its thread waits on a wait set that holds only that subscription and a guard condition
+(to stop), takes every message queued and calls the callback at once, as
+``rclpy.wait_for_message`` does for one message (with the same ``rclpy_implementation`` wait
+set).
+
+The side node is named ``<owner>_<suffix>`` in the owner's namespace and is what
+``ros2 topic info -v`` lists as the subscriber. Topic names are resolved with the owner's
+expansion and remapping rules (``--ros-args -r joint_states:=...`` applies as if the owner
+subscribed), while the side node itself takes no command-line arguments (a ``__node`` remapping
+would give it the owner's name).
+
+The callback runs concurrently with the owner's executor: it must protect the state it shares
+(the controller takes its lock).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.guard_condition import GuardCondition
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+
+#: The longest one wait lasts before the thread looks at the context again [s].
+POLL_S = 0.1
+#: How long :meth:`SubscriptionThread.stop` waits for the thread [s].
+JOIN_TIMEOUT_S = 2.0
+
+
+class SubscriptionThread:
+    """One subscription of ``owner`` served by a thread and a wait set of its own.
+
+    Parameters
+    ----------
+    owner : Node
+        The node the subscription belongs to logically: its context, namespace, name
+        (``<owner>_<suffix>`` for the side node), logger and remapping rules are used.
+    suffix : str
+        Appended to the owner's name for the side node.
+
+    Notes
+    -----
+    :meth:`create_subscription`, then :meth:`start`; :meth:`stop` before the owner is
+    destroyed. A thread takes the scheduling policy of the thread that starts it; start this
+    before :func:`~dam_common.realtime.set_process_priority` is called, which then covers it.
+    """
+
+    def __init__(self, owner: Node, suffix: str = 'intake') -> None:
+        self._owner = owner
+        self._node = Node(f'{owner.get_name()}_{suffix}', namespace=owner.get_namespace(),
+                          context=owner.context, use_global_arguments=False,
+                          start_parameter_services=False, enable_rosout=False)
+        self._wake = GuardCondition(None, None, owner.context)
+        self._subscription: Subscription | None = None
+        self._callback: Callable[[Any], None] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f'{suffix}_thread', daemon=True)
+        self._stopped = False
+
+    @property
+    def node_name(self) -> str:
+        """The side node's name (what ``ros2 topic info -v`` shows as the subscriber)."""
+        return self._node.get_name()
+
+    def create_subscription(self, msg_type: type, topic: str,
+                            callback: Callable[[Any], None], qos: QoSProfile | int
+                            ) -> Subscription:
+        """Subscribe to ``topic`` (resolved by the owner's rules); ``callback(msg)`` runs in
+        this object's thread, once per message, in the order they arrived.
+
+        Raises
+        ------
+        RuntimeError
+            A second subscription (one per thread).
+        """
+        if self._subscription is not None:
+            raise RuntimeError('a SubscriptionThread serves one subscription')
+        resolved = self._owner.resolve_topic_name(topic)
+        self._subscription = self._node.create_subscription(
+            msg_type, resolved, lambda _msg: None, qos)
+        self._callback = callback
+        return self._subscription
+
+    def start(self) -> None:
+        """Start serving the subscription."""
+        self._thread.start()
+
+    def _run(self) -> None:
+        sub, callback = self._subscription, self._callback
+        if sub is None or callback is None:
+            return
+        context = self._owner.context
+        wait_set = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, context.handle)
+        timeout_ns = int(POLL_S * 1e9)
+        try:
+            while not self._stop.is_set() and context.ok():
+                with sub.handle, self._wake.handle:
+                    wait_set.clear_entities()
+                    wait_set.add_subscription(sub.handle)
+                    wait_set.add_guard_condition(self._wake.handle)
+                    wait_set.wait(timeout_ns)
+                    while not self._stop.is_set():
+                        taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                        if taken is None:
+                            break
+                        self._call(callback, taken[0])
+        except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
+            if context.ok() and not self._stop.is_set():
+                self._owner.get_logger().error(f'{self.node_name} stopped: {exc!r}')
+
+    def _call(self, callback: Callable[[Any], None], msg: Any) -> None:
+        try:
+            callback(msg)
+        except Exception as exc:  # noqa: BLE001 - one bad message must not end the intake
+            self._owner.get_logger().error(
+                f'a {self.node_name} callback raised {exc!r}; the intake goes on',
+                throttle_duration_sec=1.0)
+
+    def stop(self) -> None:
+        """Stop the thread (waits up to :data:`JOIN_TIMEOUT_S`) and destroy the side node.
+        Idempotent."""
+        if self._stopped:
+            return
+        self._stopped = True
+        self._stop.set()
+        try:
+            self._wake.trigger()
+        except Exception:  # noqa: BLE001 - a context already shut down wakes the wait anyway
+            pass
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=JOIN_TIMEOUT_S)
+        self._wake.destroy()
+        self._node.destroy_node()

@@ -1,0 +1,151 @@
+"""SubscriptionThread: a subscription served by a thread of its own, over real DDS."""
+
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from std_msgs.msg import Int64  # noqa: E402
+
+from dam_common.intake import SubscriptionThread  # noqa: E402
+
+
+@pytest.fixture
+def context() -> Iterator[rclpy.Context]:
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+def _topic() -> str:
+    return f'/dam_test_intake_{uuid.uuid4().hex[:8]}'
+
+
+def _publish_until_matched(node, topic: str, count: int) -> None:
+    pub = node.create_publisher(Int64, topic, count)
+    deadline = time.monotonic() + 10.0
+    while pub.get_subscription_count() == 0:
+        assert time.monotonic() < deadline, f'no subscriber on {topic}'
+        time.sleep(0.01)
+    time.sleep(0.2)  # the reader's side of the match
+    for i in range(count):
+        pub.publish(Int64(data=i))
+        time.sleep(0.001)
+
+
+def _wait(predicate, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return predicate()
+
+
+def test_every_message_reaches_the_callback_in_order_in_the_intake_thread(context) -> None:
+    owner = rclpy.create_node('intake_owner', context=context)
+    talker = rclpy.create_node('intake_talker', context=context)
+    topic = _topic()
+    got: list[int] = []
+    threads: set[str] = set()
+
+    def on_message(msg: Int64) -> None:
+        got.append(msg.data)
+        threads.add(threading.current_thread().name)
+
+    intake = SubscriptionThread(owner, 'numbers')
+    intake.create_subscription(Int64, topic, on_message, 300)
+    intake.start()
+    try:
+        assert intake.node_name == 'intake_owner_numbers'
+        _publish_until_matched(talker, topic, 300)
+        assert _wait(lambda: len(got) == 300), len(got)
+        assert got == list(range(300))
+        assert threads == {'numbers_thread'}  # not the caller's thread, no executor needed
+    finally:
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()
+
+
+def test_the_owners_remapping_applies_and_the_owners_executor_takes_nothing(context) -> None:
+    remapped = _topic()
+    owner = rclpy.create_node('intake_owner', context=context,
+                              cli_args=['--ros-args', '-r', f'/joint_states:={remapped}'])
+    talker = rclpy.create_node('intake_talker', context=context)
+    got: list[int] = []
+    intake = SubscriptionThread(owner, 'states')
+    sub = intake.create_subscription(Int64, '/joint_states', lambda m: got.append(m.data), 50)
+    assert sub.topic_name == remapped
+    intake.start()
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(owner)  # the owner's executor spins beside it: the messages stay ours
+    try:
+        _publish_until_matched(talker, remapped, 50)
+        deadline = time.monotonic() + 10.0
+        while len(got) < 50 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.01)
+        assert got == list(range(50))
+    finally:
+        executor.shutdown()
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()
+
+
+def test_a_raising_callback_is_logged_and_the_intake_goes_on(context) -> None:
+    owner = rclpy.create_node('intake_owner', context=context)
+    talker = rclpy.create_node('intake_talker', context=context)
+    topic = _topic()
+    got: list[int] = []
+
+    def on_message(msg: Int64) -> None:
+        if msg.data % 2:
+            raise ValueError(f'odd {msg.data}')
+        got.append(msg.data)
+
+    intake = SubscriptionThread(owner, 'numbers')
+    intake.create_subscription(Int64, topic, on_message, 20)
+    intake.start()
+    try:
+        _publish_until_matched(talker, topic, 20)
+        assert _wait(lambda: len(got) == 10), got
+        assert got == list(range(0, 20, 2))
+    finally:
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()
+
+
+def test_stop_ends_the_thread_at_once_and_removes_the_side_node(context) -> None:
+    owner = rclpy.create_node('intake_owner', context=context)
+    intake = SubscriptionThread(owner, 'numbers')
+    intake.create_subscription(Int64, _topic(), lambda _m: None, 1)
+    intake.start()
+    assert _wait(lambda: 'intake_owner_numbers' in owner.get_node_names())
+    started = time.monotonic()
+    intake.stop()
+    assert time.monotonic() - started < 0.5  # woken by its guard condition, not a time-out
+    assert not intake._thread.is_alive()
+    intake.stop()  # idempotent
+    assert _wait(lambda: 'intake_owner_numbers' not in owner.get_node_names())
+    owner.destroy_node()
+
+
+def test_one_subscription_per_thread(context) -> None:
+    owner = rclpy.create_node('intake_owner', context=context)
+    intake = SubscriptionThread(owner)
+    intake.create_subscription(Int64, _topic(), lambda _m: None, 1)
+    with pytest.raises(RuntimeError, match='one subscription'):
+        intake.create_subscription(Int64, _topic(), lambda _m: None, 1)
+    intake.stop()
+    owner.destroy_node()
