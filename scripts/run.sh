@@ -102,7 +102,7 @@ set -e
 
 # The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
 episode=""
-for _ in $(seq 150); do
+for _ in $(seq 600); do  # up to 60 s: a recorder behind a busy machine catches up first
   episode=$(sed -n 's/.*\] \[recorder\]: episode [A-Z_]*: //p' "$recorder_log" | tail -n 1)
   [ -n "$episode" ] && break
   sleep 0.1

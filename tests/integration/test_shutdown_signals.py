@@ -208,7 +208,7 @@ def test_controller_stops_cleanly_at_any_moment_of_a_grasp(plant_and_analysis) -
             return phases[-1] if phases else 'STARTING'
 
         try:
-            trials.append(run_trial(command, None, rng.uniform(0.0, 7.0), rng.choice(SIGNALS),
+            trials.append(run_trial(command, None, rng.uniform(0.0, 6.0), rng.choice(SIGNALS),
                                     grasp_until))
         finally:
             action.destroy()
