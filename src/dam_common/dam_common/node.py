@@ -23,6 +23,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from dam_common.collector import ScheduledCollector
 from dam_common.errors import DamCommonError
 from dam_common.parameter_services import harden_parameter_services
 from dam_common.shutdown import ShutdownRequest, StartupInterrupted, catch_signals
@@ -171,7 +172,8 @@ def spin_until_shutdown(node: Node, shutdown: ShutdownRequest) -> None:
 
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None,
              startup_errors: tuple[type[BaseException], ...] = (),
-             startup_exit_code: int = 1, switch_interval_s: float | None = None) -> None:
+             startup_exit_code: int = 1, switch_interval_s: float | None = None,
+             scheduled_gc_period_s: float | None = None) -> None:
     """The life of a node process: start it, serve until SIGINT or SIGTERM, stop it cleanly.
 
     - SIGINT and SIGTERM at any moment, from the entry point's first line on (see
@@ -193,7 +195,11 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
       pause of several milliseconds in the middle of a control cycle. A node with a timed
       thread (the driver's device link, the stand-in's device) passes ``switch_interval_s``
       [s], the longest time another thread may keep that thread from the interpreter
-      (``sys.setswitchinterval``; Python's default is 5 ms).
+      (``sys.setswitchinterval``; Python's default is 5 ms). A node with a real-time loop
+      passes ``scheduled_gc_period_s`` [s]: the automatic collector is off and a full
+      collection runs from its executor at that period
+      (:class:`~dam_common.collector.ScheduledCollector`, set as the node's
+      ``garbage_collector`` attribute), not in the middle of a cycle.
     """
     shutdown = catch_signals()
     logger = rclpy.logging.get_logger(name)
@@ -227,7 +233,10 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
             shutdown.started()  # from here on a signal asks; it never interrupts
         if switch_interval_s is not None:
             sys.setswitchinterval(switch_interval_s)
-        gc.freeze()  # no gc.collect() first: a full collection could stall a running thread
+        if scheduled_gc_period_s is not None:
+            node.garbage_collector = ScheduledCollector(node, scheduled_gc_period_s)
+        else:
+            gc.freeze()  # no gc.collect() first: a full collection could stall a running thread
         spin_until_shutdown(node, shutdown)
     except StartupInterrupted:
         pass  # stopped while starting: what was built is torn down below, status 0

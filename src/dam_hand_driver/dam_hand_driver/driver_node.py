@@ -84,6 +84,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
+from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.intake import SubscriptionThread
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
@@ -605,6 +606,8 @@ class HandDriverNode(Node):
         else:
             status.level = DiagnosticStatus.OK
             status.message = 'ACTIVE' + (' (simulator)' if simulated else '')
+        collector = getattr(self, 'garbage_collector', None)  # set by run_node
+        gc_pause_max_s = collector.max_pause_s if collector is not None else 0.0
         values = {
             'state': state.value,
             'backend': self.backend + (' (simulator running)' if simulated else ''),
@@ -614,6 +617,10 @@ class HandDriverNode(Node):
             'joint_states_published': str(published),
             'joint_states_last_stamp_ns': str(last_stamp_ns),
             'target_rate_hz': f'{self.config.device.rate_hz:g}',
+            # The scheduled garbage collections (dam_common.collector): how long the longest
+            # held the interpreter lock, i.e. stopped the device-link thread.
+            'gc_collections': str(collector.collections if collector is not None else 0),
+            'gc_pause_max_ms': f'{gc_pause_max_s * 1e3:.2f}',
             'link_thread_scheduling': self._scheduling,
             'state_age_s': f'{now - last:.4f}' if last is not None else 'never',
             'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
@@ -650,4 +657,4 @@ class HandDriverNode(Node):
 def main(args: list[str] | None = None) -> None:
     run_node(HandDriverNode, 'hand_driver', args,
              startup_errors=(HandDriverError, OSError),
-             switch_interval_s=SWITCH_INTERVAL_S)
+             switch_interval_s=SWITCH_INTERVAL_S, scheduled_gc_period_s=GC_PERIOD_S)

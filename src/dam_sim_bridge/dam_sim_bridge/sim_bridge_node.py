@@ -54,6 +54,7 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
+from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import SWITCH_INTERVAL_S, set_process_priority, set_thread_priority
@@ -256,4 +257,4 @@ def main(args: list[str] | None = None) -> None:
     gui_flag = '--gui' in non_ros_args(argv)
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
              startup_errors=(SimBridgeError, OSError),
-             switch_interval_s=SWITCH_INTERVAL_S)
+             switch_interval_s=SWITCH_INTERVAL_S, scheduled_gc_period_s=GC_PERIOD_S)
