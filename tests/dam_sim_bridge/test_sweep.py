@@ -186,7 +186,7 @@ def test_a_trial_depends_only_on_its_inputs_and_seed(cfg: DamConfig) -> None:
     assert float(row['object_mass_kg']) == pytest.approx(draw.object_mass_kg, rel=1e-5)
     assert float(row['object_mass_kg']) != 0.04
     assert float(row['object_offset_x_mm']) == pytest.approx(draw.object_offset_m[0] * 1e3,
-                                                             rel=1e-5)
+                                                             abs=1e-4)
     assert float(row['friction_angle_sim_deg']) != 5.0
     assert row['phase'] == 'ROLLING_UP'  # reached contact within 2 s
     assert float(row['peak_tau_finger1_compliant_nm']) > 0.01

@@ -501,6 +501,11 @@ def _fmt(value: float, digits: int = 6) -> str:
     return 'nan' if math.isnan(value) else f'{value + 0.0:.{digits}g}'  # + 0.0: no '-0'
 
 
+def _mm(value_m: float) -> str:
+    """A length [m] in millimetres with 4 decimals (0.1 um), ``nan``."""
+    return 'nan' if math.isnan(value_m) else f'{round(value_m * 1e3, 4) + 0.0:.4f}'
+
+
 def input_columns(spec: TrialSpec) -> dict[str, str]:
     """The table's input columns of a trial, as written (resume compares them)."""
     return {'trial': str(spec.index), 'friction_angle_deg': f'{spec.friction_angle_deg:.12g}',
@@ -597,13 +602,13 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     row = {
         **input_columns(spec),
         'object_mass_kg': _fmt(draw.object_mass_kg),
-        'object_offset_x_mm': _fmt(draw.object_offset_m[0] * 1e3),
-        'object_offset_y_mm': _fmt(draw.object_offset_m[1] * 1e3),
+        'object_offset_x_mm': _mm(draw.object_offset_m[0]),
+        'object_offset_y_mm': _mm(draw.object_offset_m[1]),
         'table_friction': _fmt(draw.table_friction),
         'friction_angle_sim_deg': _fmt(draw.friction_angle_deg),
         'phase': r.phase.name, 'outcome': r.outcome.name, 'lifted': str(int(r.lifted)),
-        'rise_final_mm': _fmt(r.lift_final * 1e3), 'rise_max_mm': _fmt(r.lift_max * 1e3),
-        'rise_rolling_end_mm': _fmt(r.lift_rolling_end * 1e3),
+        'rise_final_mm': _mm(r.lift_final), 'rise_max_mm': _mm(r.lift_max),
+        'rise_rolling_end_mm': _mm(r.lift_rolling_end),
         **peaks,
         'check_lift_guaranteed': str(analysis[0]), 'worst_case_margin_n': _fmt(analysis[1]),
         'csm_lift': str(analysis[2]), 'csm_margin_n': _fmt(analysis[3]),
