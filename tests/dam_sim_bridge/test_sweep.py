@@ -87,13 +87,13 @@ def test_axis_bounds_and_duplicates() -> None:
 
 def test_sweep_checked_against_the_configuration(cfg: DamConfig) -> None:
     SweepSpec((5.0,), (10.0,), (65.0,)).check_against(cfg)
-    with pytest.raises(SweepError, match='delta_theta_p: 70 deg exceeds'):
+    with pytest.raises(SweepError, match='--delta-theta-p: 70 deg exceeds'):
         SweepSpec((5.0,), (10.0,), (70.0,)).check_against(cfg)
-    with pytest.raises(SweepError, match='k_theta: 150 N.m/rad exceeds the device limit'):
+    with pytest.raises(SweepError, match='--k-theta: 150 N.m/rad exceeds the device limit'):
         SweepSpec((5.0,), (150.0,), (10.0,)).check_against(cfg)
-    with pytest.raises(SweepError, match='trajectory_duration_s: 10 s'):
+    with pytest.raises(SweepError, match='--trajectory-duration: 10 s'):
         SweepSpec((5.0,), (1.0,), (10.0,), trajectory_duration_s=10.0).check_against(cfg)
-    with pytest.raises(SweepError, match='repeats: 0 must be'):
+    with pytest.raises(SweepError, match=r'--repeats \(repeats\): 0 must be'):
         SweepSpec((5.0,), (1.0,), (10.0,), repeats=0)
 
 

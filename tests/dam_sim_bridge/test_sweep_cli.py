@@ -193,10 +193,10 @@ def test_interrupted_sweep_resumes_without_redoing_trials(
 
 @pytest.mark.parametrize('args, words', [
     (['--k-theta', '0.05:20:0:log'], ['--k-theta', 'count 0', "'0.05:20:0:log'"]),
-    (['--delta-theta-p', '5:70:14'], ['delta_theta_p: 70 deg exceeds']),
+    (['--delta-theta-p', '5:70:14'], ['--delta-theta-p: 70 deg exceeds']),
     (['--friction-angles', '5', '95'], ['--friction-angles: 95 deg', 'outside [0, 90)']),
     (['--k-theta', '1', '--mass-rel', '1.5'], ['--mass-rel (mass_rel): 1.5']),
-    (['--repeats', '0'], ['repeats: 0']),
+    (['--repeats', '0'], ['--repeats (repeats): 0']),
     (['--workers', '0'], ['--workers: 0']),
 ])
 def test_bad_arguments_are_refused(args: list[str], words: list[str], tmp_path: Path,

@@ -42,15 +42,23 @@ from typing import Any
 import numpy as np
 
 from dam_sim_bridge.errors import SweepError
-from dam_sim_bridge.experiment import run_experiment
-from dam_sim_bridge.world import HandWorld
 
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
 MAX_FRICTION_ANGLE_DEG = 89.0
-#: Command-line option of each perturbation scale (named in error messages).
-PERTURBATION_OPTIONS = {'mass_rel': '--mass-rel', 'position_sd_mm': '--position-sd',
-                        'table_friction_rel': '--table-friction-rel',
-                        'friction_angle_sd_deg': '--friction-angle-sd'}
+#: Command-line option of each sweep parameter (error messages name both).
+OPTIONS = {'friction_angles_deg': '--friction-angles', 'k_theta': '--k-theta',
+           'delta_theta_p_deg': '--delta-theta-p', 'repeats': '--repeats', 'seed': '--seed',
+           'mass_rel': '--mass-rel', 'position_sd_mm': '--position-sd',
+           'table_friction_rel': '--table-friction-rel',
+           'friction_angle_sd_deg': '--friction-angle-sd', 'max_time_s': '--max-time',
+           'latency_cycles': '--latency-cycles',
+           'trajectory_duration_s': '--trajectory-duration', 'impedance': '--impedance',
+           'envelope': '--envelope'}
+
+
+def _named(field_name: str) -> str:
+    """``--option (field)`` for an error message."""
+    return f'{OPTIONS[field_name]} ({field_name})'
 #: Significant digits kept of a value computed from a range (``0.05:20:24:log``).
 _RANGE_DIGITS = 12
 
@@ -223,8 +231,7 @@ class Perturbations:
             if not (isinstance(value, (int, float)) and 0.0 <= value < upper
                     and math.isfinite(value)):
                 bound = 'in [0, 1)' if upper == 1.0 else '>= 0 and finite'
-                raise SweepError(f'{PERTURBATION_OPTIONS[name]} ({name}): {value!r} must be '
-                                 f'{bound}')
+                raise SweepError(f'{_named(name)}: {value!r} must be {bound}')
 
     @property
     def any(self) -> bool:
@@ -327,28 +334,30 @@ class SweepSpec:
         for name in ('friction_angles_deg', 'k_theta', 'delta_theta_p_deg'):
             values = tuple(float(v) for v in getattr(self, name))
             if not values:
-                raise SweepError(f'{name}: no value given')
+                raise SweepError(f'{_named(name)}: no value given')
             object.__setattr__(self, name, values)
         if not all(0.0 <= a < 90.0 for a in self.friction_angles_deg):
-            raise SweepError(f'friction_angles_deg: {self.friction_angles_deg!r} must lie in '
-                             f'[0, 90) deg')
+            raise SweepError(f'{_named("friction_angles_deg")}: '
+                             f'{self.friction_angles_deg!r} must lie in [0, 90) deg')
         if not all(k > 0.0 and math.isfinite(k) for k in self.k_theta):
-            raise SweepError(f'k_theta: {self.k_theta!r} must be positive')
+            raise SweepError(f'{_named("k_theta")}: {self.k_theta!r} must be positive')
         if not all(d > 0.0 and math.isfinite(d) for d in self.delta_theta_p_deg):
-            raise SweepError(f'delta_theta_p_deg: {self.delta_theta_p_deg!r} must be positive')
+            raise SweepError(f'{_named("delta_theta_p_deg")}: {self.delta_theta_p_deg!r} '
+                             f'must be positive')
         for name, low in (('repeats', 1), ('seed', 0), ('latency_cycles', 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise SweepError(f'{name}: {value!r} must be a whole number >= {low}')
+                raise SweepError(f'{_named(name)}: {value!r} must be a whole number >= {low}')
         if not (math.isfinite(self.max_time_s) and self.max_time_s > 0.0):
-            raise SweepError(f'max_time_s: {self.max_time_s!r} must be positive')
+            raise SweepError(f'{_named("max_time_s")}: {self.max_time_s!r} must be positive')
         td = self.trajectory_duration_s
         if td is not None and not (math.isfinite(td) and td > 0.0):
-            raise SweepError(f'trajectory_duration_s: {td!r} must be positive')
+            raise SweepError(f'{_named("trajectory_duration_s")}: {td!r} must be positive')
         if self.impedance not in (None, 'device', 'controller'):
-            raise SweepError(f'impedance: {self.impedance!r} must be device or controller')
+            raise SweepError(f'{_named("impedance")}: {self.impedance!r} must be device or '
+                             f'controller')
         if self.envelope not in ('impedance', 'constant-torque'):
-            raise SweepError(f'envelope: {self.envelope!r} must be impedance or '
+            raise SweepError(f'{_named("envelope")}: {self.envelope!r} must be impedance or '
                              f'constant-torque')
 
     @property
@@ -419,18 +428,18 @@ class SweepSpec:
         dp_max = math.degrees(float(config.task.delta_theta_p_max_rad))
         for dp in self.delta_theta_p_deg:
             if dp > dp_max + 1e-9:
-                raise SweepError(f'delta_theta_p: {dp:g} deg exceeds task.delta_theta_p_max_deg '
-                                 f'{dp_max:g} deg')
+                raise SweepError(f'{OPTIONS["delta_theta_p_deg"]}: {dp:g} deg exceeds '
+                                 f'task.delta_theta_p_max_deg {dp_max:g} deg')
         k_max = float(config.device.max_stiffness_nm_per_rad)
         ratio = float(np.max(config.hand.stiffness_ratios))
         for k in self.k_theta:
             if k * ratio > k_max * (1.0 + 1e-12):
-                raise SweepError(f'k_theta: {k:g} N*m/rad exceeds the device limit '
+                raise SweepError(f'{OPTIONS["k_theta"]}: {k:g} N*m/rad exceeds the device limit '
                                  f'{k_max:g} N*m/rad (device.max_stiffness_nm_per_rad)')
         td = self.trajectory_duration_s
         timeout = float(config.controller.phase_timeout_s)
         if td is not None and td >= timeout:
-            raise SweepError(f'trajectory_duration_s: {td:g} s must be shorter than '
+            raise SweepError(f'{OPTIONS["trajectory_duration_s"]}: {td:g} s must be shorter than '
                              f'controller.phase_timeout_s {timeout:g} s')
 
 
@@ -561,6 +570,10 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     TrialResult
         Its row (every value formatted, so that a rerun writes the same bytes) and its cost.
     """
+    from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415 - imports on first use
+    from dam_sim_bridge.experiment import run_experiment  # noqa: PLC0415 - imports pybullet
+    from dam_sim_bridge.world import HandWorld  # noqa: PLC0415
+
     analyzer = analyzer_for(config)  # once per process, not part of the trial's cost
     wall0, cpu0 = time.monotonic(), time.process_time()
     obj = config.object
@@ -581,8 +594,6 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
                            object_position=position, table_friction=draw.table_friction,
                            latency_cycles=sweep.latency_cycles, max_time=sweep.max_time_s,
                            **sweep.sequence_overrides())
-    from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415
-
     reason = r.failure_reason or r.joint_reason
     try:
         a = analyzer.check_lift([spec.k_theta], [dp],
