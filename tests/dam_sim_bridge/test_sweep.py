@@ -21,12 +21,11 @@ from dam_sim_bridge.sweep import (
     TrialSpec,
     analyzer_for,
     input_columns,
-    parse_axis,
-    parse_range,
     run_trial,
     table_columns,
     trial_seed,
 )
+from dam_sim_bridge.sweep_axes import parse_axis, parse_range
 from dam_sim_bridge.sweep_table import (
     CELLS_FILE,
     PARAMS_FILE,

@@ -99,6 +99,7 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     d = tmp_path_factory.mktemp('dask')
     file = d / 'scheduler.json'
     procs: list[subprocess.Popen[bytes]] = []
+    grace = 0.1  # [s] for the processes to end by themselves
     env = _env()
     logs = []
 
@@ -123,14 +124,14 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         with Client(address, timeout='30s') as client:
             client.wait_for_workers(2, timeout=60)
         yield address
+        with Client(address, timeout='30s') as client:
+            client.shutdown()  # the scheduler closes the workers, then itself
+        grace = 10.0
     finally:
-        for proc in reversed(procs):
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in reversed(procs):
+        for proc in procs:
             try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:  # the set-up failed, or the shutdown did
                 proc.kill()
                 proc.wait()
         for log in logs:

@@ -37,9 +37,9 @@ from dam_sim_bridge.sweep import (
     SweepSpec,
     TrialResult,
     TrialSpec,
-    parse_axis,
     run_trial,
 )
+from dam_sim_bridge.sweep_axes import parse_axis
 from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, TrialTable
 
 PROG = 'sweep'
