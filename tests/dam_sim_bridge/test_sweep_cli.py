@@ -120,7 +120,8 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         assert address.startswith('tcp://127.0.0.1:')
         for i in (1, 2):
             start(['worker', '--scheduler-file', str(file), '--host', '127.0.0.1',
-                   '--nthreads', '1', '--no-nanny', '--no-dashboard'], f'worker{i}')
+                   '--nthreads', '1', '--no-nanny', '--no-dashboard',
+                   '--local-directory', str(d / f'worker{i}')], f'worker{i}')
         with Client(address, timeout='30s') as client:
             client.wait_for_workers(2, timeout=60)
         yield address
