@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'sim_bridge = dam_sim_bridge.entry_points:sim_bridge',
             'dam_experiment = dam_sim_bridge.experiment:main',
+            'sweep = dam_sim_bridge.sweep_cli:main',
         ],
     },
 )

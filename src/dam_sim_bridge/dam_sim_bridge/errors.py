@@ -20,3 +20,8 @@ class CommandError(SimBridgeError, ValueError):
 
 class SimulationError(SimBridgeError, RuntimeError):
     """The physics server failed (disconnected, could not load the model)."""
+
+
+class SweepError(SimBridgeError, ValueError):
+    """A sweep is malformed (a bad range or option, naming the field and the value) or does
+    not match the sweep already in its output directory."""

@@ -88,6 +88,9 @@ class ExperimentResult:
         Simulated duration of the run [s].
     wall_time
         Wall-clock duration [s].
+    peak_torques
+        (n,) largest torque-sensor reading of every joint during the run, ``max |tau|``
+        [N*m], in ``hand.joint_names`` order (empty in a result built without it).
     signals
         Recorded arrays (see :func:`run_experiment`), empty unless ``record=True``.
     """
@@ -107,6 +110,7 @@ class ExperimentResult:
     sim_time: float
     wall_time: float
     signals: dict[str, np.ndarray] = field(default_factory=dict)
+    peak_torques: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def row(self) -> dict[str, object]:
         """One CSV row (angles in degrees, lengths in millimetres)."""
@@ -127,6 +131,8 @@ class ExperimentResult:
 
 def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                    friction_angle: float | None = None, world: HandWorld | None = None,
+                   object_position: Sequence[float] | None = None,
+                   table_friction: float | None = None,
                    latency_cycles: int = 2, max_time: float = 20.0, settle_after: float = 0.0,
                    record: bool = False, record_every: int = 5,
                    **param_overrides: float) -> ExperimentResult:
@@ -142,6 +148,10 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         Position-joint displacement [rad].
     friction_angle
         Finger-object friction angle [rad]; ``None``: the configured one.
+    object_position
+        (3,) start of the object's centre [m]; ``None``: ``object.position_m``.
+    table_friction
+        Table-object friction coefficient; ``None``: ``contact.table_friction_coefficient``.
     world
         A world to reuse (it is reset); by default a new one, closed at the end.
     latency_cycles
@@ -176,7 +186,10 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
     try:
         alpha = (float(config.contact.friction_angle_rad) if friction_angle is None
                  else float(friction_angle))
-        w.reset(friction_angle_rad=alpha)
+        table_mu = (float(config.contact.table_friction_coefficient) if table_friction is None
+                    else float(table_friction))
+        w.reset(object_position=object_position, friction_angle_rad=alpha,
+                table_friction_coefficient=table_mu)
         params = SequenceParams.from_config(config, **param_overrides)
         seq = DamSequence(params)
         geometry = HandGeometry.from_config(config)
@@ -197,6 +210,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         phase_times: dict[str, float] = {}
         last_phase: Phase | None = None
         lift_max = -math.inf
+        peak = np.zeros(w.n_joints)
         lift_rolling_end = math.nan
         t = 0.0
         t_done: float | None = None
@@ -204,6 +218,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         while t < max_time:
             js = w.joint_states()
             cmd = seq.step(t, js.positions, js.velocities, js.torques)
+            np.maximum(peak, np.abs(js.torques), out=peak)
             if seq.phase is not last_phase:
                 phase_times[seq.phase.name] = t
                 if last_phase is Phase.ROLLING_UP:
@@ -251,7 +266,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
             joint_reason=reason, lifted=lift_final >= float(settings.lift_height),
             lift_final=lift_final, lift_max=lift_max, lift_rolling_end=lift_rolling_end,
             phase_times=phase_times, sim_time=t, wall_time=time.monotonic() - wall0,
-            signals=signals)
+            signals=signals, peak_torques=peak)
     finally:
         if own_world:
             w.close()

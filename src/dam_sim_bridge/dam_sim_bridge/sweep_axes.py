@@ -1,0 +1,117 @@
+"""Axes of a sweep on the command line: values and ranges ``start:stop:count[:log]``.
+
+``--k-theta 0.05:20:24:log`` is 24 values from 0.05 to 20 with a constant ratio
+(``numpy.geomspace``), ``--delta-theta-p 5:60:12`` is 5, 10, ..., 60 (``numpy.linspace``, both
+ends included); plain numbers and ranges mix freely. A bad token is refused with the option and
+the token named (:class:`~dam_sim_bridge.errors.SweepError`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from dam_sim_bridge.errors import SweepError
+
+#: Significant digits kept of a value computed from a range (``0.05:20:24:log``).
+_RANGE_DIGITS = 12
+
+
+def _number(field_name: str, text: str, token: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SweepError(f'{field_name}: {text!r} in {token!r} is not a number') from None
+    if not math.isfinite(value):
+        raise SweepError(f'{field_name}: {text!r} in {token!r} is not a finite number')
+    return value
+
+
+def parse_range(field_name: str, token: str) -> tuple[float, ...]:
+    """Values of one axis token: a number, ``start:stop:count`` or ``start:stop:count:log``.
+
+    Parameters
+    ----------
+    field_name
+        Name of the option, for the error message (``--k-theta``).
+    token
+        ``'7'``; ``'5:60:12'`` (``numpy.linspace``: 5, 10, ..., 60); ``'0.05:20:24:log'``
+        (``numpy.geomspace``: 24 values with equal ratios, both ends included). A count of 1
+        needs ``start == stop``.
+
+    Returns
+    -------
+    tuple of float
+        The values in the token's order, rounded to 12 significant digits.
+
+    Raises
+    ------
+    SweepError
+        A malformed token, naming the option and the token.
+    """
+    parts = token.strip().split(':')
+    if len(parts) == 1:
+        return (_number(field_name, parts[0], token),)
+    if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3].strip().lower() not in
+                                    ('log', 'lin')):
+        raise SweepError(f'{field_name}: {token!r} is neither a number nor a range '
+                         f'start:stop:count or start:stop:count:log')
+    start = _number(field_name, parts[0], token)
+    stop = _number(field_name, parts[1], token)
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise SweepError(f'{field_name}: count {parts[2]!r} in {token!r} is not a whole '
+                         f'number') from None
+    if count < 1:
+        raise SweepError(f'{field_name}: count {count} in {token!r} must be at least 1')
+    if count == 1 and start != stop:
+        raise SweepError(f'{field_name}: count 1 in {token!r} needs start == stop')
+    log = len(parts) == 4 and parts[3].strip().lower() == 'log'
+    if log and (start <= 0.0 or stop <= 0.0):
+        raise SweepError(f'{field_name}: a log range needs positive ends, got {token!r}')
+    values = np.geomspace(start, stop, count) if log else np.linspace(start, stop, count)
+    return tuple(float(f'{v:.{_RANGE_DIGITS}g}') for v in values)
+
+
+def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
+               upper: float = math.inf, lower_open: bool = False,
+               upper_open: bool = False, unit: str = '') -> tuple[float, ...]:
+    """All values of an axis given as tokens (:func:`parse_range`), checked against bounds.
+
+    Parameters
+    ----------
+    field_name
+        Option name for the error messages.
+    tokens
+        Numbers and ranges, concatenated in order.
+    lower, upper
+        Bounds of every value (in the option's unit).
+    lower_open, upper_open
+        Exclude the bound itself.
+    unit
+        Unit for the messages (``'deg'``).
+
+    Raises
+    ------
+    SweepError
+        No value, a malformed token, a value out of bounds or given twice.
+    """
+    values: list[float] = []
+    for token in tokens:
+        for v in parse_range(field_name, token):
+            low_bad = v <= lower if lower_open else v < lower
+            high_bad = v >= upper if upper_open else v > upper
+            if low_bad or high_bad:
+                lo = '(' if lower_open else '['
+                hi = ')' if upper_open else ']'
+                raise SweepError(f'{field_name}: {v:g}{" " + unit if unit else ""} (from '
+                                 f'{token!r}) is outside {lo}{lower:g}, {upper:g}{hi}')
+            if v in values:
+                raise SweepError(f'{field_name}: {v:g} is given twice (from {token!r})')
+            values.append(v)
+    if not values:
+        raise SweepError(f'{field_name}: no value given')
+    return tuple(values)

@@ -1,0 +1,294 @@
+"""A sweep's files: the trial table, its parameters, the per-cell summary; resuming.
+
+An output directory holds
+
+* ``trials.csv``: one row per trial (:func:`~dam_sim_bridge.sweep.table_columns`), appended
+  as trials finish and flushed row by row, rewritten in trial order when the sweep is
+  complete, so that a rerun gives the same bytes;
+* ``sweep.json``: the sweep's parameters (:meth:`SweepSpec.to_dict`), the SHA-256 of the
+  configuration's values, the columns and their units, written when the sweep starts;
+* ``cells.csv``: per cell the number of trials, how many lifted (ground truth) and succeeded
+  and the analysis answer, written when the sweep is complete.
+
+:meth:`TrialTable.open` on a directory that already holds a sweep resumes it: it refuses a
+different sweep (naming the parameter that differs), keeps every complete row whose inputs
+match its trial, drops a row cut short by an interruption and rewrites the table with what it
+kept; :meth:`TrialTable.pending` lists the trials still to run.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any, TextIO
+
+from dam_sim_bridge.errors import SweepError
+from dam_sim_bridge.sweep import (
+    SweepSpec,
+    TrialSpec,
+    config_digest,
+    input_columns,
+    table_columns,
+)
+
+TABLE_FILE = 'trials.csv'
+PARAMS_FILE = 'sweep.json'
+CELLS_FILE = 'cells.csv'
+#: Version of the directory layout and of ``sweep.json``.
+FORMAT_VERSION = 1
+#: Keys of ``sweep.json`` that must match to resume (the others are information).
+_MATCHING_KEYS = ('format', 'sweep', 'config_sha256', 'columns')
+
+CELL_COLUMNS = ['friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg', 'trials',
+                'lifted', 'p_lift', 'success', 'lifted_dam_failed', 'failure', 'p_success',
+                'rise_final_mm_mean', 'check_lift_guaranteed', 'worst_case_margin_n',
+                'csm_lift', 'csm_margin_n']
+
+_UNITS = {
+    'friction_angle_deg': 'cell friction angle alpha [deg]',
+    'k_theta_nm_per_rad': 'finger-1 compliant stiffness [N*m/rad] (others by stiffness_ratio)',
+    'delta_theta_p_deg': 'position-joint displacement [deg]',
+    'seed': 'the trial\'s seed (SeedSequence(seed, spawn_key=(i_alpha, i_dp, i_k, repeat)))',
+    'object_mass_kg': 'object mass as simulated [kg]',
+    'object_offset_x_mm': 'object start offset, x [mm]',
+    'object_offset_y_mm': 'object start offset along its axis, y [mm]',
+    'table_friction': 'table-object Coulomb coefficient as simulated [-]',
+    'friction_angle_sim_deg': 'finger-object friction angle as simulated [deg]',
+    'phase': 'phase the controller ended in',
+    'outcome': 'paper Fig. 7 class from joint signals: SUCCESS (o), LIFTED_DAM_FAILED (t), '
+               'FAILURE (x)',
+    'lifted': 'ground truth: object centre at least classification.lift_height_m up at the end',
+    'rise_final_mm': 'rise of the object centre at the end [mm]',
+    'rise_max_mm': 'largest rise [mm]', 'rise_rolling_end_mm': 'rise at the end of ROLLING_UP [mm]',
+    'peak_tau_*_nm': 'largest |torque| of that joint during the trial [N*m]',
+    'check_lift_guaranteed': '/check_lift: eq. (18) guarantees the lift (cell request)',
+    'worst_case_margin_n': 'eq. (18) worst-case margin min c_z^T f_o - m_B g [N]',
+    'csm_lift': 'contact stiffness model lifts', 'csm_margin_n': 'CSM margin [N]',
+    'sim_time_s': 'simulated duration [s]',
+}
+
+
+def sweep_parameters(sweep: SweepSpec, config: Any,
+                     info: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The content of ``sweep.json``: what must match to resume, then ``info``."""
+    data: dict[str, Any] = {
+        'format': FORMAT_VERSION, 'sweep': sweep.to_dict(),
+        'config_sha256': config_digest(config), 'columns': table_columns(config),
+        'n_trials': sweep.n_trials, 'units': _UNITS,
+        'perturbation_distributions': (
+            'u_m, u_t ~ U(-1, 1); z_x, z_y, z_a ~ N(0, 1), drawn in this order from '
+            'numpy.random.default_rng(seed); mass = object.mass_kg * (1 + mass_rel * u_m); '
+            'offset = position_sd_mm * (z_x, z_y); table = table_friction_coefficient * '
+            '(1 + table_friction_rel * u_t); alpha = cell alpha + friction_angle_sd_deg * '
+            'z_a, clipped to [0, 89] deg'),
+    }
+    data.update(info or {})
+    return data
+
+
+def _first_difference(old: Any, new: Any, path: str) -> str | None:
+    """Dotted path of the first differing value, with both values; None when equal."""
+    if isinstance(old, Mapping) and isinstance(new, Mapping):
+        for key in sorted(set(old) | set(new), key=str):
+            if key not in old or key not in new:
+                return f'{path}.{key}: only in the {"new" if key in new else "stored"} sweep'
+            found = _first_difference(old[key], new[key], f'{path}.{key}')
+            if found:
+                return found
+        return None
+    return None if old == new else f'{path}: stored {old!r}, now {new!r}'
+
+
+def _row_line(columns: list[str], row: Mapping[str, str]) -> str:
+    buffer = io.StringIO()
+    csv.writer(buffer, lineterminator='\n').writerow([row[c] for c in columns])
+    return buffer.getvalue()
+
+
+class TrialTable:
+    """The trial table of one sweep in ``directory``; see the module docstring.
+
+    Parameters
+    ----------
+    directory
+        Output directory (created if missing).
+    sweep
+        The sweep.
+    config
+        Its ``DamConfig``.
+    info
+        Extra information for ``sweep.json`` (not compared when resuming).
+    """
+
+    def __init__(self, directory: str | os.PathLike[str], sweep: SweepSpec, config: Any,
+                 info: Mapping[str, Any] | None = None) -> None:
+        self.directory = Path(directory)
+        self.sweep = sweep
+        self.columns = table_columns(config)
+        self.specs = sweep.trials()
+        self.parameters = sweep_parameters(sweep, config, info)
+        self.rows: dict[int, dict[str, str]] = {}
+        self.dropped = 0
+        self._handle: TextIO | None = None
+
+    @property
+    def table_path(self) -> Path:
+        return self.directory / TABLE_FILE
+
+    def open(self) -> int:
+        """Create or resume the directory; return the number of trials already done.
+
+        Raises
+        ------
+        SweepError
+            The directory holds a different sweep, a table without ``sweep.json``, or a table
+            with other columns.
+        """
+        if self.directory.exists() and not self.directory.is_dir():
+            raise SweepError(f'--out {str(self.directory)!r} exists and is not a directory')
+        self.directory.mkdir(parents=True, exist_ok=True)
+        params = self.directory / PARAMS_FILE
+        if params.exists():
+            try:
+                stored = json.loads(params.read_text(encoding='utf-8'))
+            except (OSError, ValueError) as exc:
+                raise SweepError(f'{params}: cannot read it ({exc})') from None
+            for key in _MATCHING_KEYS:
+                diff = _first_difference(stored.get(key), self.parameters[key], key)
+                if diff:
+                    raise SweepError(f'{self.directory} holds a different sweep ({diff}); '
+                                     f'use another --out or remove it')
+        elif self.table_path.exists():
+            raise SweepError(f'{self.table_path} exists without {PARAMS_FILE}; use another '
+                             f'--out or remove it')
+        else:
+            _write_atomic(params, json.dumps(self.parameters, indent=2) + '\n')
+        if self.table_path.exists():
+            self._read_existing()
+        self._rewrite()
+        self._handle = self.table_path.open('a', encoding='utf-8', newline='')
+        return len(self.rows)
+
+    def _read_existing(self) -> None:
+        text = self.table_path.read_text(encoding='utf-8')
+        if not text:
+            return
+        lines = text.split('\n')
+        header = next(csv.reader([lines[0]]), []) if lines else []
+        if header != self.columns:
+            raise SweepError(f'{self.table_path}: its columns {header} are not this sweep\'s '
+                             f'{self.columns}')
+        # The last element is what follows the last newline: a row cut short, or ''.
+        complete, tail = lines[1:-1], lines[-1] if len(lines) > 1 else ''
+        self.dropped = int(bool(tail.strip()))
+        for line in complete:
+            values = next(csv.reader([line]), [])
+            row = dict(zip(self.columns, values, strict=False))
+            index = _index(row.get('trial', ''), len(self.specs))
+            if (len(values) != len(self.columns) or index is None or index in self.rows
+                    or any(row[k] != v for k, v in input_columns(self.specs[index]).items())):
+                self.dropped += 1
+                continue
+            self.rows[index] = row
+
+    def _rewrite(self) -> None:
+        lines = [_row_line(self.columns, dict(zip(self.columns, self.columns, strict=True)))]
+        lines += [_row_line(self.columns, self.rows[i]) for i in sorted(self.rows)]
+        _write_atomic(self.table_path, ''.join(lines))
+
+    def pending(self) -> list[TrialSpec]:
+        """The trials without a row, in trial order."""
+        return [s for s in self.specs if s.index not in self.rows]
+
+    def append(self, row: Mapping[str, str]) -> None:
+        """Add a finished trial's row and flush it to the file."""
+        if self._handle is None:
+            raise SweepError('the table is not open')
+        index = int(row['trial'])
+        self.rows[index] = dict(row)
+        self._handle.write(_row_line(self.columns, row))
+        self._handle.flush()
+
+    def close(self) -> None:
+        """Close the file (rows stay as written)."""
+        if self._handle is not None:
+            self._handle.close()
+            self._handle = None
+
+    @property
+    def complete(self) -> bool:
+        return len(self.rows) == len(self.specs)
+
+    def finalize(self) -> None:
+        """Rewrite the table in trial order and write ``cells.csv`` (a complete sweep)."""
+        self.close()
+        self._rewrite()
+        if self.complete:
+            cells = cell_summary(self.rows[i] for i in sorted(self.rows))
+            text = _row_line(CELL_COLUMNS, dict(zip(CELL_COLUMNS, CELL_COLUMNS, strict=True)))
+            text += ''.join(_row_line(CELL_COLUMNS, c) for c in cells)
+            _write_atomic(self.directory / CELLS_FILE, text)
+
+    def __enter__(self) -> TrialTable:
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _index(text: str, n: int) -> int | None:
+    try:
+        value = int(text)
+    except ValueError:
+        return None
+    return value if 0 <= value < n else None
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + '.tmp')
+    tmp.write_text(text, encoding='utf-8')
+    os.replace(tmp, path)
+
+
+def read_table(path: str | os.PathLike[str]) -> list[dict[str, str]]:
+    """The rows of a ``trials.csv`` (or ``cells.csv``) as dictionaries of strings."""
+    with Path(path).open(encoding='utf-8', newline='') as handle:
+        return list(csv.DictReader(handle))
+
+
+def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
+    """Per cell (in order of first appearance): trials, lifts, outcomes, the analysis.
+
+    ``p_lift`` is the share of trials whose object lifted (ground truth), ``p_success`` the
+    share the controller classified SUCCESS; the analysis columns are the cell's (the same
+    for every trial of a cell).
+    """
+    cells: dict[tuple[str, str, str], list[Mapping[str, str]]] = {}
+    for row in rows:
+        key = (row['friction_angle_deg'], row['k_theta_nm_per_rad'], row['delta_theta_p_deg'])
+        cells.setdefault(key, []).append(row)
+    out = []
+    for (alpha, k, dp), group in cells.items():
+        n = len(group)
+        lifted = sum(int(r['lifted']) for r in group)
+        counts = {o: sum(r['outcome'] == o for r in group)
+                  for o in ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')}
+        rises = [float(r['rise_final_mm']) for r in group]
+        first = group[0]
+        out.append({
+            'friction_angle_deg': alpha, 'k_theta_nm_per_rad': k, 'delta_theta_p_deg': dp,
+            'trials': str(n), 'lifted': str(lifted), 'p_lift': f'{lifted / n:.6g}',
+            'success': str(counts['SUCCESS']),
+            'lifted_dam_failed': str(counts['LIFTED_DAM_FAILED']),
+            'failure': str(counts['FAILURE']), 'p_success': f'{counts["SUCCESS"] / n:.6g}',
+            'rise_final_mm_mean': f'{math.fsum(rises) / n:.6g}',
+            'check_lift_guaranteed': first['check_lift_guaranteed'],
+            'worst_case_margin_n': first['worst_case_margin_n'],
+            'csm_lift': first['csm_lift'], 'csm_margin_n': first['csm_margin_n']})
+    return out

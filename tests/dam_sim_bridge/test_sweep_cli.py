@@ -1,0 +1,234 @@
+"""``sweep`` end to end on a small sweep of short trials: in this process, on local worker
+processes, on a loopback Dask cluster (``dask scheduler`` and two ``dask worker`` processes),
+and interrupted by a real SIGINT and resumed. Every run must give the same table.
+
+The trials stop after 0.6 s of simulated time (the fingers are still closing: the pipeline is
+under test here, the grasps are in ``test_experiment.py``), about 0.2 s each.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import psutil
+import pytest
+
+from dam_sim_bridge.sweep_cli import main
+from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, read_table
+from ros_testing import installed_executable
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CONFIG = REPO_ROOT / 'config' / 'dam.yaml'
+#: 2 friction angles x 2 k_theta x 1 delta_theta_p x 2 repeats, every perturbation on.
+SWEEP = ['--friction-angles', '5', '30', '--k-theta', '0.5', '10', '--delta-theta-p', '10',
+         '--repeats', '2', '--mass-rel', '0.2', '--position-sd', '1',
+         '--table-friction-rel', '0.2', '--friction-angle-sd', '2', '--max-time', '0.6',
+         '--config', str(CONFIG), '--quiet']
+N_TRIALS = 8
+
+
+def _env() -> dict[str, str]:
+    """This process's environment with the source tree on PYTHONPATH (as conftest does)."""
+    src = [str(p) for p in sorted((REPO_ROOT / 'src').iterdir()) if (p / 'setup.py').is_file()]
+    return {**os.environ, 'PYTHONPATH': ':'.join(src + [os.environ.get('PYTHONPATH', '')])}
+
+
+def _sweep_command(out: Path, *extra: str) -> list[str]:
+    return [sys.executable, '-m', 'dam_sim_bridge.sweep_cli', *SWEEP, '--out', str(out), *extra]
+
+
+@pytest.fixture(scope='module')
+def reference(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """The table of the sweep run in this process (``--workers 1``)."""
+    out = tmp_path_factory.mktemp('reference')
+    assert main([*SWEEP, '--out', str(out), '--workers', '1']) == 0
+    return (out / TABLE_FILE).read_text(encoding='utf-8')
+
+
+def test_the_table_holds_every_trial(reference: str, tmp_path: Path) -> None:
+    rows = [line.split(',') for line in reference.splitlines()]
+    header = rows[0]
+    assert header[:6] == ['trial', 'friction_angle_deg', 'k_theta_nm_per_rad',
+                          'delta_theta_p_deg', 'repeat', 'seed']
+    for name in ('outcome', 'lifted', 'rise_final_mm', 'peak_tau_finger1_compliant_nm',
+                 'check_lift_guaranteed', 'worst_case_margin_n', 'csm_margin_n'):
+        assert name in header
+    assert [int(r[0]) for r in rows[1:]] == list(range(N_TRIALS))
+    masses = {r[header.index('object_mass_kg')] for r in rows[1:]}
+    assert len(masses) == N_TRIALS  # every trial drew its own world
+
+
+def test_two_runs_give_the_same_table(reference: str, tmp_path: Path,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Determinism, and the default parallel path: two local worker processes (a Dask
+    LocalCluster) finish the trials in another order and write the same bytes."""
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '2']) == 0
+    assert (tmp_path / TABLE_FILE).read_text(encoding='utf-8') == reference
+    out = capsys.readouterr().out
+    assert 'on 2 local worker processes' in out and f'{N_TRIALS} trials in' in out
+    cells = read_table(tmp_path / CELLS_FILE)
+    assert len(cells) == 4 and all(c['trials'] == '2' for c in cells)
+    params = json.loads((tmp_path / PARAMS_FILE).read_text(encoding='utf-8'))
+    assert params['sweep']['k_theta'] == [0.5, 10.0] and params['n_trials'] == N_TRIALS
+    assert params['sweep']['perturbations']['mass_rel'] == 0.2
+    assert str(REPO_ROOT) not in json.dumps(params['sweep'])
+
+
+def _dask() -> list[str]:
+    exe = Path(sys.executable).with_name('dask')
+    found = str(exe) if exe.is_file() else shutil.which('dask')
+    if found is None:
+        pytest.fail('the dask command is not installed (scripts/requirements/python.txt)')
+    return [found]
+
+
+@pytest.fixture(scope='module')
+def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1 (ports chosen by the
+    system); yields the scheduler's address."""
+    from distributed import Client
+
+    d = tmp_path_factory.mktemp('dask')
+    file = d / 'scheduler.json'
+    procs: list[subprocess.Popen[bytes]] = []
+    grace = 0.1  # [s] for the processes to end by themselves
+    env = _env()
+    logs = []
+
+    def start(args: list[str], name: str) -> None:
+        log = (d / f'{name}.log').open('wb')
+        logs.append(log)
+        procs.append(subprocess.Popen([*_dask(), *args], stdout=log, stderr=subprocess.STDOUT,
+                                      env=env, cwd=d))
+
+    try:
+        start(['scheduler', '--host', '127.0.0.1', '--port', '0', '--no-dashboard',
+               '--scheduler-file', str(file)], 'scheduler')
+        deadline = time.monotonic() + 60.0
+        while not (file.is_file() and file.stat().st_size) and time.monotonic() < deadline:
+            assert procs[0].poll() is None, (d / 'scheduler.log').read_text()
+            time.sleep(0.05)
+        address = json.loads(file.read_text())['address']
+        assert address.startswith('tcp://127.0.0.1:')
+        for i in (1, 2):
+            start(['worker', '--scheduler-file', str(file), '--host', '127.0.0.1',
+                   '--nthreads', '1', '--no-nanny', '--no-dashboard',
+                   '--local-directory', str(d / f'worker{i}')], f'worker{i}')
+        with Client(address, timeout='30s') as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address
+        with Client(address, timeout='30s') as client:
+            client.shutdown()  # the scheduler closes the workers, then itself
+        grace = 10.0
+    finally:
+        for proc in procs:
+            try:
+                proc.wait(timeout=grace)
+            except subprocess.TimeoutExpired:  # the set-up failed, or the shutdown did
+                proc.kill()
+                proc.wait()
+        for log in logs:
+            log.close()
+
+
+def test_loopback_dask_cluster_gives_the_same_table(reference: str, loopback_cluster: str,
+                                                    tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    from distributed import Client
+
+    assert main([*SWEEP, '--out', str(tmp_path), '--scheduler', loopback_cluster]) == 0
+    assert f'on the Dask cluster at {loopback_cluster}' in capsys.readouterr().out
+    assert (tmp_path / TABLE_FILE).read_text(encoding='utf-8') == reference
+    with Client(loopback_cluster, timeout='30s') as client:  # both workers took trials
+        ran = client.run(lambda: len(__import__('dam_sim_bridge.sweep').sweep._ANALYZERS))
+    assert sorted(ran.values()) == [1, 1]
+
+
+def test_interrupted_sweep_resumes_without_redoing_trials(
+        reference: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A real SIGINT to the command after a few rows: it finishes the running trial, keeps
+    the rows and exits with 130; the same sweep again runs only the missing trials and ends
+    with the reference table."""
+    table = tmp_path / TABLE_FILE
+    proc = subprocess.Popen(_sweep_command(tmp_path, '--workers', '1'), env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120.0
+        rows = 0
+        while rows < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+            rows = table.read_text().count('\n') - 1 if table.is_file() else 0
+        assert proc.poll() is None, 'the sweep ended before it could be interrupted'
+        children = psutil.Process(proc.pid).children(recursive=True)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert 'Traceback' not in err
+    assert 'interrupted:' in out and 'run the same command again' in out
+    assert 'stopping after the running trial' in err
+    _, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive
+    kept = read_table(table)
+    assert 2 <= len(kept) < N_TRIALS
+    assert not (tmp_path / CELLS_FILE).exists()
+
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
+    out = capsys.readouterr().out
+    todo = N_TRIALS - len(kept)
+    assert f'resuming: {len(kept)} done, {todo} to run' in out
+    assert f'\nsweep: {todo} trials in ' in out  # only the missing ones ran
+    assert table.read_text(encoding='utf-8') == reference
+    assert all(row in read_table(table) for row in kept)
+
+
+@pytest.mark.parametrize('args, words', [
+    (['--k-theta', '0.05:20:0:log'], ['--k-theta', 'count 0', "'0.05:20:0:log'"]),
+    (['--delta-theta-p', '5:70:14'], ['--delta-theta-p: 70 deg exceeds']),
+    (['--friction-angles', '5', '95'], ['--friction-angles: 95 deg', 'outside [0, 90)']),
+    (['--k-theta', '1', '--mass-rel', '1.5'], ['--mass-rel (mass_rel): 1.5']),
+    (['--repeats', '0'], ['--repeats (repeats): 0']),
+    (['--workers', '0'], ['--workers: 0']),
+])
+def test_bad_arguments_are_refused(args: list[str], words: list[str], tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    base = {'--k-theta': ['1'], '--delta-theta-p': ['10']}
+    flat = [a for k, v in base.items() if k not in args for a in (k, *v)]
+    assert main([*flat, *args, '--out', str(tmp_path / 'x'), '--config', str(CONFIG)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('sweep: ')
+    for word in words:
+        assert word in err, err
+    assert not (tmp_path / 'x').exists()
+
+
+def test_another_sweep_in_the_same_directory_is_refused(reference: str, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]
+                                                        ) -> None:
+    (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': 1, 'sweep': {'seed': 5}}))
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
+    assert 'holds a different sweep' in capsys.readouterr().err
+
+
+def test_installed_command() -> None:
+    """``ros2 run dam_sim_bridge sweep`` finds it; the core imports no rclpy."""
+    exe = installed_executable('dam_sim_bridge', 'sweep')
+    proc = subprocess.run([str(exe), '--help'], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    for option in ('--friction-angles', '--k-theta', '--delta-theta-p', '--repeats',
+                   '--workers', '--scheduler', 'start:stop:count:log'):
+        assert option in proc.stdout
+    code = ('import sys, dam_sim_bridge.sweep_cli, dam_sim_bridge.sweep_table; '
+            'assert "rclpy" not in sys.modules, "the sweep imports rclpy"')
+    subprocess.run([sys.executable, '-c', code], check=True, timeout=60, env=_env())
