@@ -214,3 +214,37 @@ def test_messages_handed_over_late_go_by_their_stamps(tmp_path: Path, prefixes,
     [(bag, outcome)] = finished
     assert outcome == 'SUCCESS'
     assert frame_ids(read_with_rosbags(bag)['/joint_states']) == list(range(400, 801))
+
+
+def test_an_ended_event_taken_after_later_messages_keeps_them_out(tmp_path: Path, prefixes,
+                                                                  typestore) -> None:
+    """The ENDED event comes late (e.g. resent), after messages from beyond the post-roll have
+    been taken: the episode still ends at its post-roll (the messages were held back)."""
+    rec = make_recorder(tmp_path, pre_roll_s=0.1, post_roll_s=0.1)
+    js = rec.add_topic(specs(prefixes)[0])
+    rec.started(GOAL, T0 + 200 * MS)
+    for i in range(200, 2000):  # the goal ends at 700 ms; its event is taken at 2000 ms
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    assert rec.ended(GOAL, T0 + 2000 * MS, summary(), ended_ns=T0 + 700 * MS)
+    [(bag, _outcome)] = rec.poll(T0 + 2000 * MS)  # a message after the post-roll was taken
+    assert frame_ids(read_with_rosbags(bag)['/joint_states']) == list(range(200, 801))
+
+
+def test_messages_are_held_back_for_a_bounded_time_only(tmp_path: Path, prefixes,
+                                                        typestore) -> None:
+    """An ENDED event later than the hold-back cannot take back what was written: the bound
+    of the guarantee (HOLD_BACK_NS) is the one documented."""
+    from dam_recorder.episodes import HOLD_BACK_NS
+
+    rec = make_recorder(tmp_path, pre_roll_s=0.1, post_roll_s=0.1)
+    js = rec.add_topic(specs(prefixes)[0])
+    rec.started(GOAL, T0)
+    late_ms = HOLD_BACK_NS // MS + 1000
+    for i in range(0, late_ms, 10):
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    rec.ended(GOAL, T0 + late_ms * MS, summary(), ended_ns=T0 + 100 * MS)
+    [(bag, _outcome)] = rec.close_all()
+    ids = frame_ids(read_with_rosbags(bag)['/joint_states'])
+    assert ids[:21] == list(range(0, 201, 10))  # the window itself is whole
+    # Written before the event came: everything older than the hold-back at that time.
+    assert max(ids) == (late_ms - 10) - HOLD_BACK_NS // MS - 10

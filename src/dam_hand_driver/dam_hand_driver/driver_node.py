@@ -332,10 +332,14 @@ class HandDriverNode(Node):
         # timed thread, so that no ordinary process delays a command or holds the lock (the
         # timed thread warns if real-time scheduling is refused). Before the timed thread
         # starts: it raises itself above them.
-        self._intake.start()
-        set_process_priority(max(0, self.thread_priority - 1))
-        self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
-        self._thread.start()
+        try:
+            self._intake.start()
+            set_process_priority(max(0, self.thread_priority - 1))
+            self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
+            self._thread.start()
+        except BaseException:  # e.g. a stop request: the node is not handed out to stop it
+            self.destroy_node()
+            raise
 
     # ---------------------------------------------------------------------------------------
     # Backend

@@ -52,6 +52,10 @@ UNFINISHED = 'UNKNOWN'
 OPEN_SUFFIX = 'recording'
 #: How long after its post-roll an episode waits for a later message before it closes [ns].
 CATCH_UP_NS = 1_000_000_000
+#: How long an open episode holds a message back before it writes it [ns]: an ENDED event that
+#: arrives up to this much later than the messages after the post-roll still keeps them out
+#: (events and data travel on different topics; a resent event arrives late).
+HOLD_BACK_NS = 3_000_000_000
 
 
 def json_safe(value: Any) -> Any:
@@ -93,6 +97,8 @@ class _Episode:
     close_after_ns: int | None = None
     caught_up: bool = False  # a message stamped after close_after_ns has arrived
     window_start_ns: int = 0  # messages stamped before are not the episode's
+    #: (key, stamp, data, trimmed) taken but not yet written (:data:`HOLD_BACK_NS`)
+    held: deque[tuple[int, int, bytes, bool]] = field(default_factory=deque)
 
 
 class EpisodeRecorder:
@@ -175,7 +181,11 @@ class EpisodeRecorder:
         for episode in self._open.values():
             if stamp_ns < episode.window_start_ns:
                 continue  # taken late (a backlog): older than the episode's pre-roll
-            if episode.close_after_ns is None or stamp_ns <= episode.close_after_ns:
+            if episode.close_after_ns is None:
+                episode.held.append((key, stamp_ns, data, trimmed))
+                while episode.held and episode.held[0][1] < stamp_ns - HOLD_BACK_NS:
+                    self._write_to(episode, *episode.held.popleft())
+            elif stamp_ns <= episode.close_after_ns:
                 self._write_to(episode, key, stamp_ns, data, trimmed)
             else:
                 episode.caught_up = True
@@ -251,6 +261,7 @@ class EpisodeRecorder:
         episode.summary = dict(summary)
         end_ns = min(stamp_ns, ended_ns) if ended_ns else stamp_ns
         episode.close_after_ns = end_ns + self.post_roll_ns
+        self._release_held(episode)
         return True
 
     def poll(self, now_ns: int) -> list[tuple[Path, str]]:
@@ -268,6 +279,17 @@ class EpisodeRecorder:
         return [self._close(goal_id) for goal_id in list(self._open)]
 
     # -- helpers -----------------------------------------------------------------------------
+
+    def _release_held(self, episode: _Episode) -> None:
+        """Write the held messages inside the episode's window; drop those after its
+        post-roll (they arrived before the ENDED event did)."""
+        close_after = episode.close_after_ns
+        while episode.held:
+            key, stamp_ns, data, trimmed = episode.held.popleft()
+            if close_after is None or stamp_ns <= close_after:
+                self._write_to(episode, key, stamp_ns, data, trimmed)
+            else:
+                episode.caught_up = True
 
     def _write_to(self, episode: _Episode, key: int, stamp_ns: int, data: bytes,
                   trimmed: bool) -> None:
@@ -309,6 +331,7 @@ class EpisodeRecorder:
 
     def _close(self, goal_id: str) -> tuple[Path, str]:
         episode = self._open.pop(goal_id)
+        self._release_held(episode)
         if episode.summary is None:
             episode.summary = unfinished_summary(goal_id, episode.started_ns)
         outcome = str(episode.summary.get('outcome_name') or UNFINISHED)

@@ -222,16 +222,20 @@ class SpcmControllerNode(Node):
         self._release_srv = self.create_service(Trigger, '~/release', self._on_release,
                                                 callback_group=MutuallyExclusiveCallbackGroup())
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._intake.start()
-        # The control loop is this process's middleware threads, its intake thread and its
-        # executor: all of them real-time where permitted, below the driver's device thread.
-        refused = set_process_priority(self._thread_priority)
-        if refused:
-            self.get_logger().warning(
-                f'{refused}: the controller runs with normal scheduling; on a busy machine '
-                f'/joint_states may reach it late (thread_priority:=0 silences this)')
-        self.get_logger().info(f'spcm_controller ready ({self._config.source}); joints '
-                               f'{list(self._layout.joint_names)}')
+        try:
+            self._intake.start()
+            # The control loop is this process's middleware threads, its intake thread and
+            # its executor: all real-time where permitted, below the driver's device thread.
+            refused = set_process_priority(self._thread_priority)
+            if refused:
+                self.get_logger().warning(
+                    f'{refused}: the controller runs with normal scheduling; on a busy machine '
+                    f'/joint_states may reach it late (thread_priority:=0 silences this)')
+            self.get_logger().info(f'spcm_controller ready ({self._config.source}); joints '
+                                   f'{list(self._layout.joint_names)}')
+        except BaseException:  # e.g. a stop request: the node is not handed out to stop it
+            self._intake.stop()
+            raise
 
     # ------------------------------------------------------------------------------------
     # Parameters
