@@ -59,7 +59,6 @@ from std_srvs.srv import Trigger
 from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
-from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.intake import SubscriptionThread
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
@@ -806,7 +805,7 @@ def main(args: list[str] | None = None) -> None:
     # A bad start-up parameter: one clear fatal line and exit status 2.
     run_node(SpcmControllerNode, 'spcm_controller', args,
              startup_errors=(InputError, DamAnalysisError),
-             startup_exit_code=2, scheduled_gc_period_s=GC_PERIOD_S)
+             startup_exit_code=2)
 
 
 if __name__ == '__main__':
