@@ -26,6 +26,7 @@ setup(
             'sim_bridge = dam_sim_bridge.entry_points:sim_bridge',
             'dam_experiment = dam_sim_bridge.experiment:main',
             'sweep = dam_sim_bridge.sweep_cli:main',
+            'sweep_plot = dam_sim_bridge.sweep_plot:main',
         ],
     },
 )

@@ -25,3 +25,8 @@ class SimulationError(SimBridgeError, RuntimeError):
 class SweepError(SimBridgeError, ValueError):
     """A sweep is malformed (a bad range or option, naming the field and the value) or does
     not match the sweep already in its output directory."""
+
+
+class SweepPlotError(SimBridgeError, ValueError):
+    """A sweep directory cannot be drawn: a missing directory or file, an empty or malformed
+    table (naming the file, the trial and the value), or a picture that cannot be written."""

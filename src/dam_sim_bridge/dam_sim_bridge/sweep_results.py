@@ -1,0 +1,272 @@
+"""A sweep directory read back: the trials of ``trials.csv`` with the sweep of ``sweep.json``.
+
+What :mod:`dam_sim_bridge.sweep_plot` draws: :func:`read_sweep` checks the files ``sweep``
+(:mod:`dam_sim_bridge.sweep_table`) writes and returns the trials as :class:`Trial` (the cell,
+the controller's classification ``outcome`` and the ground truth ``lifted``), grouped per
+friction angle and per cell on demand (:class:`SweepData`); :func:`k_axis_is_log` tells whether
+the sweep's ``k_theta`` axis was a log range. A sweep still running or interrupted is read as
+far as it got (a row cut short is left out and counted).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dam_sim_bridge.errors import SweepError, SweepPlotError
+from dam_sim_bridge.sweep import SweepSpec
+from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE
+
+#: The paper's three classes (column ``outcome``), in legend order: x, triangle, o.
+OUTCOMES = ('FAILURE', 'LIFTED_DAM_FAILED', 'SUCCESS')
+#: Columns of ``trials.csv`` the picture needs.
+REQUIRED_COLUMNS = ('trial', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
+                    'repeat', 'outcome', 'lifted')
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One row of ``trials.csv``, as far as the picture needs it.
+
+    Attributes
+    ----------
+    index
+        The trial's number (column ``trial``).
+    friction_angle_deg
+        The cell's friction angle alpha [deg].
+    k_theta
+        The cell's finger-1 compliant stiffness [N*m/rad].
+    delta_theta_p_deg
+        The cell's position-joint displacement [deg].
+    repeat
+        Repeat number within the cell.
+    outcome
+        The controller's classification: ``FAILURE``, ``LIFTED_DAM_FAILED`` or ``SUCCESS``.
+    lifted
+        Ground truth: the object centre ended at least ``classification.lift_height_m`` up.
+    """
+
+    index: int
+    friction_angle_deg: float
+    k_theta: float
+    delta_theta_p_deg: float
+    repeat: int
+    outcome: str
+    lifted: bool
+
+    @property
+    def disagrees(self) -> bool:
+        """True when the classification says lifted (SUCCESS, LIFTED_DAM_FAILED) and the
+        object did not lift, or FAILURE and it did."""
+        return (self.outcome != 'FAILURE') != self.lifted
+
+
+@dataclass(frozen=True)
+class Cell:
+    """The trials of one grid cell at one friction angle.
+
+    Attributes
+    ----------
+    k_theta, delta_theta_p_deg
+        The cell [N*m/rad, deg].
+    trials, lifted, success
+        Trials of the cell, how many lifted (ground truth), how many the controller
+        classified SUCCESS.
+    """
+
+    k_theta: float
+    delta_theta_p_deg: float
+    trials: int
+    lifted: int
+    success: int
+
+    @property
+    def p_lift(self) -> float:
+        """Share of the cell's trials that lifted [-]."""
+        return self.lifted / self.trials
+
+
+@dataclass(frozen=True)
+class SweepData:
+    """A sweep directory as read by :func:`read_sweep`.
+
+    Attributes
+    ----------
+    directory
+        The directory.
+    spec
+        The sweep's parameters (``sweep.json``'s ``sweep``).
+    parameters
+        All of ``sweep.json``.
+    trials
+        The complete rows of ``trials.csv``, in file order.
+    skipped
+        Rows cut short (a sweep still writing its table) that were left out.
+    """
+
+    directory: Path
+    spec: SweepSpec
+    parameters: Mapping[str, Any]
+    trials: tuple[Trial, ...]
+    skipped: int = 0
+
+    @property
+    def friction_angles_deg(self) -> tuple[float, ...]:
+        """The friction angles found in the table, ascending [deg]."""
+        return tuple(sorted({t.friction_angle_deg for t in self.trials}))
+
+    @property
+    def repeats(self) -> int:
+        """Trials per cell of the sweep."""
+        return self.spec.repeats
+
+    @property
+    def n_planned(self) -> int:
+        """Trials of the whole sweep."""
+        return self.spec.n_trials
+
+    def at(self, friction_angle_deg: float) -> list[Trial]:
+        """The trials at one friction angle."""
+        return [t for t in self.trials if t.friction_angle_deg == friction_angle_deg]
+
+    def cells(self, friction_angle_deg: float) -> list[Cell]:
+        """The cells at one friction angle that have trials, in order of first appearance."""
+        groups: dict[tuple[float, float], list[Trial]] = {}
+        for t in self.at(friction_angle_deg):
+            groups.setdefault((t.k_theta, t.delta_theta_p_deg), []).append(t)
+        return [Cell(k, dp, len(g), sum(t.lifted for t in g),
+                     sum(t.outcome == 'SUCCESS' for t in g)) for (k, dp), g in groups.items()]
+
+
+def _fail_row(table: Path, line: int, trial: str, message: str) -> SweepPlotError:
+    return SweepPlotError(f'{table}, line {line} (trial {trial!r}): {message}')
+
+
+def _number(table: Path, line: int, row: Mapping[str, str], column: str, low: float,
+            high: float = math.inf, low_open: bool = True) -> float:
+    text = row[column]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    inside = (value > low if low_open else value >= low) and value < high
+    if not (math.isfinite(value) and inside):
+        bound = f'{"(" if low_open else "["}{low:g}, {high:g})'
+        raise _fail_row(table, line, row['trial'], f'{column} {text!r} is not a number in '
+                                                   f'{bound}')
+    return value
+
+
+def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
+    """One row of the table, checked."""
+    try:
+        index = int(row['trial'])
+        repeat = int(row['repeat'])
+    except ValueError:
+        raise _fail_row(table, line, row['trial'], f'trial {row["trial"]!r} and repeat '
+                                                   f'{row["repeat"]!r} must be whole numbers'
+                        ) from None
+    if row['outcome'] not in OUTCOMES:
+        raise _fail_row(table, line, row['trial'], f'outcome {row["outcome"]!r} is not one of '
+                                                   f'{", ".join(OUTCOMES)}')
+    if row['lifted'] not in ('0', '1'):
+        raise _fail_row(table, line, row['trial'], f'lifted {row["lifted"]!r} is not 0 or 1')
+    return Trial(index=index,
+                 friction_angle_deg=_number(table, line, row, 'friction_angle_deg', 0.0, 90.0,
+                                            low_open=False),
+                 k_theta=_number(table, line, row, 'k_theta_nm_per_rad', 0.0),
+                 delta_theta_p_deg=_number(table, line, row, 'delta_theta_p_deg', 0.0),
+                 repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1')
+
+
+def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
+    """Read ``sweep.json`` and the complete rows of ``trials.csv`` of a sweep directory.
+
+    Parameters
+    ----------
+    directory
+        A ``sweep --out`` directory.
+
+    Returns
+    -------
+    SweepData
+        The sweep and its trials (at least one).
+
+    Raises
+    ------
+    SweepPlotError
+        The directory, ``sweep.json`` or ``trials.csv`` is missing or unreadable, the table
+        has no trial or lacks a needed column, or a value is malformed (naming the file, the
+        line, the trial and the value).
+    """
+    root = Path(directory)
+    if not root.exists():
+        raise SweepPlotError(f'{root}: no such directory')
+    if not root.is_dir():
+        raise SweepPlotError(f'{root} is not a directory')
+    params_path, table = root / PARAMS_FILE, root / TABLE_FILE
+    if not table.is_file():
+        raise SweepPlotError(f'{table}: no such file (not a sweep directory, or the sweep '
+                             f'has not started)')
+    if not params_path.is_file():
+        raise SweepPlotError(f'{params_path}: no such file (the sweep writes it first)')
+    try:
+        parameters = json.loads(params_path.read_text(encoding='utf-8'))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise SweepPlotError(f'{params_path}: cannot read it ({exc})') from None
+    if not isinstance(parameters, dict) or not isinstance(parameters.get('sweep'), dict):
+        raise SweepPlotError(f'{params_path}: no "sweep" parameters in it')
+    try:
+        spec = SweepSpec.from_dict(parameters['sweep'])
+    except SweepError as exc:
+        raise SweepPlotError(f'{params_path}: {exc}') from None
+    try:
+        with table.open(encoding='utf-8', newline='') as handle:
+            reader = csv.DictReader(handle)
+            header = reader.fieldnames
+            if not header:
+                raise SweepPlotError(f'{table} is empty: no header, no trials')
+            missing = [c for c in REQUIRED_COLUMNS if c not in header]
+            if missing:
+                raise SweepPlotError(f'{table}: no column {missing[0]!r} (its columns: '
+                                     f'{", ".join(header)})')
+            trials, skipped = [], 0
+            for row in reader:
+                if None in row.values() or None in row:  # cut short or too long
+                    skipped += 1
+                    continue
+                trials.append(_trial(table, reader.line_num, row))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise SweepPlotError(f'{table}: cannot read it ({exc})') from None
+    if not trials:
+        raise SweepPlotError(f'{table} holds no trials (only its header)' if not skipped else
+                             f'{table} holds no complete trial ({skipped} row(s) cut short)')
+    return SweepData(root, spec, parameters, tuple(trials), skipped)
+
+
+def k_axis_is_log(parameters: Mapping[str, Any]) -> bool:
+    """Whether the sweep's ``k_theta`` axis is a log range.
+
+    As typed (``sweep.json``'s ``axes_as_given.k_theta``): any ``start:stop:count:log``
+    token. Without that record: at least three values with a constant ratio and unequal
+    differences.
+    """
+    given = parameters.get('axes_as_given')
+    tokens = given.get('k_theta') if isinstance(given, Mapping) else None
+    if isinstance(tokens, list) and tokens and all(isinstance(t, str) for t in tokens):
+        return any(len(p := t.split(':')) == 4 and p[3].strip().lower() == 'log'
+                   for t in tokens)
+    values = np.sort(np.asarray(parameters.get('sweep', {}).get('k_theta', []), dtype=float))
+    if values.size < 3 or not np.all(values > 0.0):
+        return False
+    ratios, steps = values[1:] / values[:-1], np.diff(values)
+    return bool(np.allclose(ratios, ratios[0], rtol=1e-4)
+                and not np.allclose(steps, steps[0], rtol=1e-4))
