@@ -1,6 +1,6 @@
 """Every node stops cleanly on SIGINT or SIGTERM at any moment of its life.
 
-For each node, 50 trials: start it, wait a random time, send SIGINT or SIGTERM (drawn at
+For each node, 30 trials: start it, wait a random time, send SIGINT or SIGTERM (drawn at
 random), and require exit status 0, no traceback, the exit within 2 s of the signal and no
 process of its own left running (the driver's stand-in). The moment is drawn from the time the
 process has its handlers in place (``SigCgt`` in /proc, a few tens of milliseconds after the
@@ -35,11 +35,11 @@ from ros_testing import (
     process_gone,
 )
 
-# 50 real-time trials on a shared 2-core machine: a storm that fails is run once more (shown as
-# R in pytest's summary); a deterministic fault fails both.
+# 30 real-time trials per node on a shared 2-core machine: a storm that fails is run once more
+# (shown as R in pytest's summary); a deterministic fault fails both.
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
-TRIALS = 50
+TRIALS = 30
 EXIT_WITHIN_S = 2.0
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -129,7 +129,7 @@ def _assert_all_clean(trials: list[Trial]) -> None:
 
 def _storm(command: Callable[[Path], list[str]], tmp: Path, max_delay_s: float,
            seed: str, with_config: bool = False) -> list[Trial]:
-    """50 trials, two at a time (each with its own device ports when ``with_config``)."""
+    """TRIALS trials, two at a time (each with its own device ports when ``with_config``)."""
     rng = random.Random(seed)
     plans = [(rng.uniform(0.0, max_delay_s), rng.choice(SIGNALS)) for _ in range(TRIALS)]
 
