@@ -269,3 +269,12 @@ def test_cell_summary_counts_outcomes() -> None:
             cell['lifted_dam_failed'], cell['failure'], cell['p_success'],
             cell['rise_final_mm_mean']) == ('3', '2', '0.666667', '1', '1', '1', '0.333333',
                                             '5')
+
+
+def test_an_output_whose_parent_does_not_exist_is_refused_not_created(
+        cfg: DamConfig, tmp_path: Path) -> None:
+    sweep = SweepSpec((5.0,), (1.0,), (10.0,))
+    out = tmp_path / 'typo' / 'deeper' / 'run'
+    with pytest.raises(SweepError, match='does not exist'):
+        TrialTable(out, sweep, cfg, info={}).open()
+    assert not (tmp_path / 'typo').exists()

@@ -200,6 +200,22 @@ def test_repeats_give_a_lift_probability_per_cell(repeat_sweep: Path, config: An
     assert '9 of 9 trials, 3 per cell, k_theta axis linear' in result.summary[0]
 
 
+def test_a_last_row_with_all_its_fields_but_no_newline_is_still_being_written(
+        tmp_path: Path, config: Any, analyzer: LiftAnalyzer) -> None:
+    """The table's writer ends every row with a newline: a last row without one is cut short,
+    even when the cut fell inside its last field (all columns present)."""
+    sweep = SweepSpec(friction_angles_deg=(5.0,), k_theta=(1.0, 10.0),
+                      delta_theta_p_deg=(20.0,))
+    d = write_sweep(tmp_path / 'cut', config, sweep, None, lambda i: ('SUCCESS', 1))
+    table = d / TABLE_FILE
+    text = table.read_text(encoding='utf-8')
+    assert text.endswith('\n')
+    table.write_text(text[:-3], encoding='utf-8')  # inside the last row's last field
+    result = plot_sweep(d, None, config=config, analyzer=analyzer, n_points=N_POINTS,
+                        k_scale='log')
+    assert result.data.skipped == 1 and len(result.data.trials) == 1
+
+
 def test_a_sweep_still_running_and_another_configuration(tmp_path: Path, config: Any,
                                                         analyzer: LiftAnalyzer) -> None:
     sweep = SweepSpec(friction_angles_deg=(5.0, 30.0), k_theta=(1.0, 10.0),

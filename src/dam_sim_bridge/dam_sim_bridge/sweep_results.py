@@ -11,6 +11,7 @@ far as it got (a row cut short is left out and counted).
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -229,21 +230,26 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
     except SweepError as exc:
         raise SweepPlotError(f'{params_path}: {exc}') from None
     try:
-        with table.open(encoding='utf-8', newline='') as handle:
-            reader = csv.DictReader(handle)
-            header = reader.fieldnames
-            if not header:
-                raise SweepPlotError(f'{table} is empty: no header, no trials')
-            missing = [c for c in REQUIRED_COLUMNS if c not in header]
-            if missing:
-                raise SweepPlotError(f'{table}: no column {missing[0]!r} (its columns: '
-                                     f'{", ".join(header)})')
-            trials, skipped = [], 0
-            for row in reader:
-                if None in row.values() or None in row:  # cut short or too long
-                    skipped += 1
-                    continue
-                trials.append(_trial(table, reader.line_num, row))
+        text = table.read_text(encoding='utf-8')
+        trials, skipped = [], 0
+        if text and not text.endswith('\n') and '\n' in text:
+            # The last row is being written (rows end with a newline): cut short, even when
+            # it has all its fields.
+            text = text[:text.rfind('\n') + 1]
+            skipped += 1
+        reader = csv.DictReader(io.StringIO(text, newline=''))
+        header = reader.fieldnames
+        if not header:
+            raise SweepPlotError(f'{table} is empty: no header, no trials')
+        missing = [c for c in REQUIRED_COLUMNS if c not in header]
+        if missing:
+            raise SweepPlotError(f'{table}: no column {missing[0]!r} (its columns: '
+                                 f'{", ".join(header)})')
+        for row in reader:
+            if None in row.values() or None in row:  # cut short or too long
+                skipped += 1
+                continue
+            trials.append(_trial(table, reader.line_num, row))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise SweepPlotError(f'{table}: cannot read it ({exc})') from None
     if not trials:

@@ -151,7 +151,10 @@ class TrialTable:
         """
         if self.directory.exists() and not self.directory.is_dir():
             raise SweepError(f'--out {str(self.directory)!r} exists and is not a directory')
-        self.directory.mkdir(parents=True, exist_ok=True)
+        if not self.directory.parent.is_dir():  # a typo must not create directories anywhere
+            raise SweepError(f'--out {str(self.directory)!r}: the directory it goes into, '
+                             f'{str(self.directory.parent)!r}, does not exist')
+        self.directory.mkdir(exist_ok=True)
         params = self.directory / PARAMS_FILE
         if params.exists():
             try:
