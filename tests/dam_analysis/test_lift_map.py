@@ -161,12 +161,3 @@ def test_module_runs_without_ros_imports():
             'assert "rclpy" not in sys.modules, "lift_map imports rclpy"')
     subprocess.run([sys.executable, '-c', code], check=True, timeout=30,
                    env={'PYTHONPATH': ':'.join(p for p in sys.path if p)})
-
-
-def test_ros_arguments_are_ignored() -> None:
-    from dam_analysis.lift_map import strip_ros_args
-
-    argv = ['--friction-angles', '5', '--ros-args', '-r', '__ns:=/x', '--', '--out', 'm.png']
-    assert strip_ros_args(argv) == ['--friction-angles', '5', '--out', 'm.png']
-    assert strip_ros_args(['--ros-args', '-p', 'a:=1']) == []
-    assert strip_ros_args(['--k-max', '3']) == ['--k-max', '3']

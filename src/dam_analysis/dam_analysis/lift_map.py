@@ -32,6 +32,7 @@ from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.regions import Boundaries
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.ros_args import strip_ros_args
 
 #: Smallest default top of the k_theta axis (and the value when nothing lifts) [N m/rad].
 DEFAULT_K_MAX = 10.0
@@ -177,23 +178,6 @@ def plot_map(path: Path, friction_angles_deg: Sequence[float],
     fig.tight_layout()
     fig.savefig(path, format='png')
     plt.close(fig)
-
-
-def strip_ros_args(argv: Sequence[str]) -> list[str]:
-    """Drop ROS arguments (``--ros-args ... [--]``) that ``ros2 run`` may pass along.
-
-    Done by hand so that the tool needs no rclpy.
-    """
-    out: list[str] = []
-    in_ros = False
-    for arg in argv:
-        if arg == '--ros-args':
-            in_ros = True
-        elif in_ros and arg == '--':
-            in_ros = False
-        elif not in_ros:
-            out.append(arg)
-    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:

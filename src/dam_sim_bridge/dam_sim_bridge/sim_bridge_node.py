@@ -58,6 +58,7 @@ from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, declare_thread_priority, run_node
 from dam_common.realtime import SWITCH_INTERVAL_S, set_process_priority, set_thread_priority
+from dam_common.ros_args import strip_ros_args
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.errors import SimBridgeError
@@ -234,27 +235,9 @@ class SimBridgeNode(Node):
         super().destroy_node()
 
 
-def non_ros_args(argv: list[str]) -> list[str]:
-    """The arguments of ``argv`` (program name first) outside ``--ros-args ... [--]``.
-
-    Parsed here rather than by rclpy, so that a malformed ROS argument is reported once, by
-    :func:`~dam_common.node.run_node`, as one line.
-    """
-    out: list[str] = []
-    in_ros = False
-    for arg in argv[1:]:
-        if arg == '--ros-args':
-            in_ros = True
-        elif arg == '--' and in_ros:
-            in_ros = False
-        elif not in_ros:
-            out.append(arg)
-    return out
-
-
 def main(args: list[str] | None = None) -> None:
     argv = sys.argv if args is None else args
-    gui_flag = '--gui' in non_ros_args(argv)
+    gui_flag = '--gui' in strip_ros_args(argv[1:])
     run_node(lambda: SimBridgeNode(gui_flag=gui_flag), 'sim_bridge', args,
              startup_errors=(SimBridgeError, OSError),
              switch_interval_s=SWITCH_INTERVAL_S, scheduled_gc_period_s=GC_PERIOD_S)

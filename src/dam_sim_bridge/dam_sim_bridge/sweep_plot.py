@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from dam_common.ros_args import strip_ros_args
 from dam_sim_bridge.errors import SweepPlotError
 from dam_sim_bridge.sweep import config_digest
 from dam_sim_bridge.sweep_results import OUTCOMES, SweepData, k_axis_is_log, read_sweep
@@ -445,21 +446,6 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     if args.dpi < 1:
         p.error(f'--dpi: {args.dpi} must be positive')
     return args
-
-
-def strip_ros_args(argv: Sequence[str]) -> list[str]:
-    """``argv`` without ROS arguments (``--ros-args ... [--]``) that ``ros2 run`` may pass
-    along (as ``dam_analysis.lift_map`` does, without importing the analysis for it)."""
-    out: list[str] = []
-    in_ros = False
-    for arg in argv:
-        if arg == '--ros-args':
-            in_ros = True
-        elif in_ros and arg == '--':
-            in_ros = False
-        elif not in_ros:
-            out.append(arg)
-    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
