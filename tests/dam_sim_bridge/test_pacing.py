@@ -4,6 +4,7 @@ they describe (no ROS)."""
 from __future__ import annotations
 
 import socket
+import sys
 import threading
 import time
 
@@ -11,6 +12,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import load_config
+from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_hand_driver.protocol import FrameDecoder, FrameKind, StateFrame
 from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.sim_device import SimDevice
@@ -43,9 +45,20 @@ def test_real_time_state_frames_are_stamped_one_period_apart_and_sent_on_time() 
     sock.settimeout(2.0)
     device = SimDevice(cfg, host='127.0.0.1', command_port=0,
                        state_port=sock.getsockname()[1])
-    thread = threading.Thread(target=device.run, daemon=True)
+
+    def run_as_the_node_does() -> None:
+        # The stand-in's node runs its device thread under SCHED_FIFO at its thread_priority
+        # (50) where that is permitted, and normally where not.
+        set_thread_priority(50)
+        device.run()
+
+    thread = threading.Thread(target=run_as_the_node_does, daemon=True)
     decoder = FrameDecoder(FrameKind.STATE, n)
     stamps, lateness = [], []
+    # ... and it shortens the interpreter's switch interval, so that this (receiving) thread
+    # cannot keep the device thread waiting for the interpreter lock for 5 ms.
+    switch_interval = sys.getswitchinterval()
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     thread.start()
     try:
         while len(stamps) < 300:
@@ -59,6 +72,7 @@ def test_real_time_state_frames_are_stamped_one_period_apart_and_sent_on_time() 
         thread.join(timeout=2.0)
         device.close()
         sock.close()
+        sys.setswitchinterval(switch_interval)
     periods = np.diff(stamps)
     # Stamps are the deadlines: exactly one period apart unless a deadline was skipped.
     regular = np.isclose(periods, device.period_s, rtol=0.0, atol=1e-6)
