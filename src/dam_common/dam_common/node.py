@@ -32,6 +32,12 @@ CONFIG_FILE_DESCRIPTION = ('DAM configuration file (YAML); empty: DAM_CONFIG or 
                            'config/dam.yaml')
 #: Longest time a stop request waits for the executor loop [s].
 SPIN_PERIOD_S = 0.05
+#: History depth of the 500 Hz streams' publishers (``/joint_states``, ``/hand/command``)
+#: [messages]: one second, kept for reliable subscribers that fall behind (a recorder that the
+#: kernel stops for up to 50 ms when the real-time budget runs out). With the usual 10 the
+#: publisher overwrites what such a subscriber has not yet acknowledged (20 ms at 500 Hz), and
+#: the subscriber's middleware reports those messages lost.
+STREAM_HISTORY_DEPTH = 500
 #: Longest time a node may finish its work after a stop request (``begin_shutdown``) [s].
 FINISH_TIMEOUT_S = 1.0
 #: Fields that say whether a service call succeeded, and the ones that say why not.

@@ -87,7 +87,12 @@ from dam_common.clock import create_steady_timer
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.intake import SubscriptionThread
-from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.node import (
+    STREAM_HISTORY_DEPTH,
+    declare_config_file,
+    declare_thread_priority,
+    run_node,
+)
 from dam_common.realtime import (
     SWITCH_INTERVAL_S,
     die_with_parent,
@@ -309,7 +314,8 @@ class HandDriverNode(Node):
                              reliability=ReliabilityPolicy.RELIABLE)
         self._description_pub = self.create_publisher(String, '/robot_description', latched)
         self._description_pub.publish(String(data=hand_urdf(self.config)))
-        self._js_pub = self.create_publisher(JointState, '/joint_states', 10)
+        self._js_pub = self.create_publisher(JointState, '/joint_states',
+                                              STREAM_HISTORY_DEPTH)
         self._js_msg = JointState()
         self._js_msg.name = list(self.joint_names)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)

@@ -61,7 +61,12 @@ from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
 from dam_common.intake import SubscriptionThread
-from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.node import (
+    STREAM_HISTORY_DEPTH,
+    declare_config_file,
+    declare_thread_priority,
+    run_node,
+)
 from dam_common.realtime import set_process_priority
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
@@ -200,7 +205,8 @@ class SpcmControllerNode(Node):
         self._release: ReleaseMotion | None = None  # letting go (~/release) when set
         self._release_done: Future | None = None
 
-        self._command_pub = self.create_publisher(HandCommand, '/hand/command', 10)
+        self._command_pub = self.create_publisher(HandCommand, '/hand/command',
+                                                  STREAM_HISTORY_DEPTH)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
         self._episodes = EpisodeEvents(self, str(self._config.source))
         # /joint_states (500 Hz) has a thread and a wait set of its own: through this node's
