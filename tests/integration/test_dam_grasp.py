@@ -10,7 +10,10 @@ open):
 2. ``k_theta = 10`` (inside the sufficient region at 10 deg, ``k* = 6.35``): the object rises
    by well over 5 mm, stays up while the hand holds it, and the result is SUCCESS;
 3. after a world reset, a grasp cancelled mid-way: the controller commands zero torque on the
-   compliant joints and the simulated joints report zero torque.
+   compliant joints and the simulated joints report zero torque;
+4. the ROS path against the lockstep path (``run_experiment``, what ``sweep`` runs): for three
+   pairs with different outcomes (those of 1 and 2, and a LIFTED_DAM_FAILED one), the action's
+   outcome and the ground-truth lift are those of the lockstep trial of the same pair.
 
 The compliant joints run in the device's IMPEDANCE mode (the law at the stand-in's 1 kHz physics
 rate), so the grasp no longer depends on the ROS latency: every scenario runs once, no retries.
@@ -155,6 +158,42 @@ def stack(config_file: Path) -> Iterator[_Grasper]:
                 assert proc.alive(), proc.output()
 
 
+#: (k_theta [N*m/rad], delta_theta_p [deg]) at the configured friction angle (5 deg) whose
+#: ROS outcome is compared with the lockstep trial's, chosen for three different lockstep
+#: outcomes away from their class boundaries: FAILURE (too soft, the object stays down; the
+#: pair of test 1), SUCCESS (test 2), and LIFTED_DAM_FAILED (the joints say lifted, the
+#: object is not caged and stays down).
+LOCKSTEP_PAIRS = ((0.5, 10.0), (10.0, 10.0), (0.5, 40.0))
+
+
+@pytest.fixture(scope='module')
+def lockstep(config_file: Path) -> dict[tuple[float, float], tuple[str, bool]]:
+    """(outcome name, lifted) of each pair of LOCKSTEP_PAIRS in lockstep (``run_experiment``,
+    what ``sweep`` runs), with the stack's configuration."""
+    from dam_common.config import load_config
+    from dam_sim_bridge.experiment import run_experiment
+
+    config = load_config(config_file)
+    outcomes = {}
+    for k_theta, delta_deg in LOCKSTEP_PAIRS:
+        result = run_experiment(config, k_theta, math.radians(delta_deg))
+        outcomes[(k_theta, delta_deg)] = (result.outcome.name, bool(result.lifted))
+    return outcomes
+
+
+def _assert_as_in_lockstep(lockstep, pair: tuple[float, float], result, rise: float,
+                           config_file: Path) -> None:
+    """The ROS path's outcome and ground-truth lift (rise [m]) are the lockstep trial's."""
+    from dam_common.config import load_config
+
+    lift_height = load_config(config_file).classification.lift_height_m
+    outcome, lifted = lockstep[pair]
+    assert result.outcome_name == outcome, (
+        f'{pair}: ROS path {result.outcome_name} ({result.message}), lockstep {outcome}')
+    assert (rise >= lift_height) == lifted, (
+        f'{pair}: rise {rise * 1e3:.2f} mm on the ROS path, lockstep lifted={lifted}')
+
+
 def _done_result(grasper: _Grasper, k_theta: float) -> tuple[object, float, float, float]:
     """Reset the world, run a grasp to its end; (result, z before [m], z at the end [m],
     end time)."""
@@ -167,7 +206,7 @@ def _done_result(grasper: _Grasper, k_theta: float) -> tuple[object, float, floa
     return answer.result, z_before, grasper.z(), t_end
 
 
-def test_too_little_stiffness_does_not_lift(stack: _Grasper) -> None:
+def test_too_little_stiffness_does_not_lift(stack: _Grasper, lockstep, config_file) -> None:
     from dam_interfaces.action import DamGrasp
 
     result, z0, z_end, _ = _done_result(stack, 0.5)
@@ -179,9 +218,11 @@ def test_too_little_stiffness_does_not_lift(stack: _Grasper) -> None:
     assert result.outcome != DamGrasp.Result.OUTCOME_SUCCESS, result.message
     assert result.outcome in (DamGrasp.Result.OUTCOME_FAILURE,
                               DamGrasp.Result.OUTCOME_LIFTED_DAM_FAILED), result.message
+    _assert_as_in_lockstep(lockstep, (0.5, 10.0), result, z_end - z0, config_file)
 
 
-def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper) -> None:
+def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper, lockstep,
+                                                 config_file) -> None:
     from dam_interfaces.action import DamGrasp
 
     result, z_table, z_end, t_end = _done_result(stack, 10.0)  # one try: no retries
@@ -192,6 +233,7 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper) -> None:
                                                                stack.controller.output())
     assert 'IDLE' not in stack.feedback_phases, stack.feedback_phases
     assert z_end - z_table > LIFT_M, f'object rose by only {(z_end - z_table) * 1e3:.2f} mm'
+    _assert_as_in_lockstep(lockstep, (10.0, 10.0), result, z_end - z_table, config_file)
     # it stays up while the hand holds it
     stack.client.spin_until(lambda: False, 2.0)
     held = stack.z_between(t_end, math.inf)
@@ -264,6 +306,18 @@ def test_cancel_mid_grasp_zeroes_the_torque(stack: _Grasper) -> None:
     for i in compliant:
         assert efforts[cmd.name[i]] == pytest.approx(0.0, abs=1e-4), efforts
     stack.watch(False)
+
+
+def test_a_lifted_dam_failed_pair_ends_as_in_lockstep(stack: _Grasper, lockstep,
+                                                      config_file) -> None:
+    """The third of LOCKSTEP_PAIRS (the first two are tests 1 and 2)."""
+    k_theta, delta_deg = LOCKSTEP_PAIRS[2]
+    _reset_world(stack)
+    z_before = stack.z()
+    result = stack.result(stack.send(k_theta, math.radians(delta_deg))).result
+    stack.client.spin_until(lambda: False, 0.3)
+    _assert_as_in_lockstep(lockstep, LOCKSTEP_PAIRS[2], result, stack.z() - z_before,
+                           config_file)
 
 
 def _dam_grasp(*args: str, env: dict[str, str] | None = None,
