@@ -193,6 +193,33 @@ def test_interrupted_sweep_resumes_without_redoing_trials(
     assert all(row in read_table(table) for row in kept)
 
 
+def test_sigint_stops_a_background_sweep_on_local_workers(tmp_path: Path) -> None:
+    """Started as a shell starts a background job (``&``: SIGINT ignored), on local worker
+    processes: ``kill -INT`` stops it all the same, with its rows kept and its workers gone."""
+    table = tmp_path / TABLE_FILE
+    proc = subprocess.Popen(_sweep_command(tmp_path, '--workers', '2'), env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + 120.0
+        while not (table.is_file() and table.read_text().count('\n') >= 2):
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.01)
+        children = psutil.Process(proc.pid).children(recursive=True)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert 'interrupted:' in out, out
+    assert 'Traceback' not in err, err
+    _, alive = psutil.wait_procs(children, timeout=10)
+    assert not alive
+    assert 1 <= len(read_table(table)) < N_TRIALS
+
+
 @pytest.mark.parametrize('args, words', [
     (['--k-theta', '0.05:20:0:log'], ['--k-theta', 'count 0', "'0.05:20:0:log'"]),
     (['--delta-theta-p', '5:70:14'], ['--delta-theta-p: 70 deg exceeds']),
@@ -210,6 +237,27 @@ def test_bad_arguments_are_refused(args: list[str], words: list[str], tmp_path: 
     assert err.startswith('sweep: ')
     for word in words:
         assert word in err, err
+    assert not (tmp_path / 'x').exists()
+
+
+def test_an_unreachable_scheduler_fails_at_once_and_writes_nothing(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    from dam_sim_bridge import sweep_cli
+
+    with socket.socket() as sock:  # a port nobody listens on
+        sock.bind(('127.0.0.1', 0))
+        port = sock.getsockname()[1]
+    monkeypatch.setattr(sweep_cli, 'CONNECT_TIMEOUT_S', 2.0)
+    start = time.monotonic()
+    status = main([*SWEEP, '--out', str(tmp_path / 'x'), '--scheduler',
+                   f'tcp://127.0.0.1:{port}'])
+    assert status == 1
+    assert time.monotonic() - start < 15.0
+    err = capsys.readouterr().err
+    assert err.startswith(f"sweep: cannot reach the Dask scheduler at 'tcp://127.0.0.1:{port}'")
     assert not (tmp_path / 'x').exists()
 
 

@@ -45,6 +45,8 @@ from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, Tria
 PROG = 'sweep'
 #: Longest wait for the first worker of a ``--scheduler`` cluster [s].
 WORKER_WAIT_S = 60.0
+#: Longest wait for a ``--scheduler`` to answer [s].
+CONNECT_TIMEOUT_S = 10.0
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
@@ -228,9 +230,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f'{PROG}: {message}\n')
         return status
 
+    # A shell starts a background job with SIGINT ignored; ``kill -INT`` is to stop the sweep
+    # all the same, as it stops a node.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         config = load_config(args.config)
         sweep = build_sweep(args, config)
+    except (SweepError, DamCommonError, OSError) as exc:
+        return fail(str(exc))
+    client = None
+    if args.scheduler:  # before any file is written: a wrong address leaves nothing behind
+        try:
+            client = _connect(args.scheduler)
+        except KeyboardInterrupt:
+            return 130
+        except SweepError as exc:
+            return fail(str(exc), 1)
+    try:
         from dam_common.version import software_version  # noqa: PLC0415
 
         table = TrialTable(args.out, sweep, config,
@@ -241,17 +258,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      'delta_theta_p': args.delta_theta_p}})
         done = table.open()
     except (SweepError, DamCommonError, OSError) as exc:
+        if client is not None:
+            client.close()
         return fail(str(exc))
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
-        return _run(args, sweep, config, table, done)
+        return _run(args, sweep, config, table, done, client)
     finally:
         signal.signal(signal.SIGTERM, previous)
         table.close()
+        if client is not None:
+            client.close()
 
 
 def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTable,
-         done: int) -> int:
+         done: int, client: Any = None) -> int:
     from tqdm import tqdm  # noqa: PLC0415
 
     pending = table.pending()
@@ -296,10 +317,8 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     try:
         if pending:
             print(f'{PROG}: running {len(pending)} trials on {where}', flush=True)
-            if args.scheduler:
-                status = _run_remote(args.scheduler, pending, sweep, config, on_result)
-                if status:
-                    return status
+            if client is not None:
+                run_on_dask(client, pending, sweep, config, on_result)
             elif workers == 1:
                 _run_stoppable(pending, sweep, config, on_result)
             else:
@@ -349,24 +368,31 @@ def _run_local_cluster(workers: int, pending: Sequence[TrialSpec], sweep: SweepS
         run_on_dask(client, pending, sweep, config, on_result)
 
 
-def _run_remote(address: str, pending: Sequence[TrialSpec], sweep: SweepSpec, config: Any,
-                on_result: OnResult) -> int:
+def _connect(address: str) -> Any:
+    """A Dask client of the scheduler at ``address`` with at least one worker.
+
+    Raises
+    ------
+    SweepError
+        The scheduler does not answer within :data:`CONNECT_TIMEOUT_S`, or has no worker
+        within :data:`WORKER_WAIT_S`.
+    """
     from distributed import Client  # noqa: PLC0415 - slow import
 
     try:
-        client = Client(address, timeout='20s')
-    except (OSError, TimeoutError, ValueError) as exc:
-        sys.stderr.write(f'{PROG}: cannot reach the Dask scheduler at {address!r}: {exc}\n')
-        return 1
-    with client:
-        try:
-            client.wait_for_workers(1, timeout=WORKER_WAIT_S)
-        except TimeoutError:
-            sys.stderr.write(f'{PROG}: the Dask scheduler at {address!r} has no worker after '
-                             f'{WORKER_WAIT_S:g} s\n')
-            return 1
-        run_on_dask(client, pending, sweep, config, on_result)
-    return 0
+        client = Client(address, timeout=f'{CONNECT_TIMEOUT_S:g}s')
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: {exc}') from None
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except TimeoutError:
+        client.close()
+        raise SweepError(f'the Dask scheduler at {address!r} has no worker after '
+                         f'{WORKER_WAIT_S:g} s') from None
+    except BaseException:
+        client.close()
+        raise
+    return client
 
 
 if __name__ == '__main__':
