@@ -425,7 +425,7 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
         reasons.append(f'{names[j]} torque {tau[j]:.3g} N*m shows no load (below '
                        f'{s.load_torque_threshold:g} N*m)')
     if est.found and not lifted:
-        reasons.append(f'object raised only {lift * 1e3:.3g} mm')
+        reasons.append(f'object raised only {lift * 1e3:.3g} mm (estimated from the joints)')
     if contact and lifted and not enveloped:
         reasons.append('object not caged by the fingertips')
     return Classification(outcome=outcome, contact=bool(contact), load_held=load_held,
