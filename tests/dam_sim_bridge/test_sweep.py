@@ -49,7 +49,9 @@ def test_linear_and_log_ranges() -> None:
     assert np.allclose(ratios, ratios[0], rtol=1e-9) and ratios[0] > 1.0
     assert parse_range('--k-theta', '7') == (7.0,)
     assert parse_range('--k-theta', '3:3:1') == (3.0,)
-    assert parse_range('--k-theta', '20:0.05:3:log') == (20.0, 1.0, 0.05)
+    assert parse_range('--k-theta', '20:0.05:3:log') == (20.0, 1.0, 0.05)  # descending
+    assert parse_range('--delta-theta-p', '60:5:12:lin') == tuple(range(60, 0, -5))
+    assert parse_range('--k-theta', '1:3:3:LOG') == parse_range('--k-theta', '1:3:3:log')
     assert parse_axis('--k-theta', ['0.5', '1:2:2'], lower=0.0) == (0.5, 1.0, 2.0)
 
 

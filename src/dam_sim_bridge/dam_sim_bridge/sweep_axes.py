@@ -30,7 +30,8 @@ def _number(field_name: str, text: str, token: str) -> float:
 
 
 def parse_range(field_name: str, token: str) -> tuple[float, ...]:
-    """Values of one axis token: a number, ``start:stop:count`` or ``start:stop:count:log``.
+    """Values of one axis token: a number, ``start:stop:count[:lin]`` or
+    ``start:stop:count:log``.
 
     Parameters
     ----------
@@ -38,8 +39,9 @@ def parse_range(field_name: str, token: str) -> tuple[float, ...]:
         Name of the option, for the error message (``--k-theta``).
     token
         ``'7'``; ``'5:60:12'`` (``numpy.linspace``: 5, 10, ..., 60); ``'0.05:20:24:log'``
-        (``numpy.geomspace``: 24 values with equal ratios, both ends included). A count of 1
-        needs ``start == stop``.
+        (``numpy.geomspace``: 24 values with equal ratios, both ends included). ``:lin`` says
+        linear explicitly; the suffix is case-blind. ``start > stop`` gives the values in
+        descending order. A count of 1 needs ``start == stop``.
 
     Returns
     -------
@@ -57,7 +59,7 @@ def parse_range(field_name: str, token: str) -> tuple[float, ...]:
     if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3].strip().lower() not in
                                     ('log', 'lin')):
         raise SweepError(f'{field_name}: {token!r} is neither a number nor a range '
-                         f'start:stop:count or start:stop:count:log')
+                         f'start:stop:count[:lin] or start:stop:count:log')
     start = _number(field_name, parts[0], token)
     stop = _number(field_name, parts[1], token)
     try:
