@@ -229,7 +229,7 @@ def _summary(report: SweepReport) -> list[str]:
         rows.append((f'{a.friction_angle_deg:g}', str(a.n_trials), str(a.n_cells),
                      str(a.n_lifting), str(a.n_false_guarantees),
                      share(a.n_agree, a.n_cells),
-                     f'{decades(a.median_distance_dec)} ({a.n_compared} columns)',
+                     f'{decades(a.median_distance_dec)} ({a.n_compared} column(s))',
                      share(a.n_within_step, a.n_compared), share(a.n_missed, a.n_lifting)))
     return ['## Summary', ''] + _table(SUMMARY_HEADER, rows) + ['']
 
