@@ -33,8 +33,11 @@ import numpy as np
 from dam_sim_bridge.errors import SweepPlotError
 from dam_sim_bridge.sweep import config_digest
 from dam_sim_bridge.sweep_report_rows import (
-    RUNNING_PHASES,
+    CHECKS_LIFTING,
+    CHECKS_NOT_LIFTING,
+    Limits,
     TrialRow,
+    checks,
     ending,
     read_rows,
     rise_class,
@@ -44,8 +47,6 @@ from dam_sim_bridge.sweep_results import SweepData, k_axis_is_log
 
 #: A cell lifts when at least this share of its trials lifted [-].
 LIFT_PROBABILITY = 0.5
-#: A peak torque at least this share of a limit counts as having reached it [-].
-LIMIT_FRACTION = 0.98
 
 #: Disagreement categories of section 4: key, title, the boundary they are compared with, and
 #: whether the simulation lifts in them.
@@ -189,14 +190,6 @@ def column_boundary(cells: Sequence[CellRow]) -> ColumnBoundary:
                           math.log10(k_sim / k_csm))
 
 
-def next_to_boundary(k_theta: float, k_star: float, grid: Sequence[float]) -> bool:
-    """True when no value of ``grid`` lies strictly between ``k_theta`` and a finite boundary
-    ``k_star`` [N*m/rad]: a boundary offset below one grid step would flip the cell."""
-    if not math.isfinite(k_star):
-        return False
-    low, high = sorted((k_theta, k_star))
-    return not any(low < k < high for k in grid)
-
 
 # ------------------------------------------------------------------------------------------
 # Per friction angle and per disagreement category
@@ -314,89 +307,6 @@ class Category:
     max_peak_position_nm: float
 
 
-@dataclass(frozen=True)
-class Limits:
-    """What the checks compare with.
-
-    Attributes
-    ----------
-    lift_height_mm
-        ``classification.lift_height_m`` [mm].
-    compliant_torque_nm
-        The compliant joints' torque limit during the trials [N*m]: ``device.torque_limit_nm``
-        with the impedance on the device (the sweep's ``impedance``, or when not given
-        ``controller.impedance_on_device``), else the lower of it and
-        ``controller.torque_limit_nm`` (the controller's torque commands).
-    servo_torque_nm
-        ``sim.servo_force_limit_nm``: the position joints' servo limit [N*m].
-    object_mass_kg
-        ``object.mass_kg``: the mass the analysis assumes [kg].
-    """
-
-    lift_height_mm: float
-    compliant_torque_nm: float
-    servo_torque_nm: float
-    object_mass_kg: float
-
-    @classmethod
-    def from_config(cls, config: Any, impedance: str | None = None) -> Limits:
-        """The limits of ``config`` for trials run with the sweep's ``impedance`` option
-        (``'device'``, ``'controller'`` or None: the configured one)."""
-        on_device = (impedance == 'device' if impedance is not None
-                     else bool(config.controller.impedance_on_device))
-        device = float(config.device.torque_limit_nm)
-        return cls(lift_height_mm=1e3 * float(config.classification.lift_height_m),
-                   compliant_torque_nm=(device if on_device else
-                                        min(device, float(config.controller.torque_limit_nm))),
-                   servo_torque_nm=float(config.sim.servo_force_limit_nm),
-                   object_mass_kg=float(config.object.mass_kg))
-
-
-#: The checks, by side: (name, what it says).
-CHECKS_NOT_LIFTING = (
-    ('controller failure', 'the controller ended the grasp (phase FAILED)'),
-    ('time limit', 'the grasp was still running at the time limit'),
-    ('compliant torque limit', 'a compliant joint reached the compliant torque limit'),
-    ('servo limit', 'a position joint reached its servo torque limit'),
-    ('heavier object', 'the object was heavier than the analysis assumes'),
-    ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
-)
-CHECKS_LIFTING = (
-    ('lifted after rolling-up', 'the object reached the lift height only after ROLLING_UP, '
-                                'the phase the analysis covers'),
-    ('lighter object', 'the object was lighter than the analysis assumes'),
-    ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
-)
-
-
-def checks(trial: TrialRow, cell: CellRow, k_grid: Sequence[float], boundary: str,
-           sim_lifts: bool, limits: Limits) -> list[str]:
-    """The names of the checks of :data:`CHECKS_LIFTING` (``sim_lifts``) or
-    :data:`CHECKS_NOT_LIFTING` that hold for a trial; ``boundary`` (``'csm'`` or
-    ``'sufficient'``) names the boundary of ``'next to the boundary'``."""
-    k_star = cell.k_csm if boundary == 'csm' else cell.k_sufficient
-    near = next_to_boundary(cell.k_theta, k_star, k_grid)
-    mass = trial.object_mass_kg
-    if sim_lifts:
-        found = {'lifted after rolling-up': (math.isfinite(trial.rise_rolling_end_mm)
-                                             and trial.rise_rolling_end_mm
-                                             < limits.lift_height_mm),
-                 'lighter object': mass < limits.object_mass_kg * (1.0 - 1e-9),
-                 'next to the boundary': near}
-        names = CHECKS_LIFTING
-    else:
-        found = {'controller failure': trial.phase == 'FAILED',
-                 'time limit': trial.phase in RUNNING_PHASES,
-                 'compliant torque limit': (trial.peak_compliant_nm
-                                            >= LIMIT_FRACTION * limits.compliant_torque_nm),
-                 'servo limit': (trial.peak_position_nm
-                                 >= LIMIT_FRACTION * limits.servo_torque_nm),
-                 'heavier object': mass > limits.object_mass_kg * (1.0 + 1e-9),
-                 'next to the boundary': near}
-        names = CHECKS_NOT_LIFTING
-    return [name for name, _ in names if found[name]]
-
-
 def _nanmean(values: Sequence[float]) -> float:
     finite = [v for v in values if not math.isnan(v)]
     return math.fsum(finite) / len(finite) if finite else math.nan
@@ -405,7 +315,8 @@ def _nanmean(values: Sequence[float]) -> float:
 def _category(key: str, title: str, boundary: str, sim_lifts: bool, cells: list[CellRow],
               alphas: Sequence[float], k_grid: Sequence[float], limits: Limits) -> Category:
     trials = [(t, c) for c in cells for t in c.trials if t.lifted == sim_lifts]
-    found = [checks(t, c, k_grid, boundary, sim_lifts, limits) for t, c in trials]
+    found = [checks(t, c.k_csm if boundary == 'csm' else c.k_sufficient, k_grid, sim_lifts,
+                    limits) for t, c in trials]
     names = CHECKS_LIFTING if sim_lifts else CHECKS_NOT_LIFTING
     rows = [t for t, _ in trials]
     return Category(

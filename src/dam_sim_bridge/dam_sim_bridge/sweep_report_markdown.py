@@ -13,15 +13,13 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from dam_sim_bridge.sweep_report import (
+from dam_sim_bridge.sweep_report import LIFT_PROBABILITY, Category, SweepReport
+from dam_sim_bridge.sweep_report_rows import (
     CHECKS_LIFTING,
     CHECKS_NOT_LIFTING,
-    LIFT_PROBABILITY,
     LIMIT_FRACTION,
-    Category,
-    SweepReport,
+    NEVER_ROSE_FRACTION,
 )
-from dam_sim_bridge.sweep_report_rows import NEVER_ROSE_FRACTION
 
 #: Cells listed per disagreement category (the figure shows them all).
 MAX_LISTED_CELLS = 40

@@ -5,7 +5,7 @@ the columns of ``trials.csv`` the report (:mod:`dam_sim_bridge.sweep_report`) ne
 those of the picture: the phase and reason, the rises, the simulated mass, the peak torques and
 the analysis columns, checked (naming the file, the line, the trial and the value).
 :func:`rise_class`, :func:`ending` and :func:`trial_label` say in words what a trial did, from
-its columns alone.
+its columns alone; :func:`checks` lists the checks of the evidence that hold for it.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import csv
 import io
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +29,8 @@ NEVER_ROSE_FRACTION = 0.1
 REPORT_COLUMNS = ('phase', 'reason', 'rise_final_mm', 'rise_max_mm', 'rise_rolling_end_mm',
                   'object_mass_kg', 'check_lift_guaranteed', 'worst_case_margin_n',
                   'csm_lift', 'csm_margin_n')
+#: A peak torque at least this share of a limit counts as having reached it [-].
+LIMIT_FRACTION = 0.98
 #: Phases in which a grasp is still running (it was cut at the time limit).
 RUNNING_PHASES = ('IDLE', 'APPROACH', 'ROLLING_UP', 'ENVELOPE')
 _PHASE_IN_REASON = re.compile(r'(?:during (?:phase )?|phase )(approach|rolling_up|envelope)\b')
@@ -224,3 +226,99 @@ def rise_class(trial: TrialRow, lift_height_mm: float) -> str:
 def trial_label(trial: TrialRow, lift_height_mm: float) -> str:
     """``'<rise class>; <ending>'`` (:func:`rise_class`, :func:`ending`)."""
     return f'{rise_class(trial, lift_height_mm)}; {ending(trial)}'
+
+
+# ------------------------------------------------------------------------------------------
+# The checks of the evidence
+
+
+def next_to_boundary(k_theta: float, k_star: float, grid: Sequence[float]) -> bool:
+    """True when no value of ``grid`` lies strictly between ``k_theta`` and a finite boundary
+    ``k_star`` [N*m/rad]: a boundary offset below one grid step would flip the cell."""
+    if not math.isfinite(k_star):
+        return False
+    low, high = sorted((k_theta, k_star))
+    return not any(low < k < high for k in grid)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the checks compare with.
+
+    Attributes
+    ----------
+    lift_height_mm
+        ``classification.lift_height_m`` [mm].
+    compliant_torque_nm
+        The compliant joints' torque limit during the trials [N*m]: ``device.torque_limit_nm``
+        with the impedance on the device (the sweep's ``impedance``, or when not given
+        ``controller.impedance_on_device``), else the lower of it and
+        ``controller.torque_limit_nm`` (the controller's torque commands).
+    servo_torque_nm
+        ``sim.servo_force_limit_nm``: the position joints' servo limit [N*m].
+    object_mass_kg
+        ``object.mass_kg``: the mass the analysis assumes [kg].
+    """
+
+    lift_height_mm: float
+    compliant_torque_nm: float
+    servo_torque_nm: float
+    object_mass_kg: float
+
+    @classmethod
+    def from_config(cls, config: Any, impedance: str | None = None) -> Limits:
+        """The limits of ``config`` for trials run with the sweep's ``impedance`` option
+        (``'device'``, ``'controller'`` or None: the configured one)."""
+        on_device = (impedance == 'device' if impedance is not None
+                     else bool(config.controller.impedance_on_device))
+        device = float(config.device.torque_limit_nm)
+        return cls(lift_height_mm=1e3 * float(config.classification.lift_height_m),
+                   compliant_torque_nm=(device if on_device else
+                                        min(device, float(config.controller.torque_limit_nm))),
+                   servo_torque_nm=float(config.sim.servo_force_limit_nm),
+                   object_mass_kg=float(config.object.mass_kg))
+
+
+#: The checks, by side: (name, what it says).
+CHECKS_NOT_LIFTING = (
+    ('controller failure', 'the controller ended the grasp (phase FAILED)'),
+    ('time limit', 'the grasp was still running at the time limit'),
+    ('compliant torque limit', 'a compliant joint reached the compliant torque limit'),
+    ('servo limit', 'a position joint reached its servo torque limit'),
+    ('heavier object', 'the object was heavier than the analysis assumes'),
+    ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
+)
+CHECKS_LIFTING = (
+    ('lifted after rolling-up', 'the object reached the lift height only after ROLLING_UP, '
+                                'the phase the analysis covers'),
+    ('lighter object', 'the object was lighter than the analysis assumes'),
+    ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
+)
+
+
+def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: bool,
+           limits: Limits) -> list[str]:
+    """The names of the checks of :data:`CHECKS_LIFTING` (``sim_lifts``) or
+    :data:`CHECKS_NOT_LIFTING` that hold for a trial; ``k_star`` [N*m/rad] is the boundary
+    of ``'next to the boundary'`` at the trial's ``delta_theta_p`` (NaN: none), ``k_grid``
+    the sweep's ``k_theta`` values."""
+    near = next_to_boundary(trial.k_theta, k_star, k_grid)
+    mass = trial.object_mass_kg
+    if sim_lifts:
+        found = {'lifted after rolling-up': (math.isfinite(trial.rise_rolling_end_mm)
+                                             and trial.rise_rolling_end_mm
+                                             < limits.lift_height_mm),
+                 'lighter object': mass < limits.object_mass_kg * (1.0 - 1e-9),
+                 'next to the boundary': near}
+        names = CHECKS_LIFTING
+    else:
+        found = {'controller failure': trial.phase == 'FAILED',
+                 'time limit': trial.phase in RUNNING_PHASES,
+                 'compliant torque limit': (trial.peak_compliant_nm
+                                            >= LIMIT_FRACTION * limits.compliant_torque_nm),
+                 'servo limit': (trial.peak_position_nm
+                                 >= LIMIT_FRACTION * limits.servo_torque_nm),
+                 'heavier object': mass > limits.object_mass_kg * (1.0 + 1e-9),
+                 'next to the boundary': near}
+        names = CHECKS_NOT_LIFTING
+    return [name for name, _ in names if found[name]]
