@@ -27,6 +27,7 @@ setup(
             'dam_experiment = dam_sim_bridge.experiment:main',
             'sweep = dam_sim_bridge.sweep_cli:main',
             'sweep_plot = dam_sim_bridge.sweep_plot:main',
+            'sweep_report = dam_sim_bridge.sweep_report_cli:main',
         ],
     },
 )
