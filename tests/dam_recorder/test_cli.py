@@ -31,12 +31,20 @@ def test_a_regex_alone_replaces_the_default_topics() -> None:
     (['-b', '-5'], "'-5' is negative"),
     (['-d', 'soon'], "'soon' is not a number"),
     (['-s', 'rosbag'], "invalid choice: 'rosbag'"),
+    (['-b', '10'], "'10' is below 86016, the smallest split size (0 turns the limit off)"),
+    (['--chunk-interval', '0'], "'0' is below 0.01"),
+    (['--chunk-interval', '61'], "'61' is above 60"),
+    (['--pre-roll', '-1'], "'-1' is negative"),
+    (['-d', 'nan'], "'nan' is not a finite number"),
 ])
 def test_bad_options_exit_2_naming_the_value(argv, message, capsys) -> None:
     with pytest.raises(SystemExit) as info:
         parameter_overrides(argv)
     assert info.value.code == 2
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err
+    if '--pre-roll' in argv:  # a pre-roll is no limit that 0 turns off
+        assert 'turns the limit off' not in err
 
 
 def test_help_lists_the_options_the_default_topics_and_the_services(capsys) -> None:

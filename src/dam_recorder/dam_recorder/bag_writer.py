@@ -51,6 +51,11 @@ from dam_recorder.qos import metadata_profiles
 STORAGE_SUFFIXES: dict[str, str] = {'mcap': '.mcap', 'sqlite3': '.db3'}
 #: Compression of MCAP chunks.
 COMPRESSIONS: tuple[str, ...] = ('zstd', 'none')
+#: The smallest size limit of a file [bytes] (``-b``), the one rosbag2's sqlite3 storage
+#: requires: below it a file would close after every few messages.
+MIN_SPLIT_BYTES = 86_016
+#: The range of the recorder's chunk interval [s]: the longest a message waits in memory.
+CHUNK_INTERVAL_RANGE_S = (0.01, 60.0)
 
 
 class _FileTarget:
@@ -163,6 +168,10 @@ class BagWriter:
             raise ConfigurationError(
                 'split limits must be 0 (off) or positive, got max_file_bytes='
                 f'{max_file_bytes!r}, max_file_duration_ns={max_file_duration_ns!r}')
+        if 0 < max_file_bytes < MIN_SPLIT_BYTES:
+            raise ConfigurationError(
+                f'max_file_bytes {max_file_bytes!r} is below the smallest split size, '
+                f'{MIN_SPLIT_BYTES} bytes (0: no limit)')
         self.bag_dir = Path(bag_dir)
         self.storage = storage
         self.compression = compression
@@ -181,6 +190,8 @@ class BagWriter:
         self._topics: list[_Topic] = []
         self._writer: Any = None
         self._file_data_bytes = 0
+        #: Bytes of the MCAP chunks written out so far, uncompressed and as stored.
+        self._chunk_bytes = [0, 0]
         self._open_file()
 
     # -- files -------------------------------------------------------------------------------
@@ -226,6 +237,8 @@ class BagWriter:
         write_metadata(self.bag_dir, self.metadata())
 
     def _close_file(self) -> None:
+        if self.storage == 'mcap':
+            self._write_chunk()
         writer, self._writer = self._writer, None
         text = dump_metadata(self.metadata()[TOP_KEY]).strip()
         writer.close(METADATA_VERSION, text)
@@ -274,22 +287,43 @@ class BagWriter:
             self.split()
             file = self.files[-1]
         writer = self._writer
+        if self.storage == 'mcap':
+            before = (writer.chunk.bio.tell(), writer.bio.tell())
         writer.write(topic.connection, timestamp_ns, data)
         file.add(timestamp_ns)
         topic.info.message_count += 1
         self._file_data_bytes += len(data)
         if self.storage == 'mcap' and writer.chunk.bio.tell() == 0:
-            writer.bio.flush()  # the writer just wrote out a full chunk
+            # The writer just wrote out a full chunk (this message's record included).
+            self._count_chunk(before[0] + len(data), writer.bio.tell() - before[1])
+            writer.bio.flush()
         if self.max_file_bytes and self.file_bytes() >= self.max_file_bytes:
             self.split()
 
+    def _write_chunk(self) -> None:
+        """Write out the pending MCAP chunk, if any, and count its sizes."""
+        writer = self._writer
+        if writer.chunk.msgs:
+            before = (writer.chunk.bio.tell(), writer.bio.tell())
+            writer.close_chunk()
+            self._count_chunk(before[0], writer.bio.tell() - before[1])
+
+    def _count_chunk(self, raw_bytes: int, stored_bytes: int) -> None:
+        self._chunk_bytes[0] += raw_bytes
+        self._chunk_bytes[1] += stored_bytes
+
     def file_bytes(self) -> int:
         """Size of the current file [bytes]: for MCAP what is written, plus the pending chunk
-        (uncompressed) and its message index (16 bytes a message); for sqlite3 the message
-        data. The summary written when the file closes (schemas, channels, chunk index,
-        statistics: a few hundred bytes) is not counted."""
+        and its message index, at the ratio of stored to raw bytes of the chunks written out
+        so far (compression and index included; before the first, the raw bytes and 16 bytes
+        of index a message); for sqlite3 the message data. The summary written when the file
+        closes (schemas, channels, chunk index, statistics: a few hundred bytes) is not
+        counted."""
         if self.storage == 'mcap':
             writer = self._writer
+            raw, stored = self._chunk_bytes
+            if raw > 0:  # stored bytes per raw byte, message index included
+                return int(writer.bio.tell() + stored / raw * writer.chunk.bio.tell())
             pending = sum(len(m) for m in writer.chunk.msgs.values())
             return writer.bio.tell() + writer.chunk.bio.tell() + 16 * pending
         return self._file_data_bytes
@@ -299,8 +333,7 @@ class BagWriter:
         MCAP chunk and flush the file to the operating system (sqlite3: commit)."""
         self._check_open()
         if self.storage == 'mcap':
-            if self._writer.chunk.msgs:
-                self._writer.close_chunk()
+            self._write_chunk()
             self._writer.bio.flush()
         else:
             self._writer.conn.commit()

@@ -8,10 +8,16 @@ out leaves the parameter as it is. ROS arguments (``--ros-args ...``) are remove
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from typing import Any
 
-from dam_recorder.bag_writer import COMPRESSIONS, STORAGE_SUFFIXES
+from dam_recorder.bag_writer import (
+    CHUNK_INTERVAL_RANGE_S,
+    COMPRESSIONS,
+    MIN_SPLIT_BYTES,
+    STORAGE_SUFFIXES,
+)
 from dam_recorder.selection import DEFAULT_TOPICS
 
 EPILOG = f"""\
@@ -31,14 +37,27 @@ SIGINT or SIGTERM closes the bag. After a SIGKILL run `ros2 run dam_recorder rec
 Every option is also a parameter of the node (see the README, section Recording)."""
 
 
-def _non_negative(kind: type) -> Any:
+def _number(kind: type, *, low: float = 0.0, high: float = math.inf, off: bool = False,
+            low_reason: str = '') -> Any:
+    """An argparse type: a number in ``[low, high]``, or 0 if ``off`` (no limit)."""
     def parse(text: str) -> Any:
         try:
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f'{text!r} is not a finite number')
+        if off and value == 0:
+            return value
         if value < 0:
-            raise argparse.ArgumentTypeError(f'{text!r} is negative (0 turns the limit off)')
+            raise argparse.ArgumentTypeError(
+                f'{text!r} is negative' + (' (0 turns the limit off)' if off else ''))
+        if value < low:
+            raise argparse.ArgumentTypeError(
+                f'{text!r} is below {low:g}{low_reason}' + (' (0 turns the limit off)'
+                                                            if off else ''))
+        if value > high:
+            raise argparse.ArgumentTypeError(f'{text!r} is above {high:g}')
         return value
     return parse
 
@@ -63,20 +82,25 @@ def build_parser() -> argparse.ArgumentParser:
                         help='also record every topic this regular expression matches')
     parser.add_argument('-x', '--exclude', metavar='REGEX',
                         help='never record a topic this regular expression matches')
-    parser.add_argument('-b', '--max-bag-size', type=_non_negative(int), metavar='BYTES',
-                        help='start a new file when the current one reaches this size '
-                             '(default: 0, no limit)')
-    parser.add_argument('-d', '--max-bag-duration', type=_non_negative(float), metavar='S',
+    parser.add_argument('-b', '--max-bag-size', type=_number(int, low=MIN_SPLIT_BYTES, off=True,
+                                     low_reason=', the smallest split size'),
+                        metavar='BYTES',
+                        help='start a new file when the current one reaches this size, at '
+                             f'least {MIN_SPLIT_BYTES} (default: 0, no limit)')
+    parser.add_argument('-d', '--max-bag-duration', type=_number(float, off=True), metavar='S',
                         help='start a new file when the current one spans this many seconds '
                              '(default: 0, no limit)')
-    parser.add_argument('--chunk-interval', type=_non_negative(float), metavar='S',
+    parser.add_argument('--chunk-interval', metavar='S',
+                        type=_number(float, low=CHUNK_INTERVAL_RANGE_S[0],
+                                     high=CHUNK_INTERVAL_RANGE_S[1]),
                         help='write the pending chunk out at least this often: the most that '
-                             'a SIGKILL can lose (default: 1.0)')
+                             f'a SIGKILL can lose (default: 1.0; {CHUNK_INTERVAL_RANGE_S[0]:g} '
+                             f'to {CHUNK_INTERVAL_RANGE_S[1]:g})')
     parser.add_argument('--episodes', action='store_true', default=None,
                         help='one bag per /dam_grasp goal, in the directory -o')
-    parser.add_argument('--pre-roll', type=_non_negative(float), metavar='S',
+    parser.add_argument('--pre-roll', type=_number(float), metavar='S',
                         help='episodes: seconds kept before a goal starts (default: 3.0)')
-    parser.add_argument('--post-roll', type=_non_negative(float), metavar='S',
+    parser.add_argument('--post-roll', type=_number(float), metavar='S',
                         help='episodes: seconds recorded after a goal ends (default: 2.0)')
     return parser
 

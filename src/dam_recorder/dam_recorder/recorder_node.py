@@ -64,7 +64,7 @@ from dam_common.clock import create_steady_timer
 from dam_common.node import declare_thread_priority, run_node
 from dam_common.realtime import set_process_priority
 from dam_common.shutdown import SHUTDOWN
-from dam_recorder.bag_writer import BagWriter
+from dam_recorder.bag_writer import CHUNK_INTERVAL_RANGE_S, MIN_SPLIT_BYTES, BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
 from dam_recorder.episode_messages import (
@@ -251,14 +251,15 @@ class RecorderNode(Node):
             'exclude': ('', _descriptor('never record the topics this regular expression '
                                         'matches')),
             'max_bag_size': (0, _descriptor(
-                'new file at this size [bytes]; 0: no limit',
+                f'new file at this size [bytes], at least {MIN_SPLIT_BYTES}; 0: no limit',
                 integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)])),
             'max_bag_duration': (0.0, _descriptor(
                 'new file at this time span [s]; 0: no limit',
                 floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1e9)])),
             'chunk_interval': (1.0, _descriptor(
                 'longest time a message waits in memory [s]: what a SIGKILL can lose',
-                floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)])),
+                floating_point_range=[FloatingPointRange(
+                    from_value=CHUNK_INTERVAL_RANGE_S[0], to_value=CHUNK_INTERVAL_RANGE_S[1])])),
             'discovery_period': (0.5, _descriptor(
                 'how often new topics are looked for [s]',
                 floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)])),
