@@ -194,6 +194,10 @@ def test_pause_resume_and_split_services(tmp_path: Path) -> None:
             wait_for(pub, 'done')
             time.sleep(0.3)
             assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+    for line in ('~/split: now writing services_1.mcap', '~/pause: paused',
+                 '~/pause: was paused already', '~/resume: resumed'):
+        assert line in log, log  # each call is in the recorder's log
     assert metadata_problems(bag) == []
     info = metadata(bag)
     assert info['relative_file_paths'] == ['services_0.mcap', 'services_1.mcap']

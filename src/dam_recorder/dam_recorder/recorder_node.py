@@ -436,16 +436,20 @@ class RecorderNode(Node):
         response.success = True
         response.message = 'was paused already' if self._paused else 'paused'
         self._paused = True
+        self.get_logger().info(f'~/pause: {response.message}')
         return response
 
     def _on_resume(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
         response.success = True
         response.message = 'resumed' if self._paused else 'was recording already'
         self._paused = False
+        self.get_logger().info(f'~/resume: {response.message}')
         return response
 
     def _on_split(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
-        return self._split(response)
+        response = self._split(response)
+        self.get_logger().info(f'~/split: {response.message}')
+        return response
 
     def _split(self, response: Trigger.Response) -> Any:
         if self._episodes is not None:
