@@ -414,6 +414,8 @@ def _set_first(column: str, value: str) -> Callable[[Path], None]:
     (_drop_column('lifted'), "no column 'lifted'"),
     (_set_first('check_lift_guaranteed', 'yes'), "check_lift_guaranteed 'yes' is not 0 or 1"),
     (_set_first('rise_final_mm', 'high'), "rise_final_mm 'high' is not a number"),
+    (_set_first('rise_final_mm', '-inf'), "rise_final_mm '-inf' is not a number"),
+    (_set_first('worst_case_margin_n', 'inf'), "worst_case_margin_n 'inf' is not a number"),
     (lambda d: (d / PARAMS_FILE).unlink(), 'sweep.json: no such file'),
     (lambda d: (d / TABLE_FILE).unlink(), 'trials.csv: no such file'),
 ])
@@ -435,6 +437,25 @@ def test_bad_sweeps_exit_2_with_one_line(tmp_path: Path, config: Any,
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith('sweep_report: ') and message in err
     assert not out.exists() and not (tmp_path / 'results').exists()
+
+
+def test_an_unbounded_worst_case_is_read_and_shown(tmp_path: Path, config: Any) -> None:
+    """``worst_case_margin_n = -inf`` is what the sweep writes where the worst case of eq. 18
+    is unbounded (alpha = 30 deg at large delta_theta_p): read, and shown as such."""
+    sweep = SweepSpec(friction_angles_deg=(30.0,), k_theta=(1.0, 2.0),
+                      delta_theta_p_deg=(10.0,))
+    d = tmp_path / 'sweep'
+    table = TrialTable(d, sweep, config)
+    with table:
+        for spec in sweep.trials():
+            row = dict.fromkeys(table_columns(config), '0')
+            row.update(input_columns(spec), outcome='FAILURE', phase='DONE', reason='x',
+                       worst_case_margin_n='-inf', csm_lift='1', csm_margin_n='-inf')
+            table.append(row)
+        table.finalize()
+    out = tmp_path / 'results.md'
+    assert main([str(d), '-o', str(out), '--config', str(CONFIG)]) == 0
+    assert '-inf' in out.read_text(encoding='utf-8')
 
 
 def test_bad_outputs_and_arguments(synthetic: Path, tmp_path: Path,

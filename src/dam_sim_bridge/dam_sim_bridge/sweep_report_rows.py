@@ -106,14 +106,22 @@ def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]
     return header, rows
 
 
+#: Columns that may hold ``-inf``: the worst case of eq. 18 is unbounded (the friction cone
+#: admits an arbitrarily low vertical force; ``LiftResult.worst_case_margin``).
+_MAY_BE_MINUS_INF = ('worst_case_margin_n', 'csm_margin_n')
+
+
 def _float(table: Any, line: int, row: Mapping[str, str], column: str) -> float:
     """A number of the row; ``nan`` is allowed (a margin without analysis, a phase that did
-    not end), an infinity or text is not."""
+    not end), ``-inf`` in the margin columns (unbounded), any other infinity or text is
+    not."""
     text = row[column]
     try:
         value = float(text)
     except ValueError:
         value = math.inf
+    if value == -math.inf and column in _MAY_BE_MINUS_INF:
+        return value
     if math.isinf(value):
         raise SweepPlotError(f'{table}, line {line} (trial {row["trial"]!r}): {column} '
                              f'{text!r} is not a number')
