@@ -33,6 +33,10 @@ def finite_vector(name: str, value: object, length: int | None = None, *,
 
     A scalar is accepted and broadcast when ``length`` is given.
     """
+    if (type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1
+            and (length is None or value.shape[0] == length) and not positive
+            and not nonnegative and np.isfinite(value).all()):
+        return value  # the common case of the control loop, in two numpy calls
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):

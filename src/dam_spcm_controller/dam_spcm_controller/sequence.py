@@ -103,6 +103,11 @@ _PROGRESS_APPROACH = 0.2
 _PROGRESS_ROLLING = 0.9
 # Times closer than this count as equal (float rounding of sums of time steps) [s].
 _TIME_EPS = 1e-9
+# The modes as plain ints: numpy compares an array with an int faster than with an IntEnum.
+_HOLD = int(JointMode.HOLD)
+_POSITION = int(JointMode.POSITION)
+_TORQUE = int(JointMode.TORQUE)
+_IMPEDANCE = int(JointMode.IMPEDANCE)
 
 
 @dataclass(frozen=True)
@@ -258,7 +263,14 @@ class DamSequence:
         self._inner_hi = lay.upper - params.limit_margin
         self._outer_lo = lay.lower - params.limit_margin
         self._outer_hi = lay.upper + params.limit_margin
-        self._modes = np.full(self._nj, JointMode.HOLD, dtype=np.int8)
+        self._inner_hi_c = self._inner_hi[self._c].copy()
+        self._lower_c = lay.lower[self._c].copy()  # compliant joint limits [rad]
+        self._upper_c = lay.upper[self._c].copy()
+        # The bounds of _check_limits for the modes they were computed for.
+        self._limits_for: bytes | None = None
+        self._limits_lo = self._outer_lo
+        self._limits_hi = self._outer_hi
+        self._modes = np.full(self._nj, _HOLD, dtype=np.int8)
         self._set = np.zeros(self._nj)
         self._stiff = np.zeros(self._nj)  # IMPEDANCE gains of the command [N*m/rad]
         self._damp = np.zeros(self._nj)  # [N*m*s/rad]
@@ -416,7 +428,7 @@ class DamSequence:
         if self._pending_start:
             self._pending_start = False
             self._phase = Phase.ABORTED
-            self._relax_from_modes[:] = JointMode.HOLD
+            self._relax_from_modes[:] = _HOLD
             self._relax_latch_measured = True  # hold whatever is measured at the next step
             self._t_phase = self._t_last if self._t_last is not None else 0.0
             return True
@@ -499,7 +511,7 @@ class DamSequence:
         if self._relax_latch_measured:
             self._relax_latch_measured = False
             self._relax_from[:] = pos
-            self._modes[:] = JointMode.HOLD
+            self._modes[:] = _HOLD
         phase = self._phase
         if phase.active:
             if t - self._t_phase > self._p.phase_timeout:
@@ -527,7 +539,7 @@ class DamSequence:
     def _step_idle(self, pos: np.ndarray) -> None:
         if self._hold is None:
             self._hold = pos.copy()
-        self._modes[:] = JointMode.HOLD
+        self._modes[:] = _HOLD
         self._set[:] = self._hold
         self._stiff[:] = 0.0
         self._damp[:] = 0.0
@@ -536,15 +548,14 @@ class DamSequence:
         """Command the compliant joints in IMPEDANCE around ``theta_eq`` [rad] (clipped to
         the joint limits) with ``k_theta_i`` and ``d``."""
         c = self._c
-        lay = self._p.layout
-        self._modes[c] = JointMode.IMPEDANCE
-        self._set[c] = np.clip(theta_eq, lay.lower[c], lay.upper[c])
+        self._modes[c] = _IMPEDANCE
+        self._set[c] = np.clip(theta_eq, self._lower_c, self._upper_c)
         self._stiff[c] = self._k_theta_i
         self._damp[c] = self._p.damping
 
     def _torque_mode(self) -> None:
         """Compliant joints in TORQUE (gains cleared)."""
-        self._modes[self._c] = JointMode.TORQUE
+        self._modes[self._c] = _TORQUE
         self._stiff[:] = 0.0
         self._damp[:] = 0.0
 
@@ -559,7 +570,7 @@ class DamSequence:
         dist = np.abs(self._preshape_to - self._preshape_from)
         self._preshape_time = float(dist.max()) / self._p.approach_speed
         self._eq_start[:] = pos[self._c]
-        self._modes[:] = JointMode.POSITION
+        self._modes[:] = _POSITION
         if self._p.impedance_on_device:
             self._device_impedance(self._eq_start)
         else:
@@ -604,13 +615,13 @@ class DamSequence:
             self._set[self._c] = tau
         frac_pre = 1.0 if self._preshape_time <= 0.0 else min(elapsed / self._preshape_time,
                                                                1.0)
-        frac = 0.5 * frac_pre + 0.5 * float(self._contact.mean())
+        frac = 0.5 * frac_pre + 0.5 * (int(np.count_nonzero(self._contact)) / self._n)
         self._progress = max(self._progress, _PROGRESS_APPROACH * frac)
         if self._contact.all():
             self._enter_rolling(t, pos, vel)
             return
         # A finger whose equilibrium has passed its joint limit will never find the object.
-        upper_c = self._inner_hi[self._c]
+        upper_c = self._inner_hi_c
         open_limit = (~self._contact) & (theta_eq >= upper_c)
         if open_limit.any():
             i = int(np.flatnonzero(open_limit)[0])
@@ -630,8 +641,8 @@ class DamSequence:
         self._loaded[:] = False
         self._below_since[:] = np.nan
         self._loaded_since[:] = np.nan
-        self._modes[self._q] = JointMode.POSITION
-        self._modes[self._l] = JointMode.HOLD
+        self._modes[self._q] = _POSITION
+        self._modes[self._l] = _HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
         if p.impedance_on_device:
             self._device_impedance(self._theta_0)
@@ -693,8 +704,8 @@ class DamSequence:
             self._device_impedance(self._theta_0)
         else:
             self._torque_mode()
-        self._modes[self._q] = JointMode.POSITION  # stays at the trajectory's goal
-        self._modes[self._l] = JointMode.HOLD
+        self._modes[self._q] = _POSITION  # stays at the trajectory's goal
+        self._modes[self._l] = _HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
         self._settled_since = None
 
@@ -733,10 +744,13 @@ class DamSequence:
     # Failure, abort, relaxation
 
     def _check_limits(self, t: float, pos: np.ndarray) -> None:
-        torque = (self._modes == JointMode.TORQUE) | (self._modes == JointMode.IMPEDANCE)
-        lo = np.where(torque, self._inner_lo, self._outer_lo)
-        hi = np.where(torque, self._inner_hi, self._outer_hi)
-        bad = (pos < lo) | (pos > hi)
+        modes = self._modes.tobytes()
+        if modes != self._limits_for:  # the bounds change with the modes only
+            torque = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
+            self._limits_lo = np.where(torque, self._inner_lo, self._outer_lo)
+            self._limits_hi = np.where(torque, self._inner_hi, self._outer_hi)
+            self._limits_for = modes
+        bad = (pos < self._limits_lo) | (pos > self._limits_hi)
         if bad.any():
             j = int(np.flatnonzero(bad)[0])
             lay = self._p.layout
@@ -750,7 +764,7 @@ class DamSequence:
         self._enter_relax(Phase.FAILED, t)
 
     def _enter_relax(self, phase: Phase, t: float) -> None:
-        impedance = self._modes == JointMode.IMPEDANCE
+        impedance = self._modes == _IMPEDANCE
         if impedance.any():
             # the device's static impedance torque at the last step, then ramped to zero
             theta = np.zeros(self._nj)
@@ -758,7 +772,7 @@ class DamSequence:
             tau = np.clip(self._stiff * (self._set - theta), -self._p.torque_limit,
                           self._p.torque_limit)
             self._set[impedance] = tau[impedance]
-            self._modes[impedance] = JointMode.TORQUE
+            self._modes[impedance] = _TORQUE
             self._stiff[:] = 0.0
             self._damp[:] = 0.0
         self._phase = phase
@@ -766,8 +780,8 @@ class DamSequence:
         self._relax_from_modes[:] = self._modes
         self._relax_from[:] = self._set
         self._relax_scale = 1.0
-        moving = self._modes == JointMode.POSITION
-        self._modes[moving] = JointMode.HOLD
+        moving = self._modes == _POSITION
+        self._modes[moving] = _HOLD
 
     def _step_relax(self, t: float) -> None:
         p = self._p
@@ -777,7 +791,7 @@ class DamSequence:
         else:
             scale = 1.0 - elapsed / p.torque_ramp_time
         self._relax_scale = scale
-        torque = self._relax_from_modes == JointMode.TORQUE
+        torque = self._relax_from_modes == _TORQUE
         self._set[:] = np.where(torque, self._relax_from * scale, self._relax_from)
 
     @property
@@ -785,5 +799,5 @@ class DamSequence:
         """True in ABORTED/FAILED once every torque command has reached zero."""
         if not (self._phase is Phase.ABORTED or self._phase is Phase.FAILED):
             return False
-        torque = self._relax_from_modes == JointMode.TORQUE
+        torque = self._relax_from_modes == _TORQUE
         return bool(not torque.any() or self._relax_scale == 0.0)
