@@ -8,6 +8,8 @@ import numpy as np
 
 from dam_spcm_controller.errors import InputError
 
+_ALL = np.logical_and.reduce  # ndarray.all without its Python wrapper
+
 
 def finite_scalar(name: str, value: float, *, positive: bool = False,
                   nonnegative: bool = False) -> float:
@@ -35,7 +37,7 @@ def finite_vector(name: str, value: object, length: int | None = None, *,
     """
     if (type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1
             and (length is None or value.shape[0] == length) and not positive
-            and not nonnegative and np.isfinite(value).all()):
+            and not nonnegative and _ALL(np.isfinite(value))):
         return value  # the common case of the control loop, in two numpy calls
     try:
         arr = np.asarray(value, dtype=np.float64)

@@ -76,6 +76,14 @@ if TYPE_CHECKING:  # pragma: no cover
     from dam_common.config import DamConfig
 
 
+def _since(condition: bool, since: float, t: float) -> float:
+    """Time [s] since which ``condition`` has held: ``since``, or ``t`` when it starts now;
+    NaN when it does not hold."""
+    if not condition:
+        return math.nan
+    return t if since != since else since
+
+
 class Phase(enum.Enum):
     """Phase of the DAM sequence."""
 
@@ -597,14 +605,19 @@ class DamSequence:
         # Closing: the equilibrium of fingers without contact moves inward.
         closing_time = max(elapsed - self._preshape_time, 0.0)
         theta_eq = self._eq_start + p.approach_speed * closing_time
-        if preshaped:
-            above = (~self._contact) & (eff[self._c] >= p.contact_torque_threshold)
-            self._above_since = np.where(above, np.where(np.isnan(self._above_since), t,
-                                                         self._above_since), np.nan)
-            new = above & (t - self._above_since >= p.contact_confirm_time - _TIME_EPS)
-            if new.any():
-                self._theta_0[new] = pos[self._c][new]
-                self._contact |= new
+        if preshaped:  # per finger (three numbers: plain floats are faster than numpy)
+            contact = self._contact.tolist()
+            tau_c = eff[self._c].tolist()
+            theta = pos[self._c].tolist()
+            above_since = self._above_since.tolist()
+            confirm = p.contact_confirm_time - _TIME_EPS
+            for i in range(self._n):
+                above = not contact[i] and tau_c[i] >= p.contact_torque_threshold
+                above_since[i] = _since(above, above_since[i], t)
+                if above and t - above_since[i] >= confirm:  # new contact
+                    self._theta_0[i] = theta[i]
+                    self._contact[i] = True
+            self._above_since = np.array(above_since)
         theta_eq = np.where(self._contact, self._theta_0, theta_eq)
         if p.impedance_on_device:
             self._device_impedance(theta_eq)
@@ -665,21 +678,33 @@ class DamSequence:
         # Lost contact: a finger that carried load drops below the release level. The load is
         # the paper's tau_s = -K_theta delta_theta_s from the encoders (the torque sensor would
         # still show the approach torque for a cycle after the contact posture is latched).
-        tau_c = self._k_theta_i * (self._theta_0 - pos[self._c])
-        over = tau_c >= p.contact_torque_threshold
-        self._loaded_since = np.where(over, np.where(np.isnan(self._loaded_since), t,
-                                                     self._loaded_since), np.nan)
-        self._loaded |= over & (t - self._loaded_since >= p.lost_contact_time - _TIME_EPS)
+        # Per finger (three numbers: plain floats are faster than numpy).
+        k = self._k_theta_i.tolist()
+        theta_0 = self._theta_0.tolist()
+        theta = pos[self._c].tolist()
+        loaded = self._loaded.tolist()
+        loaded_since = self._loaded_since.tolist()
+        below_since = self._below_since.tolist()
         release = p.lost_contact_ratio * p.contact_torque_threshold
-        below = self._loaded & (tau_c < release)
-        self._below_since = np.where(below, np.where(np.isnan(self._below_since), t,
-                                                     self._below_since), np.nan)
-        lost = below & (t - self._below_since >= p.lost_contact_time)
-        if lost.any():
-            i = int(np.flatnonzero(lost)[0])
-            self._fail(t, f'lost contact on {p.layout.finger_name(i)}: compliant torque '
-                          f'{tau_c[i]:.4g} N*m below {release:.4g} N*m for '
-                          f'{t - self._below_since[i]:.4g} s during rolling_up')
+        loaded_after = p.lost_contact_time - _TIME_EPS
+        lost: int | None = None
+        for i in range(self._n):
+            tau_c = k[i] * (theta_0[i] - theta[i])
+            over = tau_c >= p.contact_torque_threshold
+            loaded_since[i] = _since(over, loaded_since[i], t)
+            loaded[i] = loaded[i] or (over and t - loaded_since[i] >= loaded_after)
+            below = loaded[i] and tau_c < release
+            below_since[i] = _since(below, below_since[i], t)
+            if lost is None and below and t - below_since[i] >= p.lost_contact_time:
+                lost = i
+                lost_tau = tau_c
+        self._loaded[:] = loaded
+        self._loaded_since = np.array(loaded_since)
+        self._below_since = np.array(below_since)
+        if lost is not None:
+            self._fail(t, f'lost contact on {p.layout.finger_name(lost)}: compliant torque '
+                          f'{lost_tau:.4g} N*m below {release:.4g} N*m for '
+                          f'{t - below_since[lost]:.4g} s during rolling_up')
             return
         if elapsed >= traj.duration:
             self._enter_envelope(t, pos)
