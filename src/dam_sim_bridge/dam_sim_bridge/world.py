@@ -261,6 +261,22 @@ class ObjectPose(NamedTuple):
     sim_time: float  #: simulated time since the last reset [s]
 
 
+class _StepPlan(NamedTuple):
+    """The torque-controlled joints of a command, as :meth:`HandWorld.step` uses them: rows
+    (``joint_names`` order) of the TORQUE joints, then of the IMPEDANCE joints."""
+
+    rows: tuple[int, ...]
+    joints: list[int]  #: Bullet joint indices of ``rows``
+    n_torque: int  #: the first ``n_torque`` rows are TORQUE joints
+    target: tuple[float, ...]  #: clipped TORQUE setpoints [N*m], then zeros
+    stiffness: tuple[float, ...]  #: of the IMPEDANCE rows [N*m/rad]
+    damping: tuple[float, ...]  #: [N*m*s/rad]
+    theta_0: tuple[float, ...]  #: commanded equilibria [rad]
+    max_shift: tuple[float, ...]  #: the equilibria's ramp per step [rad]
+    max_change: float  #: slew limit per step [N*m]
+    limit: float  #: torque limit [N*m]
+
+
 @dataclass
 class _JointTable:
     indices: list[int] = field(default_factory=list)  # Bullet joint indices, joint_names order
@@ -688,6 +704,8 @@ class HandWorld:
         self._stiffness: list[float] = [0.0] * n  # [N*m/rad]
         self._damping: list[float] = [0.0] * n  # [N*m*s/rad]
         self._sent_servo: tuple[tuple[int, ...], bytes] | None = None
+        self._plan: _StepPlan | None = None
+        self._plan_key: tuple[tuple[int, ...], bytes] | None = None  # the plan's command
         self._steps = 0
         self._stepped = False
         self._send_servo_targets(force=True)
@@ -746,13 +764,16 @@ class HandWorld:
             raise CommandError(f'stiffness {k_in.shape} and damping {d_in.shape} must '
                                f'both have shape ({n},)')
         k_all, d_all = k_in.tolist(), d_in.tolist()
-        k = [k_all[i] if impedance[i] else 0.0 for i in range(n)]
-        d = [d_all[i] if impedance[i] else 0.0 for i in range(n)]
+        k = [0.0] * n
+        d = [0.0] * n
         for i in range(n):
-            if impedance[i] and not (math.isfinite(k[i]) and math.isfinite(d[i])
-                                     and k[i] > 0.0 and d[i] >= 0.0):
-                raise CommandError(f'IMPEDANCE gains must be finite with stiffness > 0 and '
-                                   f'damping >= 0: stiffness {k_all!r}, damping {d_all!r}')
+            if impedance[i]:
+                k[i], d[i] = k_all[i], d_all[i]
+                if not (math.isfinite(k[i]) and math.isfinite(d[i]) and k[i] > 0.0
+                        and d[i] >= 0.0):
+                    raise CommandError(f'IMPEDANCE gains must be finite with stiffness > 0 '
+                                       f'and damping >= 0: stiffness {k_all!r}, damping '
+                                       f'{d_all!r}')
         return k, d
 
     def set_joint_commands(self, modes: Sequence[int] | np.ndarray,
@@ -794,46 +815,60 @@ class HandWorld:
             raise CommandError(f'non-finite setpoint for {bad}: {sp!r}')
         impedance = [mode == _IMPEDANCE for mode in m]
         k, d = self._checked_gains(impedance, stiffness, damping)
-        old = self._modes
-        torque_like = [mode == _TORQUE or mode == _IMPEDANCE for mode in m]
-        was_torque_like = [mode == _TORQUE or mode == _IMPEDANCE for mode in old]
-        newly_torque = [torque_like[i] and not was_torque_like[i] for i in range(n)]
-        reseat = [impedance[i] and (old[i] != _IMPEDANCE or k[i] != self._stiffness[i]
-                                    or d[i] != self._damping[i]) for i in range(n)]
-        entering_hold = [m[i] == _HOLD and old[i] != _HOLD for i in range(n)]
-        # One read of the joints serves every reading below (nothing moves in between).
-        states = (self._get_joint_states(self.hand_id, self._joints.indices)
-                  if any(entering_hold) or any(newly_torque) or any(reseat) else ())
-        self._theta_0 = [sp[i] if impedance[i] else 0.0 for i in range(n)]
-        self._stiffness = k
-        self._damping = d
+        old, old_k, old_d = self._modes, self._stiffness, self._damping
         lower, upper = self._joints.lower_list, self._joints.upper_list
         limit = self.options.torque_limit_nm
-        targets = self._targets
-        applied = self._applied_torque
+        targets, applied = self._targets, self._applied_torque
         theta_0_eff = self._theta_0_eff
+        theta_0 = [0.0] * n
+        newly_torque: list[int] = []  # Bullet indices of the joints that leave the servo
+        states = None  # one read of the joints serves every reading below (nothing moves)
         for i in range(n):
-            mode = m[i]
-            if entering_hold[i]:
-                targets[i] = states[i][0]
+            mode, before = m[i], old[i]
+            if mode == _HOLD:
+                if before != _HOLD:  # hold the angle of the switch
+                    if states is None:
+                        states = self._get_joint_states(self.hand_id, self._joints.indices)
+                    targets[i] = states[i][0]
             elif mode == _POSITION:
                 targets[i] = _clip(sp[i], lower[i], upper[i])
             tau = sp[i] if mode == _TORQUE else 0.0  # NaN setpoints of other modes dropped
             self._torque_cmd[i] = _clip(tau, -limit, limit)
             self._saturated[i] = abs(tau) > limit
-            if newly_torque[i]:  # the slew starts from the servo's last torque: bumpless
-                applied[i] = _clip(states[i][3], -limit, limit) if self._stepped else 0.0
-            elif not torque_like[i]:
+            if mode == _TORQUE or mode == _IMPEDANCE:
+                if before != _TORQUE and before != _IMPEDANCE:
+                    # the slew starts from the servo's last torque: bumpless
+                    newly_torque.append(self._joints.indices[i])
+                    applied[i] = 0.0
+                    if self._stepped:
+                        if states is None:
+                            states = self._get_joint_states(self.hand_id,
+                                                            self._joints.indices)
+                        applied[i] = _clip(states[i][3], -limit, limit)
+            else:
                 applied[i] = 0.0
-            if reseat[i]:  # the law starts where it gives the torque applied now
-                theta_0_eff[i] = states[i][0] + (applied[i] + d[i] * states[i][1]) / k[i]
-            elif not impedance[i]:
+            if mode == _IMPEDANCE:
+                theta_0[i] = sp[i]
+                if before != _IMPEDANCE or k[i] != old_k[i] or d[i] != old_d[i]:
+                    # the law starts where it gives the torque applied now
+                    if states is None:
+                        states = self._get_joint_states(self.hand_id, self._joints.indices)
+                    theta, theta_dot = states[i][0], states[i][1]
+                    theta_0_eff[i] = theta + (applied[i] + d[i] * theta_dot) / k[i]
+            else:
                 theta_0_eff[i] = 0.0
+        self._theta_0 = theta_0
+        self._stiffness = k
+        self._damping = d
         self._modes = m
-        if any(newly_torque):
-            idx = [self._joints.indices[i] for i in range(n) if newly_torque[i]]
-            self._pb.setJointMotorControlArray(self.hand_id, idx, pybullet.VELOCITY_CONTROL,
-                                               forces=[0.0] * len(idx))
+        plan_key = (tuple(m), array.array('d', theta_0 + k + d + self._torque_cmd).tobytes())
+        if plan_key != self._plan_key:  # (the bytes: a zero's sign counts too)
+            self._plan = None
+            self._plan_key = plan_key
+        if newly_torque:
+            self._pb.setJointMotorControlArray(self.hand_id, newly_torque,
+                                               pybullet.VELOCITY_CONTROL,
+                                               forces=[0.0] * len(newly_torque))
         self._send_servo_targets()
 
     def _send_servo_targets(self, force: bool = False) -> None:
@@ -872,32 +907,21 @@ class HandWorld:
             return
         hand = self.hand_id
         step_simulation = self._step_simulation
-        modes = self._modes
-        # Rows (joint_names order): the TORQUE joints, then the IMPEDANCE joints.
-        torque_rows = [i for i, mode in enumerate(modes) if mode == _TORQUE]
-        imp_rows = [i for i, mode in enumerate(modes) if mode == _IMPEDANCE]
-        if not torque_rows and not imp_rows:
+        plan = self._plan if self._plan is not None else self._step_plan()
+        if not plan.rows:
             for _ in range(steps):
                 step_simulation()
             self._steps += steps
             self._stepped = True
             return
-        rows = torque_rows + imp_rows
-        indices = self._joints.indices
-        joints = [indices[i] for i in rows]
-        imp_joints = [indices[i] for i in imp_rows]
-        n_t, n_i = len(torque_rows), len(imp_rows)
-        # Targets [N*m]: TORQUE setpoints (fixed), then the impedance laws (every step).
-        target = [self._torque_cmd[i] for i in torque_rows] + [0.0] * n_i
-        forces = [self._applied_torque[i] for i in rows]
-        max_change = float(self.options.torque_rate_limit_nm_per_s) * self.options.time_step_s
-        limit = float(self.options.torque_limit_nm)
-        k = [self._stiffness[i] for i in imp_rows]
-        d = [self._damping[i] for i in imp_rows]
-        theta_0 = [self._theta_0[i] for i in imp_rows]
-        theta_0_eff = [self._theta_0_eff[i] for i in imp_rows]
-        max_shift = [max_change / k_j for k_j in k]  # the equilibrium's ramp [rad] per step
+        n_t, n_i = plan.n_torque, len(plan.stiffness)
+        k, d, theta_0, max_shift = plan.stiffness, plan.damping, plan.theta_0, plan.max_shift
+        max_change, limit = plan.max_change, plan.limit
+        target = list(plan.target)  # TORQUE setpoints, then the impedance laws of the step
+        forces = [self._applied_torque[i] for i in plan.rows]
+        theta_0_eff = [self._theta_0_eff[i] for i in plan.rows[n_t:]]
         raw_imp = [0.0] * n_i
+        joints, imp_joints = plan.joints, plan.joints[n_t:]
         get_states = self._get_joint_states
         set_torques = self._set_joint_motor_control_array
         torque_control = pybullet.TORQUE_CONTROL
@@ -921,11 +945,29 @@ class HandWorld:
             step_simulation()
         self._steps += steps
         self._stepped = True
-        for j, i in enumerate(rows):
+        for j, i in enumerate(plan.rows):
             self._applied_torque[i] = forces[j]
-        for j, i in enumerate(imp_rows):
+        for j, i in enumerate(plan.rows[n_t:]):
             self._theta_0_eff[i] = theta_0_eff[j]
             self._saturated[i] = abs(raw_imp[j]) > limit
+
+    def _step_plan(self) -> _StepPlan:
+        """What :meth:`step` needs of the current command (kept until the next command)."""
+        modes = self._modes
+        torque_rows = [i for i, mode in enumerate(modes) if mode == _TORQUE]
+        imp_rows = [i for i, mode in enumerate(modes) if mode == _IMPEDANCE]
+        max_change = float(self.options.torque_rate_limit_nm_per_s) * self.options.time_step_s
+        k = tuple(self._stiffness[i] for i in imp_rows)
+        self._plan = _StepPlan(
+            rows=tuple(torque_rows + imp_rows),
+            joints=[self._joints.indices[i] for i in torque_rows + imp_rows],
+            n_torque=len(torque_rows),
+            target=tuple([self._torque_cmd[i] for i in torque_rows] + [0.0] * len(imp_rows)),
+            stiffness=k, damping=tuple(self._damping[i] for i in imp_rows),
+            theta_0=tuple(self._theta_0[i] for i in imp_rows),
+            max_shift=tuple(max_change / k_j for k_j in k),
+            max_change=max_change, limit=float(self.options.torque_limit_nm))
+        return self._plan
 
     def _read_positions(self) -> np.ndarray:
         states = self._get_joint_states(self.hand_id, self._joints.indices)
