@@ -1,7 +1,8 @@
 """Run the benchmarks ``bench/bench_<name>.py`` and collect their reports.
 
 Each module defines ``run(args) -> dict``; the dict is printed and written to
-``bench/results/<name>.json``. Usage: ``python bench/run.py [name ...] [--quick]``.
+``bench/results/<name>.json``. Usage: ``python bench/run.py [name ...] [--quick] [--grid]``
+(``--grid``: also the long grid measurement of ``bench_sweep``, about 10 minutes).
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('names', nargs='*', help='benchmarks to run (default: all)')
     parser.add_argument('--quick', action='store_true', help='fewer samples, for a smoke run')
+    parser.add_argument('--grid', action='store_true',
+                        help='sweep: also run the 480-trial grid with 1 and 2 workers (about '
+                             '10 minutes; for a quiet machine)')
     args = parser.parse_args()
     available = {p.stem[len('bench_'):]: p for p in sorted(BENCH_DIR.glob('bench_*.py'))}
     names = args.names or list(available)

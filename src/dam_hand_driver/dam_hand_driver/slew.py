@@ -70,14 +70,16 @@ class CommandSlew:
         self.period_s = float(period_s)
         #: Largest change of a TORQUE setpoint, or of ``k theta_0``, per frame [N*m].
         self.max_change_nm = self.rate_nm_per_s * self.period_s
-        self._modes = np.zeros(self.n_joints, dtype=np.int64)
-        self._sent = np.zeros(self.n_joints)  # torque [N*m] or theta_0 [rad] sent last
-        self._stiffness = np.zeros(self.n_joints)
-        self._damping = np.zeros(self.n_joints)
+        # Per joint, as plain lists (a frame touches nine numbers: numpy's per-call overhead
+        # would dominate): the mode, the torque [N*m] or theta_0 [rad] sent last, the gains.
+        self._modes: list[int] = [0] * self.n_joints
+        self._sent: list[float] = [0.0] * self.n_joints
+        self._stiffness: list[float] = [0.0] * self.n_joints
+        self._damping: list[float] = [0.0] * self.n_joints
 
     def reset(self) -> None:
         """Forget the commands sent so far: every joint starts afresh from its measurement."""
-        self._modes[:] = 0
+        self._modes = [0] * self.n_joints
 
     def step(self, modes: np.ndarray, setpoints: np.ndarray, stiffness: np.ndarray,
              damping: np.ndarray, theta_rad: np.ndarray, theta_dot_rad_per_s: np.ndarray,
@@ -103,32 +105,53 @@ class CommandSlew:
             (n,) setpoints with the TORQUE torques and IMPEDANCE equilibria slewed; the others
             as given.
         """
-        m = np.asarray(modes, dtype=np.int64)
-        sp = np.asarray(setpoints, dtype=float)
-        k = np.asarray(stiffness, dtype=float)
-        d = np.asarray(damping, dtype=float)
-        torque = m == _TORQUE
-        impedance = m == _IMPEDANCE
-        out = sp.copy()
+        m = np.asarray(modes, dtype=np.int64).tolist()
+        out = np.asarray(setpoints, dtype=float).tolist()
+        k = np.asarray(stiffness, dtype=float).tolist()
+        d = np.asarray(damping, dtype=float).tolist()
+        theta = np.asarray(theta_rad, dtype=float).tolist()
+        theta_dot = np.asarray(theta_dot_rad_per_s, dtype=float).tolist()
+        tau = np.asarray(torque_nm, dtype=float).tolist()
         limit = self.torque_limit_nm
-        measured = np.clip(np.asarray(torque_nm, dtype=float), -limit, limit)
-        start = torque & (self._modes != _TORQUE)
-        previous = np.where(start, measured, self._sent)
-        out[torque] = slew_torque(previous, np.where(torque, sp, 0.0), limit,
-                                  self.rate_nm_per_s, self.period_s)[torque]
-        restart = impedance & ((self._modes != _IMPEDANCE) | (k != self._stiffness)
-                               | (d != self._damping))
-        if np.any(impedance):
-            k_safe = np.where(impedance, k, 1.0)
-            seat = (np.asarray(theta_rad, dtype=float)
-                    + (measured + d * np.asarray(theta_dot_rad_per_s, dtype=float)) / k_safe)
-            previous = np.where(restart, seat, self._sent)
-            shift = self.max_change_nm / k_safe
-            gap = sp - previous
-            moved = np.where(np.abs(gap) <= shift, sp, previous + np.clip(gap, -shift, shift))
-            out[impedance] = moved[impedance]
-        self._sent = np.where(torque | impedance, out, 0.0)
-        self._modes = m.copy()
-        self._stiffness = np.where(impedance, k, 0.0)
-        self._damping = np.where(impedance, d, 0.0)
-        return out
+        step = self.rate_nm_per_s * max(0.0, self.period_s)
+        max_change = self.max_change_nm
+        old_modes, old_k, old_d = self._modes, self._stiffness, self._damping
+        sent = [0.0] * self.n_joints
+        new_k = [0.0] * self.n_joints
+        new_d = [0.0] * self.n_joints
+        for i, mode in enumerate(m):
+            if mode == _TORQUE:
+                # slew_torque, from the measured torque when the joint enters TORQUE
+                previous = (_clip(tau[i], -limit, limit) if old_modes[i] != _TORQUE
+                            else self._sent[i])
+                target = _clip(out[i], -limit, limit)
+                out[i] = previous + _clip(target - previous, -step, step)
+                sent[i] = out[i]
+            elif mode == _IMPEDANCE:
+                if old_modes[i] != _IMPEDANCE or k[i] != old_k[i] or d[i] != old_d[i]:
+                    # restart where the law gives the measured torque
+                    previous = theta[i] + (_clip(tau[i], -limit, limit)
+                                           + d[i] * theta_dot[i]) / k[i]
+                else:
+                    previous = self._sent[i]
+                shift = max_change / k[i]
+                gap = out[i] - previous
+                if not abs(gap) <= shift:
+                    out[i] = previous + _clip(gap, -shift, shift)
+                sent[i] = out[i]
+                new_k[i] = k[i]
+                new_d[i] = d[i]
+        self._sent = sent
+        self._modes = m
+        self._stiffness = new_k
+        self._damping = new_d
+        return np.array(out)
+
+
+def _clip(value: float, low: float, high: float) -> float:
+    """``value`` clipped to ``[low, high]`` (numbers) as ``numpy.clip`` does it with array
+    bounds: a NaN value stays NaN, and on a tie the bound is returned (the sign of a zero)."""
+    if value != value:
+        return value
+    value = value if value > low else low
+    return value if value < high else high

@@ -49,6 +49,8 @@ _TO_WORLD = {int(JointMode.HOLD): int(WireMode.HOLD),
              int(JointMode.POSITION): int(WireMode.POSITION),
              int(JointMode.TORQUE): int(WireMode.TORQUE),
              int(JointMode.IMPEDANCE): int(WireMode.IMPEDANCE)}
+#: The same as a lookup table: controller mode values (0, 1, ...) index their world mode.
+_TO_WORLD_TABLE = np.array([_TO_WORLD[m] for m in range(len(_TO_WORLD))], dtype=np.int64)
 #: Phase -> small integer for the recorded signals.
 PHASE_CODES = {phase: i for i, phase in enumerate(Phase)}
 
@@ -224,7 +226,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                 if last_phase is Phase.ROLLING_UP:
                     lift_rolling_end = float(w.object_pose().position[2]) - z0
                 last_phase = seq.phase
-            modes = np.array([_TO_WORLD[int(m)] for m in cmd.modes], dtype=np.int64)
+            modes = _TO_WORLD_TABLE[cmd.modes]
             setpoints = slew.step(modes, cmd.setpoints, cmd.stiffness, cmd.damping,
                                   js.positions, js.velocities, js.torques)
             pending.append((modes, setpoints, cmd.stiffness.copy(), cmd.damping.copy()))

@@ -103,6 +103,7 @@ every reading is zero.
 
 from __future__ import annotations
 
+import array
 import math
 import os
 import tempfile
@@ -123,6 +124,7 @@ if TYPE_CHECKING:
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 _IMPEDANCE = int(JointMode.IMPEDANCE)
+_MODES = frozenset((_TORQUE, _POSITION, _HOLD, _IMPEDANCE))
 
 
 @dataclass(frozen=True)
@@ -259,20 +261,46 @@ class ObjectPose(NamedTuple):
     sim_time: float  #: simulated time since the last reset [s]
 
 
+class _StepPlan(NamedTuple):
+    """The torque-controlled joints of a command, as :meth:`HandWorld.step` uses them: rows
+    (``joint_names`` order) of the TORQUE joints, then of the IMPEDANCE joints."""
+
+    rows: tuple[int, ...]
+    joints: list[int]  #: Bullet joint indices of ``rows``
+    n_torque: int  #: the first ``n_torque`` rows are TORQUE joints
+    target: tuple[float, ...]  #: clipped TORQUE setpoints [N*m], then zeros
+    stiffness: tuple[float, ...]  #: of the IMPEDANCE rows [N*m/rad]
+    damping: tuple[float, ...]  #: [N*m*s/rad]
+    theta_0: tuple[float, ...]  #: commanded equilibria [rad]
+    max_shift: tuple[float, ...]  #: the equilibria's ramp per step [rad]
+    max_change: float  #: slew limit per step [N*m]
+    limit: float  #: torque limit [N*m]
+
+
 @dataclass
 class _JointTable:
     indices: list[int] = field(default_factory=list)  # Bullet joint indices, joint_names order
     roles: list[str] = field(default_factory=list)
     lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lower_list: list[float] = field(default_factory=list)  # the same limits as lists [rad]
+    upper_list: list[float] = field(default_factory=list)
 
 
-def _towards(current: np.ndarray, target: np.ndarray, max_change: float | np.ndarray
-             ) -> np.ndarray:
+def _toward(current: float, target: float, max_change: float) -> float:
     """``current`` moved towards ``target`` by at most ``max_change`` (``target`` itself,
     exactly, when it is that close)."""
     gap = target - current
-    return np.where(np.abs(gap) <= max_change, target, current + np.copysign(max_change, gap))
+    return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
+
+
+def _clip(value: float, low: float, high: float) -> float:
+    """``value`` clipped to ``[low, high]`` (numbers) as ``numpy.clip`` does it with array
+    bounds: a NaN value stays NaN, and on a tie the bound is returned (the sign of a zero)."""
+    if value != value:
+        return value
+    value = value if value > low else low
+    return value if value < high else high
 
 
 def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
@@ -411,6 +439,11 @@ class HandWorld:
         except Exception as exc:  # noqa: BLE001 - pybullet raises plain errors
             raise SimulationError(f'cannot start the PyBullet server (mode {mode}): {exc}') from exc
         self._closed = False
+        # The calls of the per-step loop, bound to this world's server once.
+        self._get_joint_states = self._pb.getJointStates
+        self._set_joint_motor_control_array = self._pb.setJointMotorControlArray
+        self._step_simulation = self._pb.stepSimulation
+        self._get_base_pose = self._pb.getBasePositionAndOrientation
         self._pb.setTimeStep(self.options.time_step_s)
         self._pb.setPhysicsEngineParameter(numSolverIterations=int(self.options.solver_iterations))
         self.set_gravity((0.0, 0.0, -config.task.gravity_m_per_s2))
@@ -447,6 +480,8 @@ class HandWorld:
         limits = [self.config.hand.joint_limits_rad[r] for r in table.roles]
         table.lower = np.array([lim[0] for lim in limits])
         table.upper = np.array([lim[1] for lim in limits])
+        table.lower_list = table.lower.tolist()
+        table.upper_list = table.upper.tolist()
         self._joints = table
         for j in table.indices:
             pb.changeDynamics(self.hand_id, j, linearDamping=0.0, angularDamping=0.0,
@@ -656,16 +691,21 @@ class HandWorld:
                                        f'of {bad}')
         for j, q in zip(self._joints.indices, q0, strict=True):
             pb.resetJointState(self.hand_id, j, float(q), 0.0)
-        self._modes = np.full(self.n_joints, _HOLD, dtype=np.int64)
-        self._targets = q0.copy()
-        self._torque_cmd = np.zeros(self.n_joints)
-        self._applied_torque = np.zeros(self.n_joints)
-        self._saturated = np.zeros(self.n_joints, dtype=bool)
-        self._theta_0 = np.zeros(self.n_joints)
-        self._theta_0_eff = np.zeros(self.n_joints)
-        self._stiffness = np.zeros(self.n_joints)
-        self._damping = np.zeros(self.n_joints)
-        self._sent_servo: tuple[bytes, bytes] | None = None
+        n = self.n_joints
+        # The joint command state, as plain lists in joint_names order (the per-step loop
+        # works on Python floats: on nine joints numpy's per-call overhead dominates).
+        self._modes: list[int] = [_HOLD] * n
+        self._targets: list[float] = [float(q) for q in q0]  # servo targets [rad]
+        self._torque_cmd: list[float] = [0.0] * n  # clipped TORQUE setpoints [N*m]
+        self._applied_torque: list[float] = [0.0] * n  # torque applied in the last step [N*m]
+        self._saturated: list[bool] = [False] * n
+        self._theta_0: list[float] = [0.0] * n  # commanded IMPEDANCE equilibria [rad]
+        self._theta_0_eff: list[float] = [0.0] * n  # effective equilibria [rad]
+        self._stiffness: list[float] = [0.0] * n  # [N*m/rad]
+        self._damping: list[float] = [0.0] * n  # [N*m*s/rad]
+        self._sent_servo: tuple[tuple[int, ...], bytes] | None = None
+        self._plan: _StepPlan | None = None
+        self._plan_key: tuple[tuple[int, ...], bytes] | None = None  # the plan's command
         self._steps = 0
         self._stepped = False
         self._send_servo_targets(force=True)
@@ -675,7 +715,66 @@ class HandWorld:
 
     def joint_modes(self) -> np.ndarray:
         """(n,) current :class:`JointMode` of every joint."""
-        return self._modes.copy()
+        return np.array(self._modes, dtype=np.int64)
+
+    def _checked_modes(self, m_in: np.ndarray) -> list[int]:
+        """``m_in`` as a list of :class:`JointMode` values.
+
+        Raises
+        ------
+        CommandError
+            A value that is not an integer or not a JointMode.
+        """
+        if m_in.dtype.kind in 'iu':
+            values = m_in.tolist()
+            if all(v in _MODES for v in values):
+                return values
+        try:
+            m = m_in.astype(np.int64)
+            valid = (m == m_in) & ((m == _TORQUE) | (m == _POSITION) | (m == _HOLD)
+                                   | (m == _IMPEDANCE))
+        except (ValueError, TypeError) as exc:
+            raise CommandError(f'modes {m_in.tolist()!r} are not integers: {exc}') from exc
+        if not np.all(valid):
+            raise CommandError(f'modes {m_in.tolist()!r}: {m_in[~valid].tolist()!r} is not a '
+                               f'JointMode ({_TORQUE}, {_POSITION}, {_HOLD}, {_IMPEDANCE})')
+        return m.tolist()
+
+    def _checked_gains(self, impedance: list[bool],
+                       stiffness: Sequence[float] | np.ndarray | None,
+                       damping: Sequence[float] | np.ndarray | None
+                       ) -> tuple[list[float], list[float]]:
+        """Stiffness [N*m/rad] and damping [N*m*s/rad] of the IMPEDANCE joints, zero for the
+        others.
+
+        Raises
+        ------
+        CommandError
+            Missing gains, a wrong shape, or a gain of an IMPEDANCE joint that is not finite
+            or not positive (stiffness), negative (damping).
+        """
+        n = self.n_joints
+        if not any(impedance):
+            return [0.0] * n, [0.0] * n
+        if stiffness is None or damping is None:
+            raise CommandError('IMPEDANCE joints need a stiffness and a damping')
+        k_in = np.asarray(stiffness, dtype=float)
+        d_in = np.asarray(damping, dtype=float)
+        if k_in.shape != (n,) or d_in.shape != (n,):
+            raise CommandError(f'stiffness {k_in.shape} and damping {d_in.shape} must '
+                               f'both have shape ({n},)')
+        k_all, d_all = k_in.tolist(), d_in.tolist()
+        k = [0.0] * n
+        d = [0.0] * n
+        for i in range(n):
+            if impedance[i]:
+                k[i], d[i] = k_all[i], d_all[i]
+                if not (math.isfinite(k[i]) and math.isfinite(d[i]) and k[i] > 0.0
+                        and d[i] >= 0.0):
+                    raise CommandError(f'IMPEDANCE gains must be finite with stiffness > 0 '
+                                       f'and damping >= 0: stiffness {k_all!r}, damping '
+                                       f'{d_all!r}')
+        return k, d
 
     def set_joint_commands(self, modes: Sequence[int] | np.ndarray,
                            setpoints: Sequence[float] | np.ndarray,
@@ -702,103 +801,91 @@ class HandWorld:
             Wrong length, an unknown mode, a non-finite TORQUE/POSITION/IMPEDANCE setpoint,
             or missing or bad gains of an IMPEDANCE joint.
         """
+        n = self.n_joints
         m_in = np.asarray(modes)
-        sp = np.asarray(setpoints, dtype=float)
-        if m_in.shape != (self.n_joints,) or sp.shape != (self.n_joints,):
-            raise CommandError(f'modes {m_in.shape} and setpoints {sp.shape} must both have '
-                               f'shape ({self.n_joints},)')
-        try:
-            m = m_in.astype(np.int64)
-            valid = (m == m_in) & ((m == _TORQUE) | (m == _POSITION) | (m == _HOLD)
-                                   | (m == _IMPEDANCE))
-        except (ValueError, TypeError) as exc:
-            raise CommandError(f'modes {m_in.tolist()!r} are not integers: {exc}') from exc
-        if not np.all(valid):
-            raise CommandError(f'modes {m_in.tolist()!r}: {m_in[~valid].tolist()!r} is not a '
-                               f'JointMode ({_TORQUE}, {_POSITION}, {_HOLD}, {_IMPEDANCE})')
-        torque_now = m == _TORQUE
-        position_now = m == _POSITION
-        impedance_now = m == _IMPEDANCE
-        active = torque_now | position_now | impedance_now
-        if not np.all(np.isfinite(sp[active])):
-            bad = [self.joint_names[i] for i in np.flatnonzero(active & ~np.isfinite(sp))]
-            raise CommandError(f'non-finite setpoint for {bad}: {sp.tolist()!r}')
-        k = np.zeros(self.n_joints)
-        d = np.zeros(self.n_joints)
-        if np.any(impedance_now):
-            if stiffness is None or damping is None:
-                raise CommandError('IMPEDANCE joints need a stiffness and a damping')
-            k_in = np.asarray(stiffness, dtype=float)
-            d_in = np.asarray(damping, dtype=float)
-            if k_in.shape != (self.n_joints,) or d_in.shape != (self.n_joints,):
-                raise CommandError(f'stiffness {k_in.shape} and damping {d_in.shape} must '
-                                   f'both have shape ({self.n_joints},)')
-            ki, di = k_in[impedance_now], d_in[impedance_now]
-            if not (np.all(np.isfinite(ki)) and np.all(np.isfinite(di)) and np.all(ki > 0.0)
-                    and np.all(di >= 0.0)):
-                raise CommandError(f'IMPEDANCE gains must be finite with stiffness > 0 and '
-                                   f'damping >= 0: stiffness {k_in.tolist()!r}, damping '
-                                   f'{d_in.tolist()!r}')
-            k[impedance_now] = ki
-            d[impedance_now] = di
-        reseat = impedance_now & ((self._modes != _IMPEDANCE) | (k != self._stiffness)
-                                  | (d != self._damping))
-        self._theta_0 = np.where(impedance_now, sp, 0.0)
+        sp_in = np.asarray(setpoints, dtype=float)
+        if m_in.shape != (n,) or sp_in.shape != (n,):
+            raise CommandError(f'modes {m_in.shape} and setpoints {sp_in.shape} must both have '
+                               f'shape ({n},)')
+        m = self._checked_modes(m_in)
+        sp = sp_in.tolist()
+        bad = [self.joint_names[i] for i in range(n)
+               if m[i] != _HOLD and not math.isfinite(sp[i])]
+        if bad:
+            raise CommandError(f'non-finite setpoint for {bad}: {sp!r}')
+        impedance = [mode == _IMPEDANCE for mode in m]
+        k, d = self._checked_gains(impedance, stiffness, damping)
+        old, old_k, old_d = self._modes, self._stiffness, self._damping
+        lower, upper = self._joints.lower_list, self._joints.upper_list
+        limit = self.options.torque_limit_nm
+        targets, applied = self._targets, self._applied_torque
+        theta_0_eff = self._theta_0_eff
+        theta_0 = [0.0] * n
+        newly_torque: list[int] = []  # Bullet indices of the joints that leave the servo
+        states = None  # one read of the joints serves every reading below (nothing moves)
+        for i in range(n):
+            mode, before = m[i], old[i]
+            if mode == _HOLD:
+                if before != _HOLD:  # hold the angle of the switch
+                    if states is None:
+                        states = self._get_joint_states(self.hand_id, self._joints.indices)
+                    targets[i] = states[i][0]
+            elif mode == _POSITION:
+                targets[i] = _clip(sp[i], lower[i], upper[i])
+            tau = sp[i] if mode == _TORQUE else 0.0  # NaN setpoints of other modes dropped
+            self._torque_cmd[i] = _clip(tau, -limit, limit)
+            self._saturated[i] = abs(tau) > limit
+            if mode == _TORQUE or mode == _IMPEDANCE:
+                if before != _TORQUE and before != _IMPEDANCE:
+                    # the slew starts from the servo's last torque: bumpless
+                    newly_torque.append(self._joints.indices[i])
+                    applied[i] = 0.0
+                    if self._stepped:
+                        if states is None:
+                            states = self._get_joint_states(self.hand_id,
+                                                            self._joints.indices)
+                        applied[i] = _clip(states[i][3], -limit, limit)
+            else:
+                applied[i] = 0.0
+            if mode == _IMPEDANCE:
+                theta_0[i] = sp[i]
+                if before != _IMPEDANCE or k[i] != old_k[i] or d[i] != old_d[i]:
+                    # the law starts where it gives the torque applied now
+                    if states is None:
+                        states = self._get_joint_states(self.hand_id, self._joints.indices)
+                    theta, theta_dot = states[i][0], states[i][1]
+                    theta_0_eff[i] = theta + (applied[i] + d[i] * theta_dot) / k[i]
+            else:
+                theta_0_eff[i] = 0.0
+        self._theta_0 = theta_0
         self._stiffness = k
         self._damping = d
-        entering_hold = (m == _HOLD) & (self._modes != _HOLD)
-        if np.any(entering_hold):
-            self._targets[entering_hold] = self._read_positions()[entering_hold]
-        if np.any(position_now):
-            self._targets[position_now] = np.clip(sp[position_now],
-                                                  self._joints.lower[position_now],
-                                                  self._joints.upper[position_now])
-        limit = self.options.torque_limit_nm
-        tau = np.where(torque_now, sp, 0.0)  # NaN setpoints of other modes are dropped here
-        self._torque_cmd = np.clip(tau, -limit, limit)
-        self._saturated = np.abs(tau) > limit
-        was_torque = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
-        newly_torque = (torque_now | impedance_now) & ~was_torque
-        if np.any(newly_torque):  # the slew starts from the servo's last torque: bumpless
-            self._applied_torque = np.where(newly_torque, np.clip(
-                self._servo_torques(), -limit, limit), self._applied_torque)
-        self._applied_torque[~(torque_now | impedance_now)] = 0.0
-        if np.any(reseat):  # the law starts where it gives the torque applied now
-            states = self._pb.getJointStates(self.hand_id, self._joints.indices)
-            theta = np.array([s[0] for s in states])
-            theta_dot = np.array([s[1] for s in states])
-            with np.errstate(divide='ignore', invalid='ignore'):
-                seat = theta + (self._applied_torque + d * theta_dot) / k
-            self._theta_0_eff = np.where(reseat, seat, self._theta_0_eff)
-        self._theta_0_eff[~impedance_now] = 0.0
         self._modes = m
-        if np.any(newly_torque):
-            idx = [self._joints.indices[i] for i in np.flatnonzero(newly_torque)]
-            self._pb.setJointMotorControlArray(self.hand_id, idx, pybullet.VELOCITY_CONTROL,
-                                               forces=[0.0] * len(idx))
+        plan_key = (tuple(m), array.array('d', theta_0 + k + d + self._torque_cmd).tobytes())
+        if plan_key != self._plan_key:  # (the bytes: a zero's sign counts too)
+            self._plan = None
+            self._plan_key = plan_key
+        if newly_torque:
+            self._pb.setJointMotorControlArray(self.hand_id, newly_torque,
+                                               pybullet.VELOCITY_CONTROL,
+                                               forces=[0.0] * len(newly_torque))
         self._send_servo_targets()
 
     def _send_servo_targets(self, force: bool = False) -> None:
-        servo = np.flatnonzero((self._modes != _TORQUE) & (self._modes != _IMPEDANCE))
-        key = (servo.tobytes(), self._targets[servo].tobytes())
-        if servo.size == 0 or (key == self._sent_servo and not force):
+        servo = tuple(i for i, mode in enumerate(self._modes)
+                      if mode != _TORQUE and mode != _IMPEDANCE)
+        targets = [self._targets[i] for i in servo]
+        key = (servo, array.array('d', targets).tobytes())
+        if not servo or (key == self._sent_servo and not force):
             return
-        n = int(servo.size)
+        n = len(servo)
         self._pb.setJointMotorControlArray(
             self.hand_id, [self._joints.indices[i] for i in servo], pybullet.POSITION_CONTROL,
-            targetPositions=self._targets[servo].tolist(), targetVelocities=[0.0] * n,
+            targetPositions=targets, targetVelocities=[0.0] * n,
             forces=[self.options.servo_force_limit_nm] * n,
             positionGains=[self.options.position_gain] * n,
             velocityGains=[self.options.velocity_gain] * n)
         self._sent_servo = key
-
-    def _servo_torques(self) -> np.ndarray:
-        """(n,) Bullet's ``appliedJointMotorTorque`` of the last step [N*m] (the servo torque
-        of POSITION and HOLD joints); zeros before the first step."""
-        if not self._stepped:
-            return np.zeros(self.n_joints)
-        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
-        return np.array([s[3] for s in states])
 
     # ---------------------------------------------------------------------------------------
     # Stepping and reading
@@ -816,48 +903,74 @@ class HandWorld:
             raise CommandError(f'step count {n!r} must be >= 0')
         if self._closed:
             raise SimulationError('the world is closed')
-        pb = self._pb
-        torque_idx = np.flatnonzero(self._modes == _TORQUE)
-        imp_idx = np.flatnonzero(self._modes == _IMPEDANCE)
-        both = np.concatenate([torque_idx, imp_idx])
-        joints = [self._joints.indices[i] for i in both]
-        imp_joints = [self._joints.indices[i] for i in imp_idx]
-        target = np.concatenate([self._torque_cmd[torque_idx], np.zeros(imp_idx.size)])
-        forces = self._applied_torque[both].astype(float)
-        max_change = float(self.options.torque_rate_limit_nm_per_s) * self.options.time_step_s
-        n_t = torque_idx.size
-        limit = float(self.options.torque_limit_nm)
-        k = self._stiffness[imp_idx]
-        d = self._damping[imp_idx]
-        theta_0 = self._theta_0[imp_idx]
-        theta_0_eff = self._theta_0_eff[imp_idx]
-        max_shift = max_change / k  # the equilibrium's ramp [rad] per step
-        raw_imp = np.zeros(imp_idx.size)
-        for _ in range(steps):
-            if imp_joints:
-                states = pb.getJointStates(self.hand_id, imp_joints)
-                theta = np.fromiter((s[0] for s in states), float, imp_idx.size)
-                theta_dot = np.fromiter((s[1] for s in states), float, imp_idx.size)
-                theta_0_eff = _towards(theta_0_eff, theta_0, max_shift)
-                raw_imp = k * (theta_0_eff - theta) - d * theta_dot
-                target[n_t:] = np.clip(raw_imp, -limit, limit)
-            if joints:
-                forces = _towards(forces, target, max_change)
-                if imp_joints:  # slewed: the spring yields instead of winding up
-                    cut = forces[n_t:] != target[n_t:]
-                    theta_0_eff[cut] = (theta + (forces[n_t:] + d * theta_dot) / k)[cut]
-                pb.setJointMotorControlArray(self.hand_id, joints, pybullet.TORQUE_CONTROL,
-                                             forces=forces.tolist())
-            pb.stepSimulation()
-        if steps:
+        if steps == 0:
+            return
+        hand = self.hand_id
+        step_simulation = self._step_simulation
+        plan = self._plan if self._plan is not None else self._step_plan()
+        if not plan.rows:
+            for _ in range(steps):
+                step_simulation()
             self._steps += steps
             self._stepped = True
-            self._applied_torque[both] = forces
-            self._theta_0_eff[imp_idx] = theta_0_eff
-            self._saturated[imp_idx] = np.abs(raw_imp) > limit
+            return
+        n_t, n_i = plan.n_torque, len(plan.stiffness)
+        k, d, theta_0, max_shift = plan.stiffness, plan.damping, plan.theta_0, plan.max_shift
+        max_change, limit = plan.max_change, plan.limit
+        target = list(plan.target)  # TORQUE setpoints, then the impedance laws of the step
+        forces = [self._applied_torque[i] for i in plan.rows]
+        theta_0_eff = [self._theta_0_eff[i] for i in plan.rows[n_t:]]
+        raw_imp = [0.0] * n_i
+        joints, imp_joints = plan.joints, plan.joints[n_t:]
+        get_states = self._get_joint_states
+        set_torques = self._set_joint_motor_control_array
+        torque_control = pybullet.TORQUE_CONTROL
+        for _ in range(steps):
+            states = get_states(hand, imp_joints) if n_i else ()
+            for j in range(n_i):
+                theta, theta_dot = states[j][0], states[j][1]
+                eff = _toward(theta_0_eff[j], theta_0[j], max_shift[j])
+                raw = k[j] * (eff - theta) - d[j] * theta_dot
+                raw_imp[j] = raw
+                target[n_t + j] = _clip(raw, -limit, limit)
+                theta_0_eff[j] = eff
+            for j in range(n_t + n_i):
+                forces[j] = _toward(forces[j], target[j], max_change)
+            for j in range(n_i):
+                force = forces[n_t + j]
+                if force != target[n_t + j]:  # slewed: the spring yields, no wind-up
+                    theta, theta_dot = states[j][0], states[j][1]
+                    theta_0_eff[j] = theta + (force + d[j] * theta_dot) / k[j]
+            set_torques(hand, joints, torque_control, forces=forces)
+            step_simulation()
+        self._steps += steps
+        self._stepped = True
+        for j, i in enumerate(plan.rows):
+            self._applied_torque[i] = forces[j]
+        for j, i in enumerate(plan.rows[n_t:]):
+            self._theta_0_eff[i] = theta_0_eff[j]
+            self._saturated[i] = abs(raw_imp[j]) > limit
+
+    def _step_plan(self) -> _StepPlan:
+        """What :meth:`step` needs of the current command (kept until the next command)."""
+        modes = self._modes
+        torque_rows = [i for i, mode in enumerate(modes) if mode == _TORQUE]
+        imp_rows = [i for i, mode in enumerate(modes) if mode == _IMPEDANCE]
+        max_change = float(self.options.torque_rate_limit_nm_per_s) * self.options.time_step_s
+        k = tuple(self._stiffness[i] for i in imp_rows)
+        self._plan = _StepPlan(
+            rows=tuple(torque_rows + imp_rows),
+            joints=[self._joints.indices[i] for i in torque_rows + imp_rows],
+            n_torque=len(torque_rows),
+            target=tuple([self._torque_cmd[i] for i in torque_rows] + [0.0] * len(imp_rows)),
+            stiffness=k, damping=tuple(self._damping[i] for i in imp_rows),
+            theta_0=tuple(self._theta_0[i] for i in imp_rows),
+            max_shift=tuple(max_change / k_j for k_j in k),
+            max_change=max_change, limit=float(self.options.torque_limit_nm))
+        return self._plan
 
     def _read_positions(self) -> np.ndarray:
-        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+        states = self._get_joint_states(self.hand_id, self._joints.indices)
         return np.array([s[0] for s in states])
 
     def joint_states(self) -> JointStates:
@@ -865,15 +978,16 @@ class HandWorld:
 
         Arrays in ``joint_names`` order; see the module docstring for the torque reading.
         """
-        states = self._pb.getJointStates(self.hand_id, self._joints.indices)
+        states = self._get_joint_states(self.hand_id, self._joints.indices)
         positions = np.array([s[0] for s in states])
         velocities = np.array([s[1] for s in states])
         if not self._stepped:
             torques = np.zeros(self.n_joints)
         else:
-            motor = np.array([s[3] for s in states])
-            torque_like = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
-            torques = np.where(torque_like, self._applied_torque, motor)
+            applied = self._applied_torque
+            torques = np.array([applied[i] if mode == _TORQUE or mode == _IMPEDANCE else s[3]
+                                for i, (mode, s) in enumerate(zip(self._modes, states,
+                                                                  strict=True))])
         return JointStates(positions, velocities, torques)
 
     def joint_faults(self, limit_tolerance_rad: float = 1e-3) -> np.ndarray:
@@ -891,7 +1005,7 @@ class HandWorld:
 
     def object_pose(self) -> ObjectPose:
         """Position [m] and orientation (x, y, z, w) of the cylinder, and the sim time [s]."""
-        pos, quat = self._pb.getBasePositionAndOrientation(self.object_id)
+        pos, quat = self._get_base_pose(self.object_id)
         return ObjectPose(np.array(pos), np.array(quat), self.sim_time)
 
     def object_velocity(self) -> tuple[np.ndarray, np.ndarray]:

@@ -8,6 +8,8 @@ import numpy as np
 
 from dam_spcm_controller.errors import InputError
 
+_ALL = np.logical_and.reduce  # ndarray.all without its Python wrapper
+
 
 def finite_scalar(name: str, value: float, *, positive: bool = False,
                   nonnegative: bool = False) -> float:
@@ -33,6 +35,10 @@ def finite_vector(name: str, value: object, length: int | None = None, *,
 
     A scalar is accepted and broadcast when ``length`` is given.
     """
+    if (type(value) is np.ndarray and value.dtype == np.float64 and value.ndim == 1
+            and (length is None or value.shape[0] == length) and not positive
+            and not nonnegative and _ALL(np.isfinite(value))):
+        return value  # the common case of the control loop, in two numpy calls
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):

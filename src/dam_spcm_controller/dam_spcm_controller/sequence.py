@@ -76,6 +76,14 @@ if TYPE_CHECKING:  # pragma: no cover
     from dam_common.config import DamConfig
 
 
+def _since(condition: bool, since: float, t: float) -> float:
+    """Time [s] since which ``condition`` has held: ``since``, or ``t`` when it starts now;
+    NaN when it does not hold."""
+    if not condition:
+        return math.nan
+    return t if since != since else since
+
+
 class Phase(enum.Enum):
     """Phase of the DAM sequence."""
 
@@ -103,6 +111,11 @@ _PROGRESS_APPROACH = 0.2
 _PROGRESS_ROLLING = 0.9
 # Times closer than this count as equal (float rounding of sums of time steps) [s].
 _TIME_EPS = 1e-9
+# The modes as plain ints: numpy compares an array with an int faster than with an IntEnum.
+_HOLD = int(JointMode.HOLD)
+_POSITION = int(JointMode.POSITION)
+_TORQUE = int(JointMode.TORQUE)
+_IMPEDANCE = int(JointMode.IMPEDANCE)
 
 
 @dataclass(frozen=True)
@@ -258,7 +271,14 @@ class DamSequence:
         self._inner_hi = lay.upper - params.limit_margin
         self._outer_lo = lay.lower - params.limit_margin
         self._outer_hi = lay.upper + params.limit_margin
-        self._modes = np.full(self._nj, JointMode.HOLD, dtype=np.int8)
+        self._inner_hi_c = self._inner_hi[self._c].copy()
+        self._lower_c = lay.lower[self._c].copy()  # compliant joint limits [rad]
+        self._upper_c = lay.upper[self._c].copy()
+        # The bounds of _check_limits for the modes they were computed for.
+        self._limits_for: bytes | None = None
+        self._limits_lo = self._outer_lo
+        self._limits_hi = self._outer_hi
+        self._modes = np.full(self._nj, _HOLD, dtype=np.int8)
         self._set = np.zeros(self._nj)
         self._stiff = np.zeros(self._nj)  # IMPEDANCE gains of the command [N*m/rad]
         self._damp = np.zeros(self._nj)  # [N*m*s/rad]
@@ -416,7 +436,7 @@ class DamSequence:
         if self._pending_start:
             self._pending_start = False
             self._phase = Phase.ABORTED
-            self._relax_from_modes[:] = JointMode.HOLD
+            self._relax_from_modes[:] = _HOLD
             self._relax_latch_measured = True  # hold whatever is measured at the next step
             self._t_phase = self._t_last if self._t_last is not None else 0.0
             return True
@@ -499,7 +519,7 @@ class DamSequence:
         if self._relax_latch_measured:
             self._relax_latch_measured = False
             self._relax_from[:] = pos
-            self._modes[:] = JointMode.HOLD
+            self._modes[:] = _HOLD
         phase = self._phase
         if phase.active:
             if t - self._t_phase > self._p.phase_timeout:
@@ -527,7 +547,7 @@ class DamSequence:
     def _step_idle(self, pos: np.ndarray) -> None:
         if self._hold is None:
             self._hold = pos.copy()
-        self._modes[:] = JointMode.HOLD
+        self._modes[:] = _HOLD
         self._set[:] = self._hold
         self._stiff[:] = 0.0
         self._damp[:] = 0.0
@@ -536,15 +556,14 @@ class DamSequence:
         """Command the compliant joints in IMPEDANCE around ``theta_eq`` [rad] (clipped to
         the joint limits) with ``k_theta_i`` and ``d``."""
         c = self._c
-        lay = self._p.layout
-        self._modes[c] = JointMode.IMPEDANCE
-        self._set[c] = np.clip(theta_eq, lay.lower[c], lay.upper[c])
+        self._modes[c] = _IMPEDANCE
+        self._set[c] = np.clip(theta_eq, self._lower_c, self._upper_c)
         self._stiff[c] = self._k_theta_i
         self._damp[c] = self._p.damping
 
     def _torque_mode(self) -> None:
         """Compliant joints in TORQUE (gains cleared)."""
-        self._modes[self._c] = JointMode.TORQUE
+        self._modes[self._c] = _TORQUE
         self._stiff[:] = 0.0
         self._damp[:] = 0.0
 
@@ -559,7 +578,7 @@ class DamSequence:
         dist = np.abs(self._preshape_to - self._preshape_from)
         self._preshape_time = float(dist.max()) / self._p.approach_speed
         self._eq_start[:] = pos[self._c]
-        self._modes[:] = JointMode.POSITION
+        self._modes[:] = _POSITION
         if self._p.impedance_on_device:
             self._device_impedance(self._eq_start)
         else:
@@ -586,14 +605,19 @@ class DamSequence:
         # Closing: the equilibrium of fingers without contact moves inward.
         closing_time = max(elapsed - self._preshape_time, 0.0)
         theta_eq = self._eq_start + p.approach_speed * closing_time
-        if preshaped:
-            above = (~self._contact) & (eff[self._c] >= p.contact_torque_threshold)
-            self._above_since = np.where(above, np.where(np.isnan(self._above_since), t,
-                                                         self._above_since), np.nan)
-            new = above & (t - self._above_since >= p.contact_confirm_time - _TIME_EPS)
-            if new.any():
-                self._theta_0[new] = pos[self._c][new]
-                self._contact |= new
+        if preshaped:  # per finger (three numbers: plain floats are faster than numpy)
+            contact = self._contact.tolist()
+            tau_c = eff[self._c].tolist()
+            theta = pos[self._c].tolist()
+            above_since = self._above_since.tolist()
+            confirm = p.contact_confirm_time - _TIME_EPS
+            for i in range(self._n):
+                above = not contact[i] and tau_c[i] >= p.contact_torque_threshold
+                above_since[i] = _since(above, above_since[i], t)
+                if above and t - above_since[i] >= confirm:  # new contact
+                    self._theta_0[i] = theta[i]
+                    self._contact[i] = True
+            self._above_since = np.array(above_since)
         theta_eq = np.where(self._contact, self._theta_0, theta_eq)
         if p.impedance_on_device:
             self._device_impedance(theta_eq)
@@ -604,13 +628,13 @@ class DamSequence:
             self._set[self._c] = tau
         frac_pre = 1.0 if self._preshape_time <= 0.0 else min(elapsed / self._preshape_time,
                                                                1.0)
-        frac = 0.5 * frac_pre + 0.5 * float(self._contact.mean())
+        frac = 0.5 * frac_pre + 0.5 * (int(np.count_nonzero(self._contact)) / self._n)
         self._progress = max(self._progress, _PROGRESS_APPROACH * frac)
         if self._contact.all():
             self._enter_rolling(t, pos, vel)
             return
         # A finger whose equilibrium has passed its joint limit will never find the object.
-        upper_c = self._inner_hi[self._c]
+        upper_c = self._inner_hi_c
         open_limit = (~self._contact) & (theta_eq >= upper_c)
         if open_limit.any():
             i = int(np.flatnonzero(open_limit)[0])
@@ -630,8 +654,8 @@ class DamSequence:
         self._loaded[:] = False
         self._below_since[:] = np.nan
         self._loaded_since[:] = np.nan
-        self._modes[self._q] = JointMode.POSITION
-        self._modes[self._l] = JointMode.HOLD
+        self._modes[self._q] = _POSITION
+        self._modes[self._l] = _HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
         if p.impedance_on_device:
             self._device_impedance(self._theta_0)
@@ -654,21 +678,33 @@ class DamSequence:
         # Lost contact: a finger that carried load drops below the release level. The load is
         # the paper's tau_s = -K_theta delta_theta_s from the encoders (the torque sensor would
         # still show the approach torque for a cycle after the contact posture is latched).
-        tau_c = self._k_theta_i * (self._theta_0 - pos[self._c])
-        over = tau_c >= p.contact_torque_threshold
-        self._loaded_since = np.where(over, np.where(np.isnan(self._loaded_since), t,
-                                                     self._loaded_since), np.nan)
-        self._loaded |= over & (t - self._loaded_since >= p.lost_contact_time - _TIME_EPS)
+        # Per finger (three numbers: plain floats are faster than numpy).
+        k = self._k_theta_i.tolist()
+        theta_0 = self._theta_0.tolist()
+        theta = pos[self._c].tolist()
+        loaded = self._loaded.tolist()
+        loaded_since = self._loaded_since.tolist()
+        below_since = self._below_since.tolist()
         release = p.lost_contact_ratio * p.contact_torque_threshold
-        below = self._loaded & (tau_c < release)
-        self._below_since = np.where(below, np.where(np.isnan(self._below_since), t,
-                                                     self._below_since), np.nan)
-        lost = below & (t - self._below_since >= p.lost_contact_time)
-        if lost.any():
-            i = int(np.flatnonzero(lost)[0])
-            self._fail(t, f'lost contact on {p.layout.finger_name(i)}: compliant torque '
-                          f'{tau_c[i]:.4g} N*m below {release:.4g} N*m for '
-                          f'{t - self._below_since[i]:.4g} s during rolling_up')
+        loaded_after = p.lost_contact_time - _TIME_EPS
+        lost: int | None = None
+        for i in range(self._n):
+            tau_c = k[i] * (theta_0[i] - theta[i])
+            over = tau_c >= p.contact_torque_threshold
+            loaded_since[i] = _since(over, loaded_since[i], t)
+            loaded[i] = loaded[i] or (over and t - loaded_since[i] >= loaded_after)
+            below = loaded[i] and tau_c < release
+            below_since[i] = _since(below, below_since[i], t)
+            if lost is None and below and t - below_since[i] >= p.lost_contact_time:
+                lost = i
+                lost_tau = tau_c
+        self._loaded[:] = loaded
+        self._loaded_since = np.array(loaded_since)
+        self._below_since = np.array(below_since)
+        if lost is not None:
+            self._fail(t, f'lost contact on {p.layout.finger_name(lost)}: compliant torque '
+                          f'{lost_tau:.4g} N*m below {release:.4g} N*m for '
+                          f'{t - below_since[lost]:.4g} s during rolling_up')
             return
         if elapsed >= traj.duration:
             self._enter_envelope(t, pos)
@@ -693,8 +729,8 @@ class DamSequence:
             self._device_impedance(self._theta_0)
         else:
             self._torque_mode()
-        self._modes[self._q] = JointMode.POSITION  # stays at the trajectory's goal
-        self._modes[self._l] = JointMode.HOLD
+        self._modes[self._q] = _POSITION  # stays at the trajectory's goal
+        self._modes[self._l] = _HOLD
         self._set[self._l] = self._p.layout.initial_locked_angle
         self._settled_since = None
 
@@ -733,10 +769,13 @@ class DamSequence:
     # Failure, abort, relaxation
 
     def _check_limits(self, t: float, pos: np.ndarray) -> None:
-        torque = (self._modes == JointMode.TORQUE) | (self._modes == JointMode.IMPEDANCE)
-        lo = np.where(torque, self._inner_lo, self._outer_lo)
-        hi = np.where(torque, self._inner_hi, self._outer_hi)
-        bad = (pos < lo) | (pos > hi)
+        modes = self._modes.tobytes()
+        if modes != self._limits_for:  # the bounds change with the modes only
+            torque = (self._modes == _TORQUE) | (self._modes == _IMPEDANCE)
+            self._limits_lo = np.where(torque, self._inner_lo, self._outer_lo)
+            self._limits_hi = np.where(torque, self._inner_hi, self._outer_hi)
+            self._limits_for = modes
+        bad = (pos < self._limits_lo) | (pos > self._limits_hi)
         if bad.any():
             j = int(np.flatnonzero(bad)[0])
             lay = self._p.layout
@@ -750,7 +789,7 @@ class DamSequence:
         self._enter_relax(Phase.FAILED, t)
 
     def _enter_relax(self, phase: Phase, t: float) -> None:
-        impedance = self._modes == JointMode.IMPEDANCE
+        impedance = self._modes == _IMPEDANCE
         if impedance.any():
             # the device's static impedance torque at the last step, then ramped to zero
             theta = np.zeros(self._nj)
@@ -758,7 +797,7 @@ class DamSequence:
             tau = np.clip(self._stiff * (self._set - theta), -self._p.torque_limit,
                           self._p.torque_limit)
             self._set[impedance] = tau[impedance]
-            self._modes[impedance] = JointMode.TORQUE
+            self._modes[impedance] = _TORQUE
             self._stiff[:] = 0.0
             self._damp[:] = 0.0
         self._phase = phase
@@ -766,8 +805,8 @@ class DamSequence:
         self._relax_from_modes[:] = self._modes
         self._relax_from[:] = self._set
         self._relax_scale = 1.0
-        moving = self._modes == JointMode.POSITION
-        self._modes[moving] = JointMode.HOLD
+        moving = self._modes == _POSITION
+        self._modes[moving] = _HOLD
 
     def _step_relax(self, t: float) -> None:
         p = self._p
@@ -777,7 +816,7 @@ class DamSequence:
         else:
             scale = 1.0 - elapsed / p.torque_ramp_time
         self._relax_scale = scale
-        torque = self._relax_from_modes == JointMode.TORQUE
+        torque = self._relax_from_modes == _TORQUE
         self._set[:] = np.where(torque, self._relax_from * scale, self._relax_from)
 
     @property
@@ -785,5 +824,5 @@ class DamSequence:
         """True in ABORTED/FAILED once every torque command has reached zero."""
         if not (self._phase is Phase.ABORTED or self._phase is Phase.FAILED):
             return False
-        torque = self._relax_from_modes == JointMode.TORQUE
+        torque = self._relax_from_modes == _TORQUE
         return bool(not torque.any() or self._relax_scale == 0.0)

@@ -1,0 +1,144 @@
+"""Cost of one lockstep sweep trial, against the physics alone; the 480-trial grid on request.
+
+1. Trial: :func:`~dam_sim_bridge.sweep.run_trial` of the configured default cell (friction
+   angle ``contact.friction_angle_deg``, ``task.k_theta_nm_per_rad``,
+   ``task.delta_theta_p_deg``, the sweep's default options: a whole grasp, about 5 s
+   simulated), as ``sweep`` runs it for each grid point: a fresh :class:`HandWorld` stepped in
+   lockstep with the controller core, then the analysis answer (the analysis itself is built
+   before the clock starts, once per process as in a sweep worker). Several trials: median,
+   minimum and maximum of the wall-clock and CPU times. Targets: median wall time < 1 s, and
+   lockstep speed (simulated time over wall time) >= 10x real time.
+2. Baseline in the same run: a bare world of the same model (built the same way) stepping
+   the same number of physics steps with no controller, no commands and no reads: what the
+   physics alone costs. The report gives the trial's wall time over the baseline's.
+3. Grid, only with ``--grid`` (about 10 minutes: run it on a quiet machine): the sweep
+   command over 480 trials (2 friction angles x 12 ``delta_theta_p`` x 20 ``k_theta``) with
+   ``--workers 1`` and ``--workers 2``; wall times, trials per second and the parallel
+   efficiency ``wall(1) / (2 wall(2))``; the two tables must be identical.
+"""
+
+from __future__ import annotations
+
+import filecmp
+import math
+import os
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+from ros_testing import installed_executable
+
+#: The grid of the ``--grid`` measurement (480 trials).
+GRID_ARGS = ('--friction-angles', '5', '30', '--k-theta', '0.05:20:20:log',
+             '--delta-theta-p', '5:60:12')
+GRID_TRIALS = 2 * 20 * 12
+
+
+def _spread(samples: list[float], unit: str, digits: int = 3) -> dict[str, float]:
+    """Median, minimum and maximum of ``samples``, keys suffixed with ``unit``."""
+    return {f'median_{unit}': round(statistics.median(samples), digits),
+            f'min_{unit}': round(min(samples), digits),
+            f'max_{unit}': round(max(samples), digits)}
+
+
+def _trials(n: int) -> dict:
+    """Wall and CPU time [s] of ``n`` default trials, and the simulated time of one [s]."""
+    from dam_common.config import load_config
+    from dam_sim_bridge.sweep import SweepSpec, TrialSpec, analyzer_for, run_trial
+
+    config = load_config()
+    sweep = SweepSpec(friction_angles_deg=(math.degrees(config.contact.friction_angle_rad),),
+                      k_theta=(float(config.task.k_theta_nm_per_rad),),
+                      delta_theta_p_deg=(math.degrees(config.task.delta_theta_p_rad),))
+    spec: TrialSpec = sweep.trials()[0]
+    analyzer_for(config)  # once per process, as in a sweep worker
+    run_trial(spec, sweep, config)  # warm-up: imports, caches
+    walls: list[float] = []
+    cpus: list[float] = []
+    rows: set[tuple[str, ...]] = set()
+    for _ in range(n):
+        result = run_trial(spec, sweep, config)
+        walls.append(result.wall_time_s)
+        cpus.append(result.cpu_time_s)
+        rows.add(tuple(result.row.values()))
+    if len(rows) != 1:
+        raise RuntimeError('the same trial gave different rows')
+    row = result.row
+    return {'walls': walls, 'cpus': cpus, 'sim_time_s': float(row['sim_time_s']),
+            'phase': row['phase'], 'outcome': row['outcome']}
+
+
+def _bare_physics(sim_time_s: float, n: int) -> list[float]:
+    """Wall time [s] of a fresh world (same model) stepping ``sim_time_s`` with no
+    controller: construction and bare ``stepSimulation`` calls, ``n`` times."""
+    from dam_common.config import load_config
+    from dam_sim_bridge.sweep import _quiet_stdout
+    from dam_sim_bridge.world import HandWorld
+
+    config = load_config()
+    walls = []
+    for _ in range(n):
+        start = time.monotonic()
+        with _quiet_stdout():
+            world = HandWorld(config)
+        with world:
+            steps = round(sim_time_s / world.time_step_s)
+            step = world.client.stepSimulation
+            for _ in range(steps):
+                step()
+        walls.append(time.monotonic() - start)
+    return walls
+
+
+def _grid() -> dict:
+    """The sweep command over :data:`GRID_ARGS` with one and with two workers."""
+    sweep = installed_executable('dam_sim_bridge', 'sweep')
+    report: dict[str, object] = {'grid_trials': GRID_TRIALS}
+    walls = {}
+    with tempfile.TemporaryDirectory(prefix='dam-bench-grid-') as tmp:
+        for workers in (1, 2):
+            out = Path(tmp) / f'workers{workers}'
+            start = time.monotonic()
+            subprocess.run([str(sweep), *GRID_ARGS, '--workers', str(workers), '--out',
+                            str(out), '--quiet'], check=True, stdin=subprocess.DEVNULL,
+                           env=dict(os.environ))
+            walls[workers] = time.monotonic() - start
+            report[f'grid_workers{workers}_wall_s'] = round(walls[workers], 1)
+            report[f'grid_workers{workers}_trials_per_s'] = round(
+                GRID_TRIALS / walls[workers], 2)
+        report['grid_tables_identical'] = filecmp.cmp(
+            Path(tmp) / 'workers1' / 'trials.csv', Path(tmp) / 'workers2' / 'trials.csv',
+            shallow=False)
+    report['grid_parallel_efficiency'] = round(walls[1] / (2.0 * walls[2]), 3)
+    return report
+
+
+def run(args) -> dict:
+    n = 3 if args.quick else 9
+    trials = _trials(n)
+    sim = trials['sim_time_s']
+    bare = _bare_physics(sim, n)
+    wall = statistics.median(trials['walls'])
+    bare_wall = statistics.median(bare)
+    speed = sim / wall
+    report: dict[str, object] = {
+        'trials': n,
+        'trial_phase': trials['phase'],
+        'trial_outcome': trials['outcome'],
+        'trial_sim_time_s': sim,
+        **{f'trial_wall_{k}': v for k, v in _spread(trials['walls'], 's').items()},
+        **{f'trial_cpu_{k}': v for k, v in _spread(trials['cpus'], 's').items()},
+        'lockstep_speed_factor': round(speed, 2),
+        **{f'baseline_bare_physics_wall_{k}': v for k, v in _spread(bare, 's').items()},
+        'baseline_bare_physics_speed_factor': round(sim / bare_wall, 2),
+        'trial_over_bare_physics_wall_ratio': round(wall / bare_wall, 2),
+    }
+    if getattr(args, 'grid', False):
+        report.update(_grid())
+    report['load_average_1_5_15_min'] = [round(v, 2) for v in os.getloadavg()]
+    report['target'] = ('median wall time of one whole default trial < 1 s; lockstep speed '
+                        '>= 10x real time')
+    report['target_met'] = bool(wall < 1.0 and speed >= 10.0)
+    return report
