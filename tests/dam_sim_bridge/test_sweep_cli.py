@@ -8,6 +8,8 @@ under test here, the grasps are in ``test_experiment.py``), about 0.2 s each.
 
 from __future__ import annotations
 
+import contextlib
+import csv
 import json
 import os
 import shutil
@@ -90,13 +92,13 @@ def _dask() -> list[str]:
     return [found]
 
 
-@pytest.fixture(scope='module')
-def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+@contextlib.contextmanager
+def _cluster(d: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1 (ports chosen by the
-    system); yields the scheduler's address."""
+    system), logs in ``d``; yields the scheduler's address and the processes (scheduler,
+    worker 1, worker 2)."""
     from distributed import Client
 
-    d = tmp_path_factory.mktemp('dask')
     file = d / 'scheduler.json'
     procs: list[subprocess.Popen[bytes]] = []
     grace = 0.1  # [s] for the processes to end by themselves
@@ -124,7 +126,7 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
                    '--local-directory', str(d / f'worker{i}')], f'worker{i}')
         with Client(address, timeout='30s') as client:
             client.wait_for_workers(2, timeout=60)
-        yield address
+        yield address, procs
         with Client(address, timeout='30s') as client:
             client.shutdown()  # the scheduler closes the workers, then itself
         grace = 10.0
@@ -137,6 +139,58 @@ def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
                 proc.wait()
         for log in logs:
             log.close()
+
+
+@pytest.fixture(scope='module')
+def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A loopback cluster (:func:`_cluster`) for the module; yields the scheduler's address."""
+    with _cluster(tmp_path_factory.mktemp('dask')) as (address, _procs):
+        yield address
+
+
+def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: Path) -> None:
+    """One of the two workers is stopped (SIGTERM) once the first rows are in: the other one
+    finishes the sweep, with the same table."""
+    out = tmp_path / 'out'
+    with _cluster(tmp_path) as (address, procs):
+        proc = subprocess.Popen(_sweep_command(out, '--scheduler', address), env=_env(),
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            table = out / TABLE_FILE
+            deadline = time.monotonic() + 120.0
+            while not (table.is_file() and table.read_text().count('\n') >= 2):
+                assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+                time.sleep(0.01)
+            procs[1].terminate()
+            _out, err = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, err
+    assert 'Traceback' not in err, err
+    assert table.read_text(encoding='utf-8') == reference
+
+
+def test_resume_runs_edited_rows_again(reference: str, tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Rows whose ``lifted`` or ``outcome`` is not a value the sweep writes (an edited table)
+    are dropped on resume and run again."""
+    (tmp_path / TABLE_FILE).parent.mkdir(exist_ok=True)
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
+    rows = read_table(tmp_path / TABLE_FILE)
+    rows[1]['lifted'] = 'x'
+    rows[4]['outcome'] = 'LIFTED'
+    with (tmp_path / TABLE_FILE).open('w', encoding='utf-8', newline='') as handle:
+        writer = csv.DictWriter(handle, list(rows[0]), lineterminator='\n')
+        writer.writeheader()
+        writer.writerows(rows)
+    capsys.readouterr()
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
+    out = capsys.readouterr().out
+    assert f'resuming: {N_TRIALS - 2} done, 2 to run (2 incomplete, malformed or repeated ' \
+           'row(s) dropped)' in out, out
+    assert (tmp_path / TABLE_FILE).read_text(encoding='utf-8') == reference
 
 
 def test_loopback_dask_cluster_gives_the_same_table(reference: str, loopback_cluster: str,

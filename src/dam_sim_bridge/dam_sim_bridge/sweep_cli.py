@@ -182,14 +182,13 @@ def run_on_dask(client: Any, pending: Sequence[TrialSpec], sweep: SweepSpec, con
                 on_result: OnResult) -> None:
     """Run the trials as Dask tasks on ``client``'s cluster, reporting each as it finishes.
 
-    The configuration is sent to every worker once; a task is :func:`run_trial` of one trial.
-    On an interruption the remaining tasks are cancelled.
+    A task is :func:`run_trial` of one trial, with the configuration in its arguments (not
+    scattered: a worker that leaves takes no data with it, the scheduler gives its tasks to
+    the others). On an interruption the remaining tasks are cancelled.
     """
     from distributed import as_completed  # noqa: PLC0415 - only when Dask runs the sweep
 
-    [config_future] = client.scatter([config], broadcast=True)
-    futures = client.map(run_trial, list(pending), sweep=sweep, config=config_future,
-                         pure=False)
+    futures = client.map(run_trial, list(pending), sweep=sweep, config=config, pure=False)
     by_key = {f.key: s for f, s in zip(futures, pending, strict=True)}
     try:
         for future in as_completed(futures):
@@ -285,7 +284,8 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
           f'{sweep.repeats} repeats) into {args.out}', flush=True)
     if done or table.dropped:
         print(f'{PROG}: resuming: {done} done, {len(pending)} to run'
-              + (f' ({table.dropped} incomplete row(s) dropped)' if table.dropped else ''),
+              + (f' ({table.dropped} incomplete, malformed or repeated row(s) dropped)'
+                 if table.dropped else ''),
               flush=True)
     if sweep.repeats > 1 and not sweep.perturbations.any:
         print(f'{PROG}: note: --repeats {sweep.repeats} without perturbations repeats the '
@@ -318,7 +318,19 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
         if pending:
             print(f'{PROG}: running {len(pending)} trials on {where}', flush=True)
             if client is not None:
-                run_on_dask(client, pending, sweep, config, on_result)
+                try:
+                    run_on_dask(client, pending, sweep, config, on_result)
+                except (KeyboardInterrupt, SystemExit):
+                    raise
+                except Exception as exc:  # noqa: BLE001 - the cluster failed, not a trial
+                    bar.close()
+                    table.close()
+                    sys.stderr.write(
+                        f'{PROG}: the Dask cluster at {args.scheduler} failed: '
+                        f'{type(exc).__name__}: {exc}; {len(table.rows)} of {n} trials are '
+                        f'kept in {args.out / TABLE_FILE}, run the same command again to '
+                        f'finish the rest\n')
+                    return 1
             elif workers == 1:
                 _run_stoppable(pending, sweep, config, on_result)
             else:
@@ -381,8 +393,9 @@ def _connect(address: str) -> Any:
 
     try:
         client = Client(address, timeout=f'{CONNECT_TIMEOUT_S:g}s')
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
-        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: {exc}') from None
+    except Exception as exc:  # noqa: BLE001 - whatever answers there is no Dask scheduler
+        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: '
+                         f'{type(exc).__name__}: {exc}') from None
     try:
         client.wait_for_workers(1, timeout=WORKER_WAIT_S)
     except TimeoutError:

@@ -36,6 +36,9 @@ from dam_sim_bridge.sweep import (
     table_columns,
 )
 
+#: The classes a row's ``outcome`` may hold; a row with another (an edited table) is run again.
+_OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')
+
 TABLE_FILE = 'trials.csv'
 PARAMS_FILE = 'sweep.json'
 CELLS_FILE = 'cells.csv'
@@ -194,7 +197,9 @@ class TrialTable:
             row = dict(zip(self.columns, values, strict=False))
             index = _index(row.get('trial', ''), len(self.specs))
             if (len(values) != len(self.columns) or index is None or index in self.rows
-                    or any(row[k] != v for k, v in input_columns(self.specs[index]).items())):
+                    or any(row[k] != v for k, v in input_columns(self.specs[index]).items())
+                    or row.get('lifted') not in ('0', '1')
+                    or row.get('outcome') not in _OUTCOMES):
                 self.dropped += 1
                 continue
             self.rows[index] = row
