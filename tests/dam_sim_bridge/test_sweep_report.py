@@ -233,7 +233,8 @@ def test_the_synthetic_document_states_them(synthetic_report: SweepReport) -> No
     rows = _summary_rows(text)
     assert rows['5'][:4] == ['42', '21', '8', '2'] and rows['30'][:4] == ['42', '21', '13', '1']
     assert _share(rows['5'][4]) == (17, 21, 81.0) and _share(rows['30'][4]) == (13, 21, 61.9)
-    assert rows['5'][5] == f'{synthetic_report.angles[0].median_distance_dec:.3f} (2 column(s))'
+    assert rows['5'][5] == (f'{synthetic_report.angles[0].median_distance_dec:.3f} '
+                            '(2 of 3 columns; no CSM boundary in 1)')
     assert _share(rows['5'][6]) == (1, 2, 50.0) and _share(rows['30'][6]) == (1, 1, 100.0)
     assert _share(rows['5'][7]) == (5, 8, 62.5) and _share(rows['30'][7]) == (13, 13, 100.0)
     assert '**3 false guarantee(s)**' in text
@@ -342,7 +343,8 @@ def test_the_documents_numbers_agree_with_an_independent_count(
         n, whole, pct = _share(r[4])
         assert (n, whole) == (e['agree'], e['cells'])
         assert pct == pytest.approx(100.0 * e['agree'] / e['cells'], abs=0.05)
-        median, compared = re.fullmatch(r'(\S+) \((\d+) column\(s\)\)', r[5]).groups()
+        median, compared, _all, _no_csm = re.fullmatch(
+            r'(\S+) \((\d+) of (\d+) columns; no CSM boundary in (\d+)\)', r[5]).groups()
         assert int(compared) == e['compared']
         if e['median'] is None:
             assert median == 'n/a'
@@ -408,7 +410,13 @@ def _set_first(column: str, value: str) -> Callable[[Path], None]:
     return edit
 
 
+def _repeat_first_row(d: Path) -> None:
+    with (d / TABLE_FILE).open('a', encoding='utf-8') as handle:
+        handle.write((d / TABLE_FILE).read_text(encoding='utf-8').splitlines()[1] + '\n')
+
+
 @pytest.mark.parametrize(('edit', 'message'), [
+    (_repeat_first_row, 'trial 0 is in the table twice (first on line 2)'),
     (_drop_column('rise_max_mm'), "no column 'rise_max_mm', which the report needs"),
     (_drop_column('csm_lift'), "no column 'csm_lift'"),
     (_drop_column('lifted'), "no column 'lifted'"),

@@ -205,8 +205,8 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
     ------
     SweepPlotError
         The directory, ``sweep.json`` or ``trials.csv`` is missing or unreadable, the table
-        has no trial or lacks a needed column, or a value is malformed (naming the file, the
-        line, the trial and the value).
+        has no trial or lacks a needed column, a value is malformed (naming the file, the
+        line, the trial and the value), or a trial number is repeated.
     """
     root = Path(directory)
     if not root.exists():
@@ -232,6 +232,7 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
     try:
         text = table.read_text(encoding='utf-8')
         trials, skipped = [], 0
+        seen: dict[int, int] = {}  # trial number -> line
         if text and not text.endswith('\n') and '\n' in text:
             # The last row is being written (rows end with a newline): cut short, even when
             # it has all its fields.
@@ -249,7 +250,13 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
             if None in row.values() or None in row:  # cut short or too long
                 skipped += 1
                 continue
-            trials.append(_trial(table, reader.line_num, row))
+            trial = _trial(table, reader.line_num, row)
+            if trial.index in seen:
+                raise _fail_row(table, reader.line_num, row['trial'],
+                                f'trial {trial.index} is in the table twice (first on line '
+                                f'{seen[trial.index]})')
+            seen[trial.index] = reader.line_num
+            trials.append(trial)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise SweepPlotError(f'{table}: cannot read it ({exc})') from None
     if not trials:
