@@ -200,6 +200,24 @@ def test_repeats_give_a_lift_probability_per_cell(repeat_sweep: Path, config: An
     assert '9 of 9 trials, 3 per cell, k_theta axis linear' in result.summary[0]
 
 
+def test_a_boundary_outside_the_plotted_range_is_named(tmp_path: Path, config: Any,
+                                                       analyzer: LiftAnalyzer) -> None:
+    """k_theta up to 2 N*m/rad at alpha 5 deg: eq. 18 needs more (its lowest k* is about
+    6 N*m/rad), so its line is off the axis and the panel says so, with its lowest value."""
+    sweep = SweepSpec(friction_angles_deg=(5.0,), k_theta=(0.5, 2.0),
+                      delta_theta_p_deg=(10.0, 25.0))
+    d = write_sweep(tmp_path / 'low', config, sweep, None, lambda i: ('FAILURE', 0))
+    result = plot_sweep(d, None, config=config, analyzer=analyzer, n_points=N_POINTS,
+                        k_scale='log')
+    [ax] = _panels(result.figure)
+    [boundary] = _expected_boundaries(analyzer, [5.0], 25.0)[1]
+    sufficient = np.asarray(boundary.sufficient, dtype=float)
+    lowest = float(sufficient[np.isfinite(sufficient)].min())
+    assert 5.0 < lowest < 7.0 and lowest > ax.get_ylim()[1]
+    assert _by_gid(ax, 'outside').get_text() == (
+        f'eq. 18 boundary above the plotted range (lowest k_theta* {lowest:.3g} N*m/rad)')
+
+
 def test_a_last_row_with_all_its_fields_but_no_newline_is_still_being_written(
         tmp_path: Path, config: Any, analyzer: LiftAnalyzer) -> None:
     """The table's writer ends every row with a newline: a last row without one is cut short,

@@ -142,6 +142,23 @@ def _lowest(b: Any, field: str) -> tuple[float, float] | None:
     return float(values[j]), math.degrees(float(b.delta_theta_p[j]))
 
 
+def _outside_notes(b: Any, y_lim: tuple[float, float]) -> list[str]:
+    """Notes for boundaries that exist but lie wholly above or below the k_theta axis."""
+    notes = []
+    for field, name in (('sufficient', 'eq. 18'), ('csm', 'CSM')):
+        values = np.asarray(getattr(b, field), dtype=float)
+        finite = values[np.isfinite(values)]
+        if finite.size == 0:
+            continue
+        if finite.min() > y_lim[1]:
+            notes.append(f'{name} boundary above the plotted range '
+                         f'(lowest k_theta* {finite.min():.3g} N*m/rad)')
+        elif finite.max() < y_lim[0]:
+            notes.append(f'{name} boundary below the plotted range '
+                         f'(highest k_theta* {finite.max():.3g} N*m/rad)')
+    return notes
+
+
 # ------------------------------------------------------------------------------------------
 # The picture
 
@@ -248,6 +265,10 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
         if _lowest(b, 'sufficient') is None:
             ax.text(0.03, 0.03, 'eq. 18: no k_theta lifts at this friction angle',
                     transform=ax.transAxes, fontsize=7, color='0.3', gid='no_sufficient')
+        notes = _outside_notes(b, y_lim)
+        if notes:
+            ax.text(0.03, 0.97, '\n'.join(notes), transform=ax.transAxes, fontsize=7,
+                    color='0.3', va='top', gid='outside')
         if log_k:
             ax.set_yscale('log')
         ax.set_xlim(0.0, x_max)
