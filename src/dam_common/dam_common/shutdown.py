@@ -133,7 +133,8 @@ def catch_signals(interrupt_startup: bool = False) -> ShutdownRequest:
 def run_node_entry(module: str) -> None:
     """Entry point of a node executable: catch SIGINT and SIGTERM, then import ``module`` and
     call its ``main()`` (which runs :func:`~dam_common.node.run_node`). A signal during the
-    import ends the process quietly with status 0."""
+    import, or in ``main()`` before the node takes the signals over, ends the process quietly
+    with status 0."""
     catch_signals(interrupt_startup=True)
     try:
         main = importlib.import_module(module).main
@@ -143,4 +144,7 @@ def run_node_entry(module: str) -> None:
         if SHUTDOWN.requested:
             return  # the interrupt surfaced as another error (a C extension's init wraps it)
         raise
-    main()
+    try:
+        main()
+    except StartupInterrupted:
+        return  # before the node took the signals over (e.g. while parsing arguments)

@@ -23,7 +23,8 @@ chunk_interval : double [s]
 discovery_period : double [s]
     How often the recorder looks for new topics and publishers.
 queue_depth : int [messages]
-    Depth of each subscription's queue.
+    Depth of each subscription's queue (default 5000: 10 s of a 500 Hz topic, a recorder
+    that falls behind for a while loses nothing).
 thread_priority : int
     ``SCHED_FIFO`` priority of every thread of the recorder (default 40, below the controller
     and the driver; 0: normal scheduling).
@@ -263,7 +264,7 @@ class RecorderNode(Node):
             'discovery_period': (0.5, _descriptor(
                 'how often new topics are looked for [s]',
                 floating_point_range=[FloatingPointRange(from_value=0.01, to_value=60.0)])),
-            'queue_depth': (1000, _descriptor(
+            'queue_depth': (5000, _descriptor(
                 'depth of each subscription queue [messages]',
                 integer_range=[IntegerRange(from_value=1, to_value=1_000_000, step=1)])),
             'episodes': (False, _descriptor(
