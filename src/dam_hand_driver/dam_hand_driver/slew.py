@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dam_common.scalars import clip
 from dam_hand_driver.errors import ParameterError
 from dam_hand_driver.protocol import JointMode
 
@@ -122,22 +123,22 @@ class CommandSlew:
         for i, mode in enumerate(m):
             if mode == _TORQUE:
                 # slew_torque, from the measured torque when the joint enters TORQUE
-                previous = (_clip(tau[i], -limit, limit) if old_modes[i] != _TORQUE
+                previous = (clip(tau[i], -limit, limit) if old_modes[i] != _TORQUE
                             else self._sent[i])
-                target = _clip(out[i], -limit, limit)
-                out[i] = previous + _clip(target - previous, -step, step)
+                target = clip(out[i], -limit, limit)
+                out[i] = previous + clip(target - previous, -step, step)
                 sent[i] = out[i]
             elif mode == _IMPEDANCE:
                 if old_modes[i] != _IMPEDANCE or k[i] != old_k[i] or d[i] != old_d[i]:
                     # restart where the law gives the measured torque
-                    previous = theta[i] + (_clip(tau[i], -limit, limit)
+                    previous = theta[i] + (clip(tau[i], -limit, limit)
                                            + d[i] * theta_dot[i]) / k[i]
                 else:
                     previous = self._sent[i]
                 shift = max_change / k[i]
                 gap = out[i] - previous
                 if not abs(gap) <= shift:
-                    out[i] = previous + _clip(gap, -shift, shift)
+                    out[i] = previous + clip(gap, -shift, shift)
                 sent[i] = out[i]
                 new_k[i] = k[i]
                 new_d[i] = d[i]
@@ -148,10 +149,3 @@ class CommandSlew:
         return np.array(out)
 
 
-def _clip(value: float, low: float, high: float) -> float:
-    """``value`` clipped to ``[low, high]`` (numbers) as ``numpy.clip`` does it with array
-    bounds: a NaN value stays NaN, and on a tie the bound is returned (the sign of a zero)."""
-    if value != value:
-        return value
-    value = value if value > low else low
-    return value if value < high else high

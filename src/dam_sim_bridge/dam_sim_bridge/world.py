@@ -115,6 +115,7 @@ import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
 
+from dam_common.scalars import clip
 from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 
@@ -292,15 +293,6 @@ def _toward(current: float, target: float, max_change: float) -> float:
     exactly, when it is that close)."""
     gap = target - current
     return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
-
-
-def _clip(value: float, low: float, high: float) -> float:
-    """``value`` clipped to ``[low, high]`` (numbers) as ``numpy.clip`` does it with array
-    bounds: a NaN value stays NaN, and on a tie the bound is returned (the sign of a zero)."""
-    if value != value:
-        return value
-    value = value if value > low else low
-    return value if value < high else high
 
 
 def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
@@ -831,9 +823,9 @@ class HandWorld:
                         states = self._get_joint_states(self.hand_id, self._joints.indices)
                     targets[i] = states[i][0]
             elif mode == _POSITION:
-                targets[i] = _clip(sp[i], lower[i], upper[i])
+                targets[i] = clip(sp[i], lower[i], upper[i])
             tau = sp[i] if mode == _TORQUE else 0.0  # NaN setpoints of other modes dropped
-            self._torque_cmd[i] = _clip(tau, -limit, limit)
+            self._torque_cmd[i] = clip(tau, -limit, limit)
             self._saturated[i] = abs(tau) > limit
             if mode == _TORQUE or mode == _IMPEDANCE:
                 if before != _TORQUE and before != _IMPEDANCE:
@@ -844,7 +836,7 @@ class HandWorld:
                         if states is None:
                             states = self._get_joint_states(self.hand_id,
                                                             self._joints.indices)
-                        applied[i] = _clip(states[i][3], -limit, limit)
+                        applied[i] = clip(states[i][3], -limit, limit)
             else:
                 applied[i] = 0.0
             if mode == _IMPEDANCE:
@@ -932,7 +924,7 @@ class HandWorld:
                 eff = _toward(theta_0_eff[j], theta_0[j], max_shift[j])
                 raw = k[j] * (eff - theta) - d[j] * theta_dot
                 raw_imp[j] = raw
-                target[n_t + j] = _clip(raw, -limit, limit)
+                target[n_t + j] = clip(raw, -limit, limit)
                 theta_0_eff[j] = eff
             for j in range(n_t + n_i):
                 forces[j] = _toward(forces[j], target[j], max_change)
