@@ -103,11 +103,17 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[_Goals, Pa
                 assert proc.alive(), proc.output()
 
 
-def _ready(client: RosClient) -> None:
+def _ready(client: RosClient) -> int:
     """Joint states flowing: a stand-in stalled by a reset or at start-up leaves the driver in
-    ERROR, which its ~/reset ends (it answers 'already ACTIVE' otherwise)."""
+    ERROR, which its ~/reset ends (it answers 'already ACTIVE' otherwise). Returns the time
+    [ns since the epoch] before the reset: a driver that was in ERROR published nothing until
+    then (it publishes no joint states in ERROR), so a pre-roll holds nothing older."""
+    before_ns = time.time_ns()
     assert client.call(Trigger, '/hand_driver/reset', Trigger.Request()).success
-    client.spin_until(lambda: False, 0.3)
+    # A second of signals before the goal: a pre-roll that is lost cannot pass for one that
+    # starts at the reset (the check below allows 0.5 s).
+    client.spin_until(lambda: False, 1.0)
+    return before_ns
 
 
 def _episode_bags(episodes_dir: Path, goal_ids: list[str], recorder) -> dict[str, Path]:
@@ -135,8 +141,11 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
 
     goals, episodes_dir, config_file, recorder = stack
     client = goals.client
-    _ready(client)
-    finished = goals.result(goals.send(10.0))
+    streaming_ns: dict[str, int] = {}  # goal id -> joint states flowing since [ns]
+    since_ns = _ready(client)
+    handle = goals.send(10.0)
+    streaming_ns[bytes(bytearray(handle.goal_id.uuid)).hex()] = since_ns
+    finished = goals.result(handle)
     # Let go and put the world back, then a grasp cancelled on its way. (Where the device
     # stream stalled, the driver is in ERROR first: docs/simulation_grasp.md, "The CPU budget
     # of two cores".)
@@ -144,8 +153,9 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
     released = client.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
     assert released.success, released.message
     assert client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request()).success
-    _ready(client)
+    since_ns = _ready(client)
     handle = goals.send(0.5)
+    streaming_ns[bytes(bytearray(handle.goal_id.uuid)).hex()] = since_ns
     client.spin_until(lambda: False, 1.0)
     cancel = handle.cancel_goal_async()
     assert client.wait_future(cancel, 10.0)
@@ -186,7 +196,9 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
         # its end, by the times the messages arrived (what the recorder windows by; the events
         # are stamped by the controller); the pre-roll's ring buffer is there. (The latched
         # /robot_description is stamped at the pre-roll's start. How much of the post-roll
-        # arrives depends on the machine: a starved recorder closes the episode on time.)
+        # arrives depends on the machine: a starved recorder closes the episode on time. The
+        # pre-roll starts with the signals at the later of its start and the driver's reset
+        # before the goal: where the stand-in had stalled, the driver published nothing before.)
         stamps = [r.timestamp for t, rs in topics.items() for r in rs]
         firsts = [r[0].timestamp for t, r in topics.items() if r and t != '/robot_description']
         pre, post = PRE_ROLL_S * 1e9, POST_ROLL_S * 1e9
@@ -194,7 +206,7 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
         late = {t: rs[-1].timestamp - summary['ended_ns'] for t, rs in topics.items()
                 if rs and rs[-1].timestamp >= summary['ended_ns'] + post + 0.5e9}
         assert not late, late
-        assert min(firsts) < summary['accepted_ns'] - pre + 0.5e9
+        assert min(firsts) < max(summary['accepted_ns'] - pre, streaming_ns[goal_id]) + 0.5e9
         assert len(topics['/joint_states']) > 500
         [description] = topics['/robot_description']
         assert description.values['data'].startswith('<?xml')
