@@ -56,7 +56,12 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
-from dam_common.node import declare_config_file, declare_thread_priority, run_node
+from dam_common.node import (
+    STREAM_HISTORY_DEPTH,
+    declare_config_file,
+    declare_thread_priority,
+    run_node,
+)
 from dam_common.realtime import SWITCH_INTERVAL_S, set_process_priority, set_thread_priority
 from dam_common.ros_args import strip_ros_args
 from dam_common.shutdown import SHUTDOWN
@@ -118,7 +123,10 @@ class SimBridgeNode(Node):
                 raise
         self._thread = threading.Thread(target=self._run_device, name='sim_device',
                                         daemon=True)
-        self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose', 10)
+        # The ground truth a recording is judged by: as much history as the 500 Hz streams
+        # (5 s at the default 100 Hz), so that a recorder that falls behind loses none.
+        self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose',
+                                               STREAM_HISTORY_DEPTH)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if self._publish_clock else None)
         self._timer = create_steady_timer(self, 1.0 / self._pose_rate_hz, self._on_timer)
