@@ -112,12 +112,11 @@ from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-import pybullet
-from pybullet_utils import bullet_client
 
 from dam_common.scalars import clip
 from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
+from dam_sim_bridge.pybullet_import import bullet_client, pybullet
 
 if TYPE_CHECKING:
     from dam_common.config import DamConfig
