@@ -417,3 +417,52 @@ def test_command_line_client_defaults_and_beyond_the_branch(
     assert 'lift guaranteed (eq. 18) : no   worst-case margin none' in beyond.stdout
     end = math.degrees(references[0].fold_delta_theta_p)
     assert f'branch ends at {end:.5f} deg' in beyond.stdout
+
+
+def test_the_answer_says_what_it_asks_of_the_hand(client: RosClient,
+                                                  analyzer: LiftAnalyzer) -> None:
+    """The hand's torque limit and the CSM's domain cross DDS with every answer: the
+    configured pair stays inside both; k_theta 63 N*m/rad at 10 deg is guaranteed by eq. 18
+    with about 3 N*m on finger 1, which the hand does not give, and the message says so."""
+    from dam_interfaces.srv import CheckLift
+
+    limit = min(CONFIG.controller.torque_limit_nm, CONFIG.device.torque_limit_nm)
+    bound = CONFIG.contact.csm_max_penetration_m
+    default = _call(client, CheckLift.Request())
+    assert default.ok and default.torque_limit == limit
+    assert default.within_torque_limit and default.csm_in_domain
+    assert len(default.csm_penetration) == CONFIG.hand.n_fingers
+    assert all(0.0 < p <= bound for p in default.csm_penetration)
+    assert 'torque:' not in default.message and 'CSM outside' not in default.message
+
+    dp = math.radians(10.0)
+    stiff = _call(client, _request([63.0], [dp], -1.0))
+    assert stiff.ok and stiff.lift_guaranteed and not stiff.within_torque_limit
+    # tau_1 = -k_theta delta_theta_s1 from the SPCM state, by the paper's formula
+    tau_1 = _finger_forces_problem(analyzer, 63.0, dp)[0][2]
+    assert abs(tau_1) > limit
+    assert stiff.compliant_torque[0] == pytest.approx(tau_1)
+    assert (f'torque: guaranteed by eq. 18 but not for this hand: finger 1 needs |tau_s| = '
+            f'{abs(tau_1):.4g} N*m') in stiff.message
+    assert f'more than the {limit:g} N*m it gives' in stiff.message
+    assert not stiff.csm_in_domain and max(stiff.csm_penetration) > bound
+    assert 'CSM outside its domain of validity' in stiff.message
+    core = analyzer.check_lift(63.0, dp)
+    assert list(stiff.csm_penetration) == pytest.approx(list(core.csm_penetration))
+
+    rejected = _call(client, _request([-1.0], [dp], -1.0))
+    assert not rejected.ok and math.isnan(rejected.torque_limit)
+    assert list(rejected.csm_penetration) == [] and not rejected.csm_in_domain
+
+
+def test_command_line_client_shows_the_hand_s_limits(server: object) -> None:
+    inside = _run_client('--k-theta', '7', '--delta-theta-p', '10deg')
+    assert inside.returncode == 0, inside.stderr
+    assert 'torque within the hand   : yes   limit 0.6 N*m' in inside.stdout
+    assert 'inside its domain' in inside.stdout
+    assert 'CSM f_n/k_n [um]' in inside.stdout
+    stiff = _run_client('--k-theta', '63', '--delta-theta-p', '10deg')
+    assert stiff.returncode == 0, stiff.stderr
+    assert 'torque within the hand   : no   limit 0.6 N*m' in stiff.stdout
+    assert 'OUTSIDE its domain' in stiff.stdout
+    assert 'guaranteed by eq. 18 but not for this hand' in stiff.stdout

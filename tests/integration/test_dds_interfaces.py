@@ -32,6 +32,9 @@ def test_check_lift_round_trip_between_processes() -> None:
             assert math.isclose(response.csm_margin, 0.1)
             assert list(response.delta_theta_s) == pytest.approx([-0.2, -0.3, -0.4])
             assert list(response.compliant_torque) == pytest.approx([0.1, 0.075, 0.1])
+            assert response.torque_limit == 0.25
+            assert response.within_torque_limit is True and response.csm_in_domain is False
+            assert list(response.csm_penetration) == pytest.approx([4e-4, 6e-4, 8e-4])
 
             # A second call with other values proves the answer depends on the request.
             request.k_theta = [-1.0]
@@ -41,6 +44,10 @@ def test_check_lift_round_trip_between_processes() -> None:
             assert response.ok is False
             assert response.lift_guaranteed is False
             assert list(response.compliant_torque) == pytest.approx([-0.5])
+            assert response.within_torque_limit is True  # -0.5 <= 0.25 by the formula
+            request.k_theta, request.delta_theta_p = [1.0], [0.6]
+            response = client.call(CheckLift, service, request)
+            assert response.within_torque_limit is False and response.csm_in_domain is True
         finally:
             client.close()
         assert server.alive(), server.output()

@@ -33,6 +33,7 @@ CONTROLLER = installed_executable('dam_spcm_controller', 'spcm_controller')
 FAST = ['-p', 'trajectory_duration:=1.0', '-p', 'approach_speed:=0.5', '-p', 'damping:=0.02']
 INSIDE = (7.0, math.radians(10.0))  # k_theta [N*m/rad], delta_theta_p [rad]: lift guaranteed
 OUTSIDE = (0.5, math.radians(40.0))  # outside the sufficient region at alpha = 5 deg
+BEYOND_TORQUE = (63.0, math.radians(10.0))  # guaranteed by eq. 18 with 3 N*m on finger 1
 
 
 def controller_command(*ros_args: str) -> list[str]:
@@ -287,6 +288,14 @@ def test_require_lift_guarantee_refuses_pair_outside_region(stack) -> None:
     assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
     assert 'sufficient-lift region' in res.result.message
     assert any(f.feedback.lift_checked and not f.feedback.lift_guaranteed for f in h.feedback)
+    # Guaranteed by eq. 18, but with about 3 N*m on finger 1, more than the hand gives.
+    h.feedback.clear()
+    handle = h.send([BEYOND_TORQUE[0]], [BEYOND_TORQUE[1]])
+    assert handle.accepted
+    res = h.result(handle, 20.0)
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert 'more compliant torque than the hand gives (0.6 N*m)' in res.result.message
+    assert any(f.feedback.lift_checked and f.feedback.lift_guaranteed for f in h.feedback)
     # The inside pair starts (reaches APPROACH), then is cancelled.
     h.feedback.clear()
     handle = h.send([INSIDE[0]], [INSIDE[1]])

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dam_analysis.errors import InputError
+from dam_analysis.hand_limits import HandLimits, csm_penetration
 from dam_analysis.lift import STATUS_BOUNDED, STATUS_NO_SPCM, worst_case_cone
 from dam_analysis.model import HandModel, build_hand_model
 from dam_analysis.regions import (
@@ -178,6 +179,14 @@ class LiftResult:
         fingers keep theirs.
     branch_message : where and why the branch ends, for the first finger beyond it (its
         ``delta_theta_p`` and the end in degrees, and the reason); empty when no finger is.
+    torque_limit : the largest compliant torque the hand gives [N m]
+        (:class:`~dam_analysis.hand_limits.HandLimits`).
+    within_torque_limit : every ``|compliant_torque|`` is at most ``torque_limit``; a pair
+        guaranteed by eq. (18) but not within it is not guaranteed for this hand.
+    csm_penetration : (n,) CSM contact penetration ``f_n / k_n`` per finger [m] (negative
+        where the contact would open, NaN beyond the end of the branch).
+    csm_in_domain : every ``csm_penetration`` is finite and at most the configured bound
+        (``contact.csm_max_penetration_m``): the CSM's answer is inside its domain of validity.
 
     In an answer of ``check_lift`` the per-contact arrays (``csm_separation``, ``csm_forces``,
     ``contact_points``, ``normals``, ``on_fingertip``) are built on first access.
@@ -200,6 +209,10 @@ class LiftResult:
     friction_angle: float
     beyond_branch: np.ndarray
     branch_message: str
+    torque_limit: float
+    within_torque_limit: bool
+    csm_penetration: np.ndarray
+    csm_in_domain: bool
 
     def __getattr__(self, name: str) -> np.ndarray:
         """Build the per-contact arrays of a :meth:`LiftAnalyzer.check_lift` answer on first use.
@@ -293,6 +306,8 @@ class LiftAnalyzer:
                         for g in self.model.fingers]
         self._csm_data: tuple | None = None
         self._branch_ends = [path.valid_until for path in self.table.paths]
+        self.limits = HandLimits.from_config(self.config)
+        self._k_n = float(self.model.contact_stiffness[0])
 
     @property
     def n_fingers(self) -> int:
@@ -406,6 +421,7 @@ class LiftAnalyzer:
             margin = worst_total - weight
             csm_margin = nan if separated else csm_total - weight
         guaranteed = margin > 0.0 and all(st == STATUS_BOUNDED for st in statuses)
+        penetration = csm_penetration(f_ns, self._k_n)
         return LiftResult._with_lazy_contacts(
             (self._frames, states, f_ns, f_ts),
             lift_guaranteed=guaranteed, worst_case_margin=margin,
@@ -413,7 +429,11 @@ class LiftAnalyzer:
             csm_lift=not separated and csm_margin > 0.0, csm_margin=csm_margin,
             delta_theta_s=np.array(d_theta_s), compliant_torque=np.array(taus),
             k_theta=np.array(k), delta_theta_p=np.array(dp), friction_angle=alpha,
-            beyond_branch=np.array(beyond), branch_message=message)
+            beyond_branch=np.array(beyond), branch_message=message,
+            torque_limit=self.limits.torque_limit,
+            within_torque_limit=self.limits.within_torque_limit(taus),
+            csm_penetration=np.array(penetration),
+            csm_in_domain=self.limits.csm_in_domain(penetration))
 
     def _validate_floats(self, k_theta: ArrayLike, delta_theta_p: ArrayLike,
                          friction_angle: float) -> tuple[list[float], list[float], float]:

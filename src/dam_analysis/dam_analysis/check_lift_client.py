@@ -79,12 +79,15 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
         f'lift guaranteed (eq. 18) : {yes_no[bool(response.lift_guaranteed)]}'
         f'   worst-case margin {_newtons(response.worst_case_margin)}',
         f'contact stiffness model  : {yes_no[bool(response.csm_lift)]}'
-        f'   margin {_newtons(response.csm_margin)}',
-        'finger  delta_theta_s [deg]  tau_s [N*m]',
+        f'   margin {_newtons(response.csm_margin)}'
+        f'   {"inside" if response.csm_in_domain else "OUTSIDE"} its domain',
+        f'torque within the hand   : {yes_no[bool(response.within_torque_limit)]}'
+        f'   limit {response.torque_limit:g} N*m',
+        'finger  delta_theta_s [deg]  tau_s [N*m]  CSM f_n/k_n [um]',
     ]
-    for i, (ds, tau) in enumerate(zip(response.delta_theta_s, response.compliant_torque,
-                                      strict=False), start=1):
-        lines.append(f'{i:>6}  {math.degrees(ds):>19.4f}  {tau:>11.5f}')
+    for i, (ds, tau, pen) in enumerate(zip(response.delta_theta_s, response.compliant_torque,
+                                           response.csm_penetration, strict=False), start=1):
+        lines.append(f'{i:>6}  {math.degrees(ds):>19.4f}  {tau:>11.5f}  {pen * 1e6:>16.2f}')
     lines.append(response.message)
     return '\n'.join(lines)
 

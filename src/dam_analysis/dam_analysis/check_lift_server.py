@@ -22,6 +22,12 @@ value; the server never dies on input. A well-formed pair beyond the end of the 
 (eqs. 1-4 have no solution there) is answered ``ok = true`` with "no lift": both lift flags
 false, both margins NaN, NaN per-finger values for the fingers beyond, and a message naming
 where (deg) and why the branch ends.
+
+Every answer also says what the analysis assumes of the hand (:mod:`dam_analysis.hand_limits`):
+``torque_limit`` and ``within_torque_limit`` (a pair guaranteed by eq. 18 whose ``tau_s``
+exceeds what the hand gives is, the message says, "guaranteed by eq. 18 but not for this
+hand"), and ``csm_penetration`` and ``csm_in_domain`` (the contact stiffness model's answer
+is not to be trusted where its contact penetration leaves the configured bound).
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from rclpy.parameter import Parameter
 
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.errors import DamAnalysisError
+from dam_analysis.hand_limits import limit_notes
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, run_node
 from dam_interfaces.srv import CheckLift
@@ -85,6 +92,7 @@ class CheckLiftServer(Node):
         delta_theta_p = list(request.delta_theta_p)
         friction_angle = float(request.friction_angle)
         response.friction_angle = math.nan  # until an answer is computed
+        response.torque_limit = math.nan
         defaults = []
         if not k_theta:
             k_theta = [task.k_theta_nm_per_rad]
@@ -115,12 +123,21 @@ class CheckLiftServer(Node):
         response.csm_margin = float(result.csm_margin)
         response.delta_theta_s = [float(v) for v in result.delta_theta_s]
         response.compliant_torque = [float(v) for v in result.compliant_torque]
+        response.torque_limit = float(result.torque_limit)
+        response.within_torque_limit = bool(result.within_torque_limit)
+        response.csm_penetration = [float(v) for v in result.csm_penetration]
+        response.csm_in_domain = bool(result.csm_in_domain)
         if result.branch_message:
             message = result.branch_message
         elif result.lift_guaranteed:
             message = 'lift guaranteed (eq. 18)'
         else:
             message = 'lift not guaranteed for every admissible contact force'
+        notes = limit_notes(self._analyzer.limits, response.compliant_torque,
+                            response.lift_guaranteed, response.csm_penetration,
+                            response.csm_lift)
+        if notes:
+            message += '; ' + '; '.join(notes)
         if defaults:
             message += f' [from the configuration: {", ".join(defaults)}]'
         response.message = message

@@ -115,6 +115,7 @@ class ContactConfig:
     cone_faces: int  # L of eq. (7)
     contact_stiffness_n_per_m: np.ndarray  # (3,) diagonal of K_pi
     table_friction_coefficient: float
+    csm_max_penetration_m: float  # the CSM's domain of validity: f_n / k_n at most this [m]
 
     @property
     def friction_coefficient(self) -> float:
@@ -389,7 +390,7 @@ def _object(node: _Node) -> ObjectConfig:
 
 def _contact(node: _Node) -> ContactConfig:
     node.only_keys({'friction_angle_deg', 'cone_faces', 'contact_stiffness_n_per_m',
-                    'table_friction_coefficient'})
+                    'table_friction_coefficient', 'csm_max_penetration_m'})
     alpha = node.child('friction_angle_deg')
     alpha_deg = alpha.number()
     if not 0.0 <= alpha_deg < 90.0:
@@ -401,6 +402,7 @@ def _contact(node: _Node) -> ContactConfig:
             3, positive=True),
         table_friction_coefficient=node.child('table_friction_coefficient').number(
             nonnegative=True),
+        csm_max_penetration_m=node.child('csm_max_penetration_m').number(positive=True),
     )
 
 

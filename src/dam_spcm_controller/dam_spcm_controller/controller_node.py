@@ -158,7 +158,8 @@ class SpcmControllerNode(Node):
                                                          step=0.0)]))
         self.declare_parameter('require_lift_guarantee', False, ParameterDescriptor(
             description='refuse (k_theta, delta_theta_p) pairs outside the sufficient-lift '
-                        'region reported by /check_lift'))
+                        'region reported by /check_lift, and pairs whose guarantee needs more '
+                        'compliant torque than the hand gives'))
         self.declare_parameter(
             'impedance_on_device', bool(self._config.controller.impedance_on_device),
             ParameterDescriptor(
@@ -754,6 +755,13 @@ class SpcmControllerNode(Node):
                     f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
                     f'(worst-case margin {answer.worst_case_margin:.4g} N): {answer.message}',
                     t0)
+            if not answer.within_torque_limit:
+                return self._finish(
+                    goal_handle, 'abort', aborted,
+                    f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
+                    f'{math.degrees(dp):.4g} deg is guaranteed by eq. 18 only with more '
+                    f'compliant torque than the hand gives ({answer.torque_limit:g} N*m): '
+                    f'{answer.message}', t0)
         fresh = await self._fresh_state(_START_STATE_WAIT_S, goal_handle)
         if goal_handle.is_cancel_requested:
             return self._finish(goal_handle, 'canceled', aborted,
