@@ -17,7 +17,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import psutil
@@ -93,10 +93,12 @@ def _dask() -> list[str]:
 
 
 @contextlib.contextmanager
-def _cluster(d: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
-    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1 (ports chosen by the
-    system), logs in ``d``; yields the scheduler's address and the processes (scheduler,
-    worker 1, worker 2)."""
+def _cluster(d: Path, workers: int = 2
+             ) -> Iterator[tuple[str, list[subprocess.Popen[bytes]], Callable[[int], None]]]:
+    """``dask scheduler`` and ``workers`` ``dask worker`` processes on 127.0.0.1 (ports chosen
+    by the system), logs in ``d``; yields the scheduler's address, the processes (scheduler,
+    worker 1, worker 2, ...) and ``start_worker(i)``, which starts worker ``i`` (appended to the
+    processes)."""
     from distributed import Client
 
     file = d / 'scheduler.json'
@@ -120,13 +122,17 @@ def _cluster(d: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
             time.sleep(0.05)
         address = json.loads(file.read_text())['address']
         assert address.startswith('tcp://127.0.0.1:')
-        for i in (1, 2):
+
+        def start_worker(i: int) -> None:
             start(['worker', '--scheduler-file', str(file), '--host', '127.0.0.1',
                    '--nthreads', '1', '--no-nanny', '--no-dashboard',
                    '--local-directory', str(d / f'worker{i}')], f'worker{i}')
+
+        for i in range(1, workers + 1):
+            start_worker(i)
         with Client(address, timeout='30s') as client:
-            client.wait_for_workers(2, timeout=60)
-        yield address, procs
+            client.wait_for_workers(workers, timeout=60)
+        yield address, procs, start_worker
         with Client(address, timeout='30s') as client:
             client.shutdown()  # the scheduler closes the workers, then itself
         grace = 10.0
@@ -144,15 +150,19 @@ def _cluster(d: Path) -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
 @pytest.fixture(scope='module')
 def loopback_cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A loopback cluster (:func:`_cluster`) for the module; yields the scheduler's address."""
-    with _cluster(tmp_path_factory.mktemp('dask')) as (address, _procs):
+    with _cluster(tmp_path_factory.mktemp('dask')) as (address, _procs, _start):
         yield address
 
 
-def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: Path) -> None:
-    """One of the two workers is stopped (SIGTERM) once the first rows are in: the other one
-    finishes the sweep, with the same table."""
+@pytest.mark.parametrize('replaced', [False, True], ids=['other_finishes', 'newcomer_finishes'])
+def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: Path,
+                                                      replaced: bool) -> None:
+    """A worker is stopped (SIGTERM) once the first rows are in: the other one of two
+    finishes the sweep, with the same table; or, where it was the only one, a worker that
+    joins afterwards does (it has nothing the first one held: whatever a trial needs travels
+    with the trial)."""
     out = tmp_path / 'out'
-    with _cluster(tmp_path) as (address, procs):
+    with _cluster(tmp_path, workers=1 if replaced else 2) as (address, procs, start_worker):
         proc = subprocess.Popen(_sweep_command(out, '--scheduler', address), env=_env(),
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
@@ -162,6 +172,9 @@ def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: 
                 assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
                 time.sleep(0.01)
             procs[1].terminate()
+            if replaced:
+                procs[1].wait(timeout=30)
+                start_worker(2)
             _out, err = proc.communicate(timeout=120)
         finally:
             if proc.poll() is None:
