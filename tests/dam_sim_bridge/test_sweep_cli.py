@@ -328,6 +328,37 @@ def test_an_unreachable_scheduler_fails_at_once_and_writes_nothing(
     assert not (tmp_path / 'x').exists()
 
 
+def test_a_server_that_never_answers_or_is_a_worker_is_refused_in_time(
+        tmp_path: Path, loopback_cluster: str, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A TCP server that accepts the connection and never speaks hung the command; a
+    worker's address is no scheduler's."""
+    import socket
+
+    from distributed import Client
+
+    from dam_sim_bridge import sweep_cli
+
+    monkeypatch.setattr(sweep_cli, 'CONNECT_TIMEOUT_S', 2.0)
+    with socket.socket() as silent:
+        silent.bind(('127.0.0.1', 0))
+        silent.listen(4)  # the kernel accepts; nobody ever reads or writes
+        port = silent.getsockname()[1]
+        start = time.monotonic()
+        status = main([*SWEEP, '--out', str(tmp_path / 'x'), '--scheduler',
+                       f'tcp://127.0.0.1:{port}'])
+        assert time.monotonic() - start < 10.0
+    assert status == 1
+    err = capsys.readouterr().err
+    assert err == (f"sweep: cannot reach the Dask scheduler at 'tcp://127.0.0.1:{port}': no "
+                   'answer within 2 s (is it a Dask scheduler?)\n')
+    with Client(loopback_cluster, timeout='30s') as client:
+        worker = next(iter(client.scheduler_info()['workers']))
+    assert main([*SWEEP, '--out', str(tmp_path / 'x'), '--scheduler', worker]) == 1
+    assert "it answers as 'Worker', not as a Dask scheduler" in capsys.readouterr().err
+    assert not (tmp_path / 'x').exists()
+
+
 def test_another_sweep_in_the_same_directory_is_refused(reference: str, tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]
                                                         ) -> None:

@@ -380,17 +380,58 @@ def _run_local_cluster(workers: int, pending: Sequence[TrialSpec], sweep: SweepS
         run_on_dask(client, pending, sweep, config, on_result)
 
 
+def _probe_scheduler(address: str, timeout_s: float) -> None:
+    """Ask whatever listens at ``address`` who it is (Dask's ``identity`` operation), within
+    ``timeout_s`` [s] in all: ``distributed.Client`` waits without end for a peer that
+    accepts the connection and never answers its handshake.
+
+    Raises
+    ------
+    SweepError
+        No answer in time, a broken connection, or an answer that is not a scheduler's (a
+        worker's address, for example), named in the message.
+    """
+    import asyncio  # noqa: PLC0415
+
+    from distributed.comm import connect  # noqa: PLC0415 - slow import
+
+    async def identity() -> Any:
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({'op': 'identity', 'reply': True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    async def bounded() -> Any:
+        return await asyncio.wait_for(identity(), timeout_s)
+
+    try:
+        answer = asyncio.run(bounded())
+    except TimeoutError:
+        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: no answer within '
+                         f'{timeout_s:g} s (is it a Dask scheduler?)') from None
+    except Exception as exc:  # noqa: BLE001 - whatever answers there is no Dask scheduler
+        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: '
+                         f'{type(exc).__name__}: {exc}') from None
+    kind = answer.get('type') if isinstance(answer, dict) else None
+    if kind != 'Scheduler':
+        raise SweepError(f'cannot reach the Dask scheduler at {address!r}: it answers as '
+                         f'{kind or type(answer).__name__!r}, not as a Dask scheduler')
+
+
 def _connect(address: str) -> Any:
     """A Dask client of the scheduler at ``address`` with at least one worker.
 
     Raises
     ------
     SweepError
-        The scheduler does not answer within :data:`CONNECT_TIMEOUT_S`, or has no worker
-        within :data:`WORKER_WAIT_S`.
+        The scheduler does not answer within :data:`CONNECT_TIMEOUT_S` (:func:`_probe_scheduler`
+        first), or has no worker within :data:`WORKER_WAIT_S`.
     """
     from distributed import Client  # noqa: PLC0415 - slow import
 
+    _probe_scheduler(address, CONNECT_TIMEOUT_S)
     try:
         client = Client(address, timeout=f'{CONNECT_TIMEOUT_S:g}s')
     except Exception as exc:  # noqa: BLE001 - whatever answers there is no Dask scheduler
