@@ -7,6 +7,7 @@ are in ``test_sweep_cli.py``.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -239,7 +240,14 @@ def test_table_resumes_and_refuses_another_sweep(cfg: DamConfig, tmp_path: Path)
                                          r'\[1\.0, 10\.0\], now \[1\.0, 12\.0\]\)'):
         TrialTable(out, changed, cfg).open()
     light = dataclasses.replace(cfg, object=dataclasses.replace(cfg.object, mass_kg=0.03))
-    with pytest.raises(SweepError, match='config_sha256'):
+    with pytest.raises(SweepError, match=r'holds a different sweep \(config\.object\.mass_kg: '
+                                         r'stored 0\.04, now 0\.03\)'):
+        TrialTable(out, sweep, light).open()
+    # A sweep.json of before the values were kept: the digests alone
+    params = json.loads((out / PARAMS_FILE).read_text())
+    del params['config']
+    (out / PARAMS_FILE).write_text(json.dumps(params))
+    with pytest.raises(SweepError, match=r'\(config_sha256: stored'):
         TrialTable(out, sweep, light).open()
 
 

@@ -343,21 +343,24 @@ class SweepSpec:
 # One trial
 
 
+def config_values(config: Any) -> Any:
+    """The configuration's values as plain JSON data (dicts by field name, lists, numbers,
+    strings), without the file name it came from."""
+    if dataclasses.is_dataclass(config) and not isinstance(config, type):
+        return {f.name: config_values(getattr(config, f.name))
+                for f in dataclasses.fields(config) if f.name != 'source'}
+    if isinstance(config, Mapping):
+        return {str(k): config_values(v) for k, v in sorted(config.items())}
+    if isinstance(config, (np.ndarray, list, tuple)):
+        return [config_values(v) for v in np.asarray(config, dtype=object).tolist()]
+    if isinstance(config, np.generic):
+        return config.item()
+    return config
+
+
 def config_digest(config: Any) -> str:
     """SHA-256 of the configuration's values (not of its file name), to recognise it again."""
-    def plain(value: Any) -> Any:
-        if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)
-                    if f.name != 'source'}
-        if isinstance(value, Mapping):
-            return {str(k): plain(v) for k, v in sorted(value.items())}
-        if isinstance(value, (np.ndarray, list, tuple)):
-            return [plain(v) for v in np.asarray(value, dtype=object).tolist()]
-        if isinstance(value, np.generic):
-            return value.item()
-        return value
-
-    text = json.dumps(plain(config), sort_keys=True, separators=(',', ':'))
+    text = json.dumps(config_values(config), sort_keys=True, separators=(',', ':'))
     return hashlib.sha256(text.encode('utf-8')).hexdigest()
 
 

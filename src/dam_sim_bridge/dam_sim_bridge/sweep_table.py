@@ -32,6 +32,7 @@ from dam_sim_bridge.sweep import (
     SweepSpec,
     TrialSpec,
     config_digest,
+    config_values,
     input_columns,
     table_columns,
 )
@@ -81,7 +82,8 @@ def sweep_parameters(sweep: SweepSpec, config: Any,
     """The content of ``sweep.json``: what must match to resume, then ``info``."""
     data: dict[str, Any] = {
         'format': FORMAT_VERSION, 'sweep': sweep.to_dict(),
-        'config_sha256': config_digest(config), 'columns': table_columns(config),
+        'config_sha256': config_digest(config), 'config': config_values(config),
+        'columns': table_columns(config),
         'n_trials': sweep.n_trials, 'units': _UNITS,
         'perturbation_distributions': (
             'u_m, u_t ~ U(-1, 1); z_x, z_y, z_a ~ N(0, 1), drawn in this order from '
@@ -166,6 +168,10 @@ class TrialTable:
                 raise SweepError(f'{params}: cannot read it ({exc})') from None
             for key in _MATCHING_KEYS:
                 diff = _first_difference(stored.get(key), self.parameters[key], key)
+                if diff and key == 'config_sha256' and isinstance(stored.get('config'), dict):
+                    # the digests differ: name the configuration value that does
+                    diff = _first_difference(stored['config'], self.parameters['config'],
+                                             'config') or diff
                 if diff:
                     raise SweepError(f'{self.directory} holds a different sweep ({diff}); '
                                      f'use another --out or remove it')
