@@ -370,10 +370,13 @@ def _run_local_cluster(workers: int, pending: Sequence[TrialSpec], sweep: SweepS
 
     # The worker processes inherit an ignored SIGINT: Ctrl-C in a terminal reaches the whole
     # process group, and only this process is to handle it (it closes the cluster).
+    # Their logs are silenced below CRITICAL: a worker whose scheduler closes first on Ctrl-C
+    # logs a heartbeat failure with a traceback (a CI run caught one); a trial's error comes
+    # back through its future and is reported by this process.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=None, silence_logs=logging.CRITICAL)
     finally:
         signal.signal(signal.SIGINT, previous)
     with cluster, Client(cluster) as client:
