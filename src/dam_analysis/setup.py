@@ -26,6 +26,7 @@ setup(
             'check_lift_server = dam_analysis.entry_points:check_lift_server',
             'check_lift = dam_analysis.check_lift_client:entry_point',
             'lift_map = dam_analysis.lift_map:entry_point',
+            'scale_map = dam_analysis.scale_map:entry_point',
         ],
     },
 )

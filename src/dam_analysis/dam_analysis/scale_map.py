@@ -1,0 +1,229 @@
+"""``scale_map``: for which cylinder sizes does DAM work with this hand?
+
+Draws the lift boundaries ``k_theta*`` (finger 1's stiffness) against the cylinder's radius at
+chosen displacements (:mod:`dam_analysis.scale_study`): the sufficient condition of eq. (18) as
+a solid line, the contact stiffness model dashed, and dotted the stiffness above which the
+hand cannot give the SPCM torque. Examples::
+
+    ros2 run dam_analysis scale_map --radius-range 3:20:35 --delta-theta-p 10 20 30 \\
+        --friction-angle 5 --out scale.png
+    ros2 run dam_analysis scale_map --radius-range 5:15:11 --delta-theta-p 15 \\
+        --constant-mass --csv scale.csv
+
+Radii are in millimetres (``start:stop:count``), displacements and the friction angle in
+degrees. The CSV has the columns ``radius_mm, mass_kg, delta_theta_p_deg, k_theta_sufficient,
+k_theta_csm, k_theta_torque_limit, no_first_contact`` [mm, kg, deg, N m/rad x 3, text]; an
+empty stiffness cell means none lifts there (or no first contact, then the last column says
+why). The summary printed at the end gives, per displacement, the radii at which the
+sufficient condition (and the CSM) lifts within the hand's torque. Exit status: 0 written, 1
+cannot write, 2 bad arguments or configuration. No ROS needed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dam_analysis.errors import DamAnalysisError
+from dam_analysis.scale_study import ScaleStudy, scale_study, working_ranges
+from dam_common.config import load_config
+from dam_common.errors import ConfigError
+from dam_common.ros_args import strip_ros_args
+
+CSV_COLUMNS = ('radius_mm', 'mass_kg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm',
+               'k_theta_torque_limit', 'no_first_contact')
+#: Most radii one run takes (each builds the analysis, about 0.5 s).
+MAX_RADII = 400
+
+
+def parse_radius_range(text: str) -> np.ndarray:
+    """``'3:20:35'`` [mm] -> radii [m]: ``count`` values evenly from ``start`` to ``stop``.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not three numbers, a non-positive or non-finite radius, ``count`` not a whole number
+        in [1, MAX_RADII], ``stop < start``, or ``count`` 1 with ``start != stop``.
+    """
+    parts = text.split(':')
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f'{text!r} is not start:stop:count [mm]')
+    try:
+        start, stop = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: start and stop must be numbers [mm]'
+                                         ) from None
+    try:
+        count = int(parts[2])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: count {parts[2]!r} is not a whole number'
+                                         ) from None
+    for name, value in (('start', start), ('stop', stop)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise argparse.ArgumentTypeError(f'{text!r}: {name} {value:g} mm must be a '
+                                             'positive radius')
+    if not 1 <= count <= MAX_RADII:
+        raise argparse.ArgumentTypeError(f'{text!r}: count {count} must be in [1, {MAX_RADII}]')
+    if stop < start:
+        raise argparse.ArgumentTypeError(f'{text!r}: stop {stop:g} mm is below start '
+                                         f'{start:g} mm')
+    if count == 1 and start != stop:
+        raise argparse.ArgumentTypeError(f'{text!r}: one value needs start == stop')
+    return np.linspace(start, stop, count) * 1e-3
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='scale_map',
+        description='Lift boundaries k_theta* against the cylinder radius (scale-dependent '
+                    'grasp): sufficient condition (eq. 18), contact stiffness model and the '
+                    "hand's torque limit.")
+    parser.add_argument('--radius-range', type=parse_radius_range, required=True,
+                        metavar='START:STOP:COUNT', help='cylinder radii [mm]')
+    parser.add_argument('--delta-theta-p', type=float, nargs='+', required=True, metavar='DEG',
+                        help='position-joint displacements [deg]')
+    parser.add_argument('--friction-angle', type=float, default=None, metavar='DEG',
+                        help='friction angle alpha [deg] (default: the configured one)')
+    parser.add_argument('--constant-mass', action='store_true',
+                        help='keep the configured mass (default: scale it with the '
+                             'cross-section, same density and length)')
+    parser.add_argument('--out', type=Path, default=Path('scale_map.png'), metavar='PNG',
+                        help='output image (default: %(default)s)')
+    parser.add_argument('--csv', type=Path, default=None, metavar='CSV',
+                        help='output table (default: --out with .csv)')
+    parser.add_argument('--config', type=Path, default=None, metavar='YAML',
+                        help='configuration file (default: the installed config/dam.yaml)')
+    return parser
+
+
+def _cell(value: float) -> str:
+    return repr(float(value)) if math.isfinite(value) else ''
+
+
+def write_csv(path: Path, study: ScaleStudy) -> None:
+    """One row per radius and displacement (:data:`CSV_COLUMNS`)."""
+    with open(path, 'w', newline='', encoding='utf-8') as stream:
+        writer = csv.writer(stream, lineterminator='\n')
+        writer.writerow(CSV_COLUMNS)
+        for j, radius in enumerate(study.radius):
+            for d, dp in enumerate(study.delta_theta_p):
+                writer.writerow((repr(float(radius * 1e3)), repr(float(study.mass[j])),
+                                 repr(float(math.degrees(dp))), _cell(study.k_sufficient[j, d]),
+                                 _cell(study.k_csm[j, d]), _cell(study.k_torque[j, d]),
+                                 study.no_contact[j]))
+
+
+def plot_study(path: Path, study: ScaleStudy) -> None:
+    """Boundaries over radius [mm] on a logarithmic stiffness axis; radii without a first
+    contact shaded grey."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=120)
+    colours = plt.rcParams['axes.prop_cycle'].by_key()['color']
+    r_mm = study.radius * 1e3
+    for d, dp in enumerate(study.delta_theta_p):
+        colour = colours[d % len(colours)]
+        label = f'delta_theta_p = {math.degrees(dp):g} deg'
+        ax.plot(r_mm, study.k_sufficient[:, d], color=colour, linewidth=2.4,
+                label=f'{label}: sufficient (eq. 18)')
+        ax.plot(r_mm, study.k_csm[:, d], color=colour, linewidth=1.1, linestyle='--',
+                label=f'{label}: CSM')
+        ax.plot(r_mm, study.k_torque[:, d], color=colour, linewidth=1.1, linestyle=':',
+                label=f'{label}: torque limit {study.torque_limit:g} N*m')
+    step = float(np.min(np.diff(r_mm))) if r_mm.size > 1 else 1.0
+    shaded = False
+    for j, reason in enumerate(study.no_contact):
+        if reason:
+            ax.axvspan(r_mm[j] - step / 2, r_mm[j] + step / 2, color='0.85', linewidth=0.0,
+                       label=None if shaded else 'no first contact')
+            shaded = True
+    values = np.concatenate([a[np.isfinite(a)] for a in (study.k_sufficient, study.k_csm,
+                                                         study.k_torque)])
+    if values.size:
+        ax.set_yscale('log')
+        ax.set_ylim(values.min() / 1.5, values.max() * 1.5)
+    ax.set_xlim(r_mm.min() - step / 2, r_mm.max() + step / 2)
+    ax.set_xlabel('cylinder radius R [mm]')
+    ax.set_ylabel('compliant-joint stiffness k_theta* (finger 1) [N m/rad]')
+    ax.set_title(f'DAM over object size, alpha = {math.degrees(study.friction_angle):g} deg\n'
+                 'lifts above a boundary; the hand gives the torque below the dotted line',
+                 fontsize=10)
+    ax.grid(True, which='both', alpha=0.3)
+    ax.legend(fontsize=6.5, loc='best')
+    fig.tight_layout()
+    fig.savefig(path, format='png')
+    plt.close(fig)
+
+
+def summary_lines(study: ScaleStudy) -> list[str]:
+    """Per displacement, the radius runs [mm] where each boundary lifts within the torque."""
+    def runs_text(runs: list[tuple[float, float]]) -> str:
+        if not runs:
+            return 'no radius'
+        return ', '.join(f'{a * 1e3:g} mm' if a == b else f'{a * 1e3:g}-{b * 1e3:g} mm'
+                         for a, b in runs)
+
+    lines = []
+    for d, (suf, csm) in enumerate(zip(working_ranges(study, 'sufficient'),
+                                       working_ranges(study, 'csm'), strict=True)):
+        lines.append(f'delta_theta_p {math.degrees(study.delta_theta_p[d]):g} deg: within '
+                     f'{study.torque_limit:g} N*m, guaranteed (eq. 18) at {runs_text(suf)}; '
+                     f'CSM lift at {runs_text(csm)}')
+    missing = [f'{r * 1e3:g}' for r, why in zip(study.radius, study.no_contact, strict=True)
+               if why]
+    if missing:
+        first = next(why for why in study.no_contact if why)
+        lines.append(f'no first contact at radius {", ".join(missing)} mm (e.g. {first})')
+    return lines
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the tool; ``argv`` without the program name (``sys.argv[1:]`` if None)."""
+    parser = build_parser()
+    options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
+    try:
+        config = load_config(options.config)
+    except ConfigError as exc:
+        print(f'scale_map: {exc}', file=sys.stderr)
+        return 2
+    alpha = (config.contact.friction_angle_rad if options.friction_angle is None
+             else math.radians(options.friction_angle))
+
+    def progress(j: int, radius: float, reason: str) -> None:
+        note = f': no first contact ({reason})' if reason else ''
+        print(f'scale_map: radius {radius * 1e3:g} mm ({j + 1}/{options.radius_range.size})'
+              f'{note}', file=sys.stderr, flush=True)
+
+    try:
+        study = scale_study(config, options.radius_range,
+                            np.radians(options.delta_theta_p), alpha,
+                            constant_mass=options.constant_mass, progress=progress)
+    except DamAnalysisError as exc:
+        parser.error(str(exc))
+    csv_path = options.csv if options.csv is not None else options.out.with_suffix('.csv')
+    try:
+        write_csv(csv_path, study)
+        plot_study(options.out, study)
+    except OSError as exc:
+        print(f'scale_map: cannot write output: {exc}', file=sys.stderr)
+        return 1
+    for line in summary_lines(study):
+        print(line)
+    print(f'scale_map: wrote {options.out} and {csv_path}', file=sys.stderr)
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    entry_point()

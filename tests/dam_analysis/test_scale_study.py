@@ -1,0 +1,166 @@
+"""The scale study (modules scale_study and scale_map): lift boundaries over cylinder size,
+against a closed form on an independently solved SPCM, and the command."""
+
+from __future__ import annotations
+
+import csv
+import math
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dam_analysis.errors import InputError
+from dam_analysis.scale_map import main, parse_radius_range
+from dam_analysis.scale_study import scale_study, scaled_config, working_ranges
+from spcm_reference import PlanarFinger, follow_branch
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_scaled_cylinder_rests_on_the_table_with_its_density(config) -> None:
+    big = scaled_config(config, 0.015)
+    assert big.object.radius_m == 0.015
+    assert big.object.position_m[2] == 0.015  # axis at height R: resting on the table
+    np.testing.assert_array_equal(big.object.position_m[:2], config.object.position_m[:2])
+    assert big.object.mass_kg == pytest.approx(config.object.mass_kg * 1.5 ** 2)
+    assert scaled_config(config, 0.015, constant_mass=True).object.mass_kg == \
+        config.object.mass_kg
+    assert config.object.radius_m == 0.010  # the configuration itself is unchanged
+    for bad in (0.0, -0.01, math.nan, math.inf):
+        with pytest.raises(InputError, match='radius: expected a positive number'):
+            scaled_config(config, bad)
+
+
+def _frictionless_boundary(config, delta_theta_p: float) -> tuple[float, float]:
+    """alpha = 0: every contact force lies along the inward normal, so each finger's force is
+    f_n = tau_s / (J^T n_in) and the margin sum f_n (-n_z) - m_B g is linear in k_theta:
+    k* = m_B g / sum_i r_i (-delta_theta_si) (-n_z) / (J^T n_in). The SPCM states come from
+    the independent solver of spcm_reference (fingertip contact, normal (cos psi, sin psi));
+    J^T n_in is the torque of a unit inward force about the compliant joint (a plane point p
+    moves with (-p_z, p_u) per radian of the whole finger); NaN where the slope is not
+    positive (no stiffness lifts). Also returns the stiffness at which the largest |tau_s|
+    reaches the torque limit. [N m/rad] The reference models the fingertip only: the radii
+    tested have their first contact there."""
+    ratios = np.asarray(config.hand.stiffness_ratios, dtype=float)
+    limit = min(config.controller.torque_limit_nm, config.device.torque_limit_nm)
+    slope, per_k = 0.0, []
+    for i in range(config.hand.n_fingers):
+        finger = PlanarFinger.from_config(config, i)
+        branch = follow_branch(finger)
+        assert finger.on_fingertip(branch.states[0][0], finger.theta_p0)
+        step = int(round(delta_theta_p / math.radians(0.25)))
+        assert branch.delta_theta_p[step] == pytest.approx(delta_theta_p)
+        theta_s, psi = branch.states[step]
+        assert finger.on_fingertip(theta_s, finger.theta_p0 + delta_theta_p)
+        d_s = theta_s - branch.states[0][0]
+        n = np.array([math.cos(psi), math.sin(psi)])
+        p = np.asarray(finger.centre) + finger.object_radius * n
+        lever = float(-n @ np.array([-p[1], p[0]]))  # J^T n_in
+        r = ratios[i] / ratios[0]
+        slope += r * (-d_s) * (-n[1]) / lever
+        per_k.append(r * abs(d_s))
+    k_star = config.object_weight_n / slope if slope > 0.0 else math.nan
+    return k_star, limit / max(per_k)
+
+
+@pytest.mark.parametrize('radius_mm', [8.0, 9.0, 12.0])
+def test_frictionless_boundaries_equal_the_closed_form(config, radius_mm: float) -> None:
+    dps = np.radians([10.0, 20.0])
+    study = scale_study(config, [radius_mm * 1e-3], dps, 0.0)
+    # 8 mm lifts at neither displacement, 9 mm at 10 deg only, 12 mm at both
+    assert np.isfinite(study.k_sufficient[0]).tolist() == {
+        8.0: [False, False], 9.0: [True, False], 12.0: [True, True]}[radius_mm]
+    scaled = scaled_config(config, radius_mm * 1e-3)
+    for d, dp in enumerate(dps):
+        k_star, k_torque = _frictionless_boundary(scaled, float(dp))
+        assert study.k_sufficient[0, d] == pytest.approx(k_star, rel=1e-6, nan_ok=True)
+        # both boundaries converge at alpha = 0
+        assert study.k_csm[0, d] == pytest.approx(k_star, rel=1e-6, nan_ok=True)
+        assert study.k_torque[0, d] == pytest.approx(k_torque, rel=1e-6)
+
+
+def test_at_the_configured_radius_the_study_is_the_lift_map(config, analyzer) -> None:
+    dps = np.radians([5.0, 10.0, 25.0, 64.0])  # 64 deg: beyond the end of the branch
+    alpha = math.radians(5.0)
+    study = scale_study(config, [config.object.radius_m], dps, alpha)
+    bounds = analyzer.boundaries(alpha, dps)
+    np.testing.assert_array_equal(study.k_sufficient[0], bounds.sufficient)
+    np.testing.assert_array_equal(study.k_csm[0], bounds.csm)
+    assert math.isnan(study.k_torque[0, 3]) and study.no_contact == ('',)
+    # the torque ceiling is where check_lift's torque verdict turns
+    k_tau = float(study.k_torque[0, 1])
+    assert analyzer.check_lift(k_tau * 0.999, dps[1]).within_torque_limit
+    assert not analyzer.check_lift(k_tau * 1.001, dps[1]).within_torque_limit
+
+
+def test_sizes_without_a_first_contact_are_named_not_drawn(config) -> None:
+    study = scale_study(config, [0.002, 0.010, 0.024], np.radians([10.0]), math.radians(5.0))
+    assert 'does not reach the object' in study.no_contact[0]
+    assert 'already overlaps the object' in study.no_contact[2]
+    assert study.no_contact[1] == ''
+    for j in (0, 2):
+        assert np.isnan([study.k_sufficient[j, 0], study.k_csm[j, 0],
+                         study.k_torque[j, 0]]).all()
+    assert working_ranges(study) == [[(0.010, 0.010)]]
+    works = study.works()
+    assert works[1, 0] == (study.k_sufficient[1, 0] < study.k_torque[1, 0])
+
+
+def test_bad_input_is_refused_with_the_value(config) -> None:
+    with pytest.raises(InputError, match='delta_theta_p: 70 deg is outside'):
+        scale_study(config, [0.01], np.radians([70.0]), 0.1)
+    with pytest.raises(InputError, match='friction_angle'):
+        scale_study(config, [0.01], [0.1], math.pi / 2)
+
+
+def test_radius_ranges() -> None:
+    np.testing.assert_allclose(parse_radius_range('3:20:18'), np.arange(3, 21) * 1e-3)
+    np.testing.assert_allclose(parse_radius_range('7:7:1'), [7e-3])
+    import argparse
+    for bad, words in (('3:20', 'start:stop:count'), ('a:2:3', 'must be numbers'),
+                       ('3:20:x', 'not a whole number'), ('0:20:3', 'positive radius'),
+                       ('3:nan:3', 'positive radius'), ('20:3:3', 'below start'),
+                       ('3:4:0', 'must be in'), ('3:4:1', 'start == stop')):
+        with pytest.raises(argparse.ArgumentTypeError, match=words):
+            parse_radius_range(bad)
+
+
+def test_the_command_writes_the_table_the_picture_and_the_summary(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'scale.png'
+    assert main(['--radius-range', '2:14:4', '--delta-theta-p', '10', '20',
+                 '--friction-angle', '5', '--out', str(out),
+                 '--config', str(REPO_ROOT / 'config' / 'dam.yaml')]) == 0
+    printed = capsys.readouterr().out
+    assert out.stat().st_size > 20_000
+    with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
+        rows = list(csv.DictReader(stream))
+    assert [(r['radius_mm'], r['delta_theta_p_deg']) for r in rows] == [
+        (repr(r), repr(d)) for r in (2.0, 6.0, 10.0, 14.0) for d in (10.0, 20.0)]
+    assert rows[0]['k_theta_sufficient'] == '' and 'does not reach' in rows[0]['no_first_contact']
+    assert float(rows[4]['mass_kg']) == pytest.approx(0.04)  # 10 mm: the configured object
+    assert 'delta_theta_p 10 deg: within 0.6 N*m, guaranteed (eq. 18) at' in printed
+    assert 'no first contact at radius 2 mm' in printed
+
+
+@pytest.mark.parametrize(('args', 'words'), [
+    (['--radius-range', '3:1:2', '--delta-theta-p', '10'], 'below start'),
+    (['--radius-range', '3:5:2', '--delta-theta-p', '80'], 'delta_theta_p: 80 deg'),
+    (['--radius-range', '3:5:2'], 'the following arguments are required: --delta-theta-p'),
+])
+def test_bad_arguments_exit_2_with_one_line(args: list[str], words: str,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2
+    assert words in capsys.readouterr().err
+
+
+def test_installed_command() -> None:
+    exe = REPO_ROOT / 'ros2_ws' / 'install' / 'dam_analysis' / 'lib' / 'dam_analysis' / \
+        'scale_map'
+    assert exe.is_file(), 'build the workspace (scripts/setup.sh)'
+    done = subprocess.run([str(exe), '--help'], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and '--radius-range' in done.stdout, done.stderr
