@@ -27,6 +27,7 @@ setup(
             'check_lift = dam_analysis.check_lift_client:entry_point',
             'lift_map = dam_analysis.lift_map:entry_point',
             'scale_map = dam_analysis.scale_map:entry_point',
+            'plan_lift = dam_analysis.plan_lift_client:entry_point',
         ],
     },
 )

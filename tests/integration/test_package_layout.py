@@ -84,7 +84,17 @@ def test_interfaces_are_generated_for_python() -> None:
         'ok': 'boolean', 'message': 'string', 'lift_guaranteed': 'boolean',
         'worst_case_margin': 'double', 'csm_lift': 'boolean', 'csm_margin': 'double',
         'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>',
-        'friction_angle': 'double'}
+        'friction_angle': 'double', 'torque_limit': 'double', 'within_torque_limit': 'boolean',
+        'csm_penetration': 'sequence<double>', 'csm_in_domain': 'boolean'}
+    from dam_interfaces.srv import PlanLift
+
+    assert PlanLift.Request.get_fields_and_field_types() == {
+        name: 'double' for name in ('friction_angle_min', 'friction_angle_max', 'mass_min',
+                                    'mass_max', 'position_tolerance', 'k_theta_max',
+                                    'delta_theta_p_min', 'delta_theta_p_max', 'min_margin')}
+    defaults = PlanLift.Request()
+    assert defaults.position_tolerance == 0.0 and defaults.friction_angle_min == -1.0
+    assert PlanLift.Response.get_fields_and_field_types()['method'] == 'string'
     from dam_interfaces.msg import GraspEpisode, LiftAnswer
 
     answer_fields = LiftAnswer.get_fields_and_field_types()

@@ -23,6 +23,11 @@ value; the server never dies on input. A well-formed pair beyond the end of the 
 false, both margins NaN, NaN per-finger values for the fingers beyond, and a message naming
 where (deg) and why the branch ends.
 
+The same node serves ``/plan_lift`` (dam_interfaces/srv/PlanLift): the robust pair over ranges
+of friction angle, mass and object position (:mod:`dam_analysis.planner`); its fields left out
+mean the configured values too. The first request with a position tolerance builds an analysis
+per position node (about 0.5 s each, kept); later ones take a few tenths of a second.
+
 Every answer also says what the analysis assumes of the hand (:mod:`dam_analysis.hand_limits`):
 ``torque_limit`` and ``within_torque_limit`` (a pair guaranteed by eq. 18 whose ``tau_s``
 exceeds what the hand gives is, the message says, "guaranteed by eq. 18 but not for this
@@ -41,9 +46,10 @@ from rclpy.parameter import Parameter
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.errors import DamAnalysisError
 from dam_analysis.hand_limits import limit_notes
+from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_from_request
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, run_node
-from dam_interfaces.srv import CheckLift
+from dam_interfaces.srv import CheckLift, PlanLift
 
 _MAX_FRICTION_ANGLE = math.pi / 2
 
@@ -67,6 +73,8 @@ class CheckLiftServer(Node):
             self.get_parameter('default_friction_angle').value)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._service = self.create_service(CheckLift, 'check_lift', self._on_request)
+        self._planner = LiftPlanner(self._config, self._analyzer)
+        self._plan_service = self.create_service(PlanLift, 'plan_lift', self._on_plan)
         self.get_logger().info(
             f'serving {self._service.srv_name} with {self._config.source} '
             f'(default friction angle {math.degrees(self._default_friction_angle):.3g} deg)')
@@ -142,6 +150,48 @@ class CheckLiftServer(Node):
             message += f' [from the configuration: {", ".join(defaults)}]'
         response.message = message
         return response
+
+
+    def _on_plan(self, request: PlanLift.Request, response: PlanLift.Response
+                 ) -> PlanLift.Response:
+        nan = math.nan
+        for name in ('k_theta', 'delta_theta_p', 'worst_case_margin', 'position_error_bound',
+                     'best_k_theta', 'best_delta_theta_p', 'best_worst_case_margin',
+                     'csm_k_theta', 'csm_delta_theta_p', 'csm_margin', 'k_theta_cap'):
+            setattr(response, name, nan)
+        try:
+            ranges, taken = ranges_from_request(
+                self._planner, request.friction_angle_min, request.friction_angle_max,
+                request.mass_min, request.mass_max, request.position_tolerance,
+                request.k_theta_max, request.delta_theta_p_min, request.delta_theta_p_max,
+                request.min_margin)
+            plan = self._planner.plan(ranges)
+        except DamAnalysisError as exc:
+            response.ok = False
+            response.message = str(exc)
+            self.get_logger().warning(f'rejected plan request: {exc}')
+            return response
+        except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
+            response.ok = False
+            response.message = f'internal error while planning: {exc!r}'
+            self.get_logger().error(response.message)
+            return response
+        response.ok = True
+        _fill_plan(response, plan)
+        message = plan_verdict(plan)
+        if taken:
+            message += f' [from the configuration: {", ".join(taken)}]'
+        response.message = message
+        return response
+
+
+def _fill_plan(response: PlanLift.Response, plan: PlanResult) -> None:
+    for name in ('found', 'k_theta', 'delta_theta_p', 'worst_case_margin',
+                 'position_error_bound', 'best_k_theta', 'best_delta_theta_p',
+                 'best_worst_case_margin', 'csm_k_theta', 'csm_delta_theta_p', 'csm_margin',
+                 'csm_in_domain', 'k_theta_cap', 'method'):
+        value = getattr(plan, name)
+        setattr(response, name, value if isinstance(value, (bool, str)) else float(value))
 
 
 def main(args: list[str] | None = None) -> None:

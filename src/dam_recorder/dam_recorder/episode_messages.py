@@ -36,7 +36,11 @@ def summary_from_event(msg: Any) -> dict[str, Any]:
             'csm_lift': bool(answer.csm_lift), 'csm_margin': float(answer.csm_margin),
             'delta_theta_s': [float(v) for v in answer.delta_theta_s],
             'compliant_torque': [float(v) for v in answer.compliant_torque],
-            'friction_angle': float(answer.friction_angle)}
+            'friction_angle': float(answer.friction_angle),
+            'torque_limit': float(answer.torque_limit),
+            'within_torque_limit': bool(answer.within_torque_limit),
+            'csm_penetration': [float(v) for v in answer.csm_penetration],
+            'csm_in_domain': bool(answer.csm_in_domain)}
     return {
         'goal_id': msg.goal_id, 'ended_ns': stamp_ns(msg.header.stamp),
         'goal': {'k_theta': [float(v) for v in msg.goal_k_theta],

@@ -44,6 +44,10 @@ def lift_answer(response: CheckLift.Response) -> LiftAnswer:
     answer.delta_theta_s = [float(v) for v in response.delta_theta_s]
     answer.compliant_torque = [float(v) for v in response.compliant_torque]
     answer.friction_angle = float(response.friction_angle)
+    answer.torque_limit = float(response.torque_limit)
+    answer.within_torque_limit = bool(response.within_torque_limit)
+    answer.csm_penetration = [float(v) for v in response.csm_penetration]
+    answer.csm_in_domain = bool(response.csm_in_domain)
     return answer
 
 
@@ -122,6 +126,7 @@ class EpisodeEvents:
             msg.check_lift.worst_case_margin = math.nan
             msg.check_lift.csm_margin = math.nan
             msg.check_lift.friction_angle = math.nan
+            msg.check_lift.torque_limit = math.nan
         msg.outcome = int(result.outcome)
         msg.outcome_name = result.outcome_name
         msg.message = result.message

@@ -1,0 +1,172 @@
+"""``plan_lift``: a command-line client of ``/plan_lift`` (the robust pair over ranges).
+
+Examples::
+
+    ros2 run dam_analysis plan_lift --friction-angle 3:6 --mass 0.03:0.05 \\
+        --position-tolerance 1mm
+    ros2 run dam_analysis plan_lift --friction-angle 5 --k-theta-max 8 --delta-theta-p 5:30
+    ros2 run dam_analysis plan_lift          # the configured friction angle, mass, position
+
+Ranges are ``MIN:MAX`` or one value; friction angles and displacements in degrees, masses in
+kilograms, the position tolerance with a unit (``1mm``, ``0.001m``; metres without one). An
+option left out is left out of the request, so the server uses its configuration for it
+(``PlanLift.srv``). Exit status: 0 when the server answered ``ok`` (whether or not a pair is
+guaranteed), 2 when it rejected the request or an argument is malformed, 1 when no answer came.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+
+import rclpy
+from rclpy.utilities import remove_ros_args
+
+from dam_interfaces.srv import PlanLift
+
+
+def parse_range(text: str) -> tuple[float, float]:
+    """``'3:6'`` or ``'5'`` -> (min, max) as numbers (``'5'`` -> (5, 5))."""
+    parts = text.split(':')
+    if len(parts) not in (1, 2):
+        raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one value')
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: not a number') from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f'{text!r}: not a finite number')
+    low, high = values[0], values[-1]
+    if high < low:
+        raise argparse.ArgumentTypeError(f'{text!r}: empty range, max {high:g} is below min '
+                                         f'{low:g}')
+    return low, high
+
+
+def parse_length(text: str) -> float:
+    """``'1mm'``, ``'0.001m'`` or ``'0.001'`` (metres) -> metres."""
+    value = text.strip().lower()
+    try:
+        if value.endswith('mm'):
+            return float(value[:-2]) * 1e-3
+        if value.endswith('m'):
+            return float(value[:-1])
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'{text!r} is not a length (examples: 1mm, 0.001m, 0.001)') from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='plan_lift',
+        description='Ask /plan_lift for the (k_theta, delta_theta_p) pair that lifts the '
+                    'object over ranges of friction angle, mass and position.')
+    parser.add_argument('--friction-angle', type=parse_range, default=None, metavar='DEG[:DEG]',
+                        help='friction angle alpha range [deg] (default: the configured one)')
+    parser.add_argument('--mass', type=parse_range, default=None, metavar='KG[:KG]',
+                        help='object mass range [kg] (default: the configured one)')
+    parser.add_argument('--position-tolerance', type=parse_length, default=None,
+                        metavar='LENGTH',
+                        help="the object's position along the fingers within +-this "
+                             '(default: 0, the configured position)')
+    parser.add_argument('--k-theta-max', type=float, default=None, metavar='N*m/rad',
+                        help='largest finger-1 stiffness to propose (default: the largest '
+                             'the device accepts)')
+    parser.add_argument('--delta-theta-p', type=parse_range, default=None, metavar='DEG:DEG',
+                        help='displacement range [deg] (default: all the configuration allows)')
+    parser.add_argument('--min-margin', type=float, default=None, metavar='N',
+                        help='smallest worst-case margin a guaranteed pair keeps [N] '
+                             '(default: 0.01)')
+    parser.add_argument('--service', default='/plan_lift', help='service name')
+    parser.add_argument('--timeout', type=float, default=30.0, metavar='S',
+                        help='seconds to wait for the service and for the answer (a first '
+                             'request with a position tolerance builds an analysis per node)')
+    return parser
+
+
+def build_request(options: argparse.Namespace) -> PlanLift.Request:
+    """The request of the options; an option left out keeps its field's default."""
+    request = PlanLift.Request()
+    if options.friction_angle is not None:
+        request.friction_angle_min, request.friction_angle_max = (
+            math.radians(v) for v in options.friction_angle)
+    if options.mass is not None:
+        request.mass_min, request.mass_max = options.mass
+    if options.position_tolerance is not None:
+        request.position_tolerance = float(options.position_tolerance)
+    if options.k_theta_max is not None:
+        request.k_theta_max = float(options.k_theta_max)
+    if options.delta_theta_p is not None:
+        request.delta_theta_p_min, request.delta_theta_p_max = (
+            math.radians(v) for v in options.delta_theta_p)
+    if options.min_margin is not None:
+        request.min_margin = float(options.min_margin)
+    return request
+
+
+def _pair(k_theta: float, delta_theta_p: float) -> str:
+    return f'k_theta {k_theta:.4g} N*m/rad at delta_theta_p {math.degrees(delta_theta_p):.4g} deg'
+
+
+def format_response(response: PlanLift.Response) -> str:
+    """Human-readable rendering of a PlanLift answer."""
+    if not response.ok:
+        return f'REJECTED: {response.message}'
+    lines = []
+    if response.found:
+        pair = _pair(response.k_theta, response.delta_theta_p)
+        lines.append(f'guaranteed (eq. 18)       : {pair}, worst-case margin '
+                     f'{response.worst_case_margin:+.4g} N (at most '
+                     f'{response.position_error_bound:.2g} N less between positions)')
+    else:
+        lines.append('guaranteed (eq. 18)       : none')
+    if math.isfinite(response.best_worst_case_margin):
+        lines.append(f'largest worst-case margin : '
+                     f'{_pair(response.best_k_theta, response.best_delta_theta_p)}, '
+                     f'{response.best_worst_case_margin:+.4g} N')
+    if math.isfinite(response.csm_margin):
+        domain = 'inside' if response.csm_in_domain else 'OUTSIDE'
+        lines.append(f'contact stiffness model   : '
+                     f'{_pair(response.csm_k_theta, response.csm_delta_theta_p)}, margin '
+                     f'{response.csm_margin:+.4g} N ({domain} its domain)')
+    lines.append(f'method: {response.method}')
+    lines.append(response.message)
+    return '\n'.join(lines)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv if args is None else args)
+    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    rclpy.init(args=argv)
+    node = rclpy.create_node('plan_lift_client')
+    try:
+        client = node.create_client(PlanLift, options.service)
+        if not client.wait_for_service(timeout_sec=options.timeout):
+            print(f'plan_lift: service {options.service} is not available '
+                  f'(is check_lift_server running in this ROS_DOMAIN_ID?)', file=sys.stderr)
+            return 1
+        future = client.call_async(build_request(options))
+        rclpy.spin_until_future_complete(node, future, timeout_sec=options.timeout)
+        if not future.done() or future.result() is None:
+            print(f'plan_lift: no answer from {options.service} within {options.timeout} s',
+                  file=sys.stderr)
+            return 1
+        response = future.result()
+        print(format_response(response))
+        return 0 if response.ok else 2
+    except KeyboardInterrupt:
+        return 1
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def entry_point() -> None:
+    sys.exit(main())
+
+
+if __name__ == '__main__':
+    entry_point()

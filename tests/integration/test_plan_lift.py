@@ -1,0 +1,161 @@
+"""/plan_lift of the installed check_lift_server, and the plan_lift client, over DDS."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dam_analysis.planner import LiftPlanner, ranges_from_request
+from dam_common.config import load_config
+from ros_testing import RosClient, installed_executable, node_process
+
+pytestmark = pytest.mark.integration
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CONFIG = load_config(REPO_ROOT / 'config' / 'dam.yaml')
+SERVER = installed_executable('dam_analysis', 'check_lift_server')
+CLIENT = installed_executable('dam_analysis', 'plan_lift')
+FIELDS = ('friction_angle_min', 'friction_angle_max', 'mass_min', 'mass_max',
+          'position_tolerance', 'k_theta_max', 'delta_theta_p_min', 'delta_theta_p_max',
+          'min_margin')
+ANSWER = ('found', 'k_theta', 'delta_theta_p', 'worst_case_margin', 'position_error_bound',
+          'best_k_theta', 'best_delta_theta_p', 'best_worst_case_margin', 'csm_k_theta',
+          'csm_delta_theta_p', 'csm_margin', 'csm_in_domain', 'k_theta_cap', 'method')
+
+
+@pytest.fixture(scope='module')
+def server() -> Iterator[object]:
+    with node_process([SERVER]) as proc:
+        yield proc
+
+
+@pytest.fixture(scope='module')
+def client(server: object) -> Iterator[RosClient]:
+    ros = RosClient()
+    yield ros
+    ros.close()
+
+
+@pytest.fixture(scope='module')
+def planner() -> LiftPlanner:
+    return LiftPlanner(CONFIG)
+
+
+def _call(client: RosClient, **fields: float):
+    from dam_interfaces.srv import PlanLift
+
+    request = PlanLift.Request()
+    for name, value in fields.items():
+        setattr(request, name, value)
+    return client.call(PlanLift, '/plan_lift', request, timeout=60.0)
+
+
+def _expected(planner: LiftPlanner, **fields: float):
+    from dam_interfaces.srv import PlanLift
+
+    request = PlanLift.Request()
+    for name, value in fields.items():
+        setattr(request, name, value)
+    ranges, _ = ranges_from_request(planner, *(getattr(request, f) for f in FIELDS))
+    return planner.plan(ranges)
+
+
+def _same(response, plan) -> None:
+    for name in ANSWER:
+        got, want = getattr(response, name), getattr(plan, name)
+        if isinstance(want, (bool, str)):
+            assert got == want, name
+        else:
+            assert got == pytest.approx(float(want), nan_ok=True), name
+
+
+def test_a_default_constructed_request_plans_for_the_configuration(client: RosClient,
+                                                                   planner: LiftPlanner) -> None:
+    """``ros2 service call /plan_lift dam_interfaces/srv/PlanLift "{}"``."""
+    response = _call(client)
+    assert response.ok, response.message
+    assert response.found and response.k_theta > 0.0
+    _same(response, _expected(planner))
+    assert response.message.startswith('guaranteed over the ranges: k_theta ')
+    assert ('[from the configuration: friction_angle = 5 deg, mass = 0.04 kg, k_theta_max = '
+            '100 N*m/rad, min_margin = 0.01 N]') in response.message
+
+
+def test_the_issue_s_ranges_cross_dds_as_the_core_answers_them(client: RosClient,
+                                                               planner: LiftPlanner) -> None:
+    fields = {'friction_angle_min': math.radians(3.0), 'friction_angle_max': math.radians(6.0),
+              'mass_min': 0.03, 'mass_max': 0.05, 'position_tolerance': 1e-3}
+    response = _call(client, **fields)
+    assert response.ok and response.found, response.message
+    _same(response, _expected(planner, **fields))
+    assert response.position_error_bound > 0.0
+    assert 'alpha_max = 6 deg' in response.method and '5 positions' in response.method
+    # 30 deg: no guarantee, the reason and the CSM's pair
+    response = _call(client, friction_angle_min=math.radians(30.0))
+    assert response.ok and not response.found
+    assert 'holds for no stiffness there' in response.message
+    assert math.isnan(response.k_theta) and response.csm_margin > 0.0
+
+
+@pytest.mark.parametrize(('fields', 'words'), [
+    ({'friction_angle_min': math.nan}, 'friction_angle_min: non-finite value nan'),
+    ({'mass_min': 0.05, 'mass_max': 0.03}, 'mass: empty range'),
+    ({'position_tolerance': 0.5}, 'position_tolerance: 0.5 m is outside'),
+    ({'delta_theta_p_max': 2.0}, 'delta_theta_p: '),
+    ({'k_theta_max': math.inf}, 'k_theta_max: non-finite value inf'),
+])
+def test_malformed_requests_are_refused_and_the_server_stays(client: RosClient, server,
+                                                             fields: dict, words: str) -> None:
+    response = _call(client, **fields)
+    assert not response.ok and words in response.message, response.message
+    assert math.isnan(response.k_theta) and not response.found
+    assert server.alive(), server.output()
+    assert _call(client).ok
+
+
+def test_random_requests_then_a_valid_one(client: RosClient, server,
+                                          planner: LiftPlanner) -> None:
+    rng = np.random.default_rng(12)
+    specials = [math.nan, math.inf, -math.inf, 0.0, -1.0, 1e308, 5e-324, 0.2]
+    answered = 0
+    for _ in range(60):
+        fields = {}
+        for name in FIELDS:
+            if rng.random() < 0.5:
+                fields[name] = float(rng.choice(specials + [float(rng.uniform(-0.1, 1.0))]))
+        # tolerances whose position nodes are built already (a new one costs 0.5 s a node)
+        fields['position_tolerance'] = float(rng.choice([0.0, 1e-3, math.nan, -1e-3]))
+        response = _call(client, **fields)
+        answered += 1
+        assert response.ok or response.message
+    assert answered == 60 and server.alive(), server.output()
+    _same(_call(client), _expected(planner))
+
+
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([str(CLIENT), *args], capture_output=True, text=True, timeout=120)
+
+
+def test_command_line_client(server: object) -> None:
+    done = _run('--friction-angle', '3:6', '--mass', '0.03:0.05', '--position-tolerance', '1mm')
+    assert done.returncode == 0, done.stderr
+    assert 'guaranteed (eq. 18)       : k_theta ' in done.stdout
+    assert 'contact stiffness model   : k_theta ' in done.stdout
+    assert 'method: friction: worst case at alpha_max = 6 deg' in done.stdout
+    capped = _run('--friction-angle', '5', '--k-theta-max', '3')
+    assert capped.returncode == 0, capped.stderr
+    assert 'guaranteed (eq. 18)       : none' in capped.stdout
+    assert 'is above the cap there' in capped.stdout
+    rejected = _run('--friction-angle', '95')
+    assert rejected.returncode == 2 and 'REJECTED' in rejected.stdout
+    bad = _run('--mass', '0.05:0.03')
+    assert bad.returncode == 2 and 'empty range' in bad.stderr
+    bad_length = _run('--position-tolerance', 'one')
+    assert bad_length.returncode == 2 and "'one' is not a length" in bad_length.stderr
+    missing = _run('--service', '/nobody/here', '--timeout', '1')
+    assert missing.returncode == 1 and 'not available' in missing.stderr
