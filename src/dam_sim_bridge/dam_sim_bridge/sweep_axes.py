@@ -102,6 +102,7 @@ def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
         No value, a malformed token, a value out of bounds or given twice.
     """
     values: list[float] = []
+    seen: set[float] = set()  # a list's ``in`` made 100 000 values take minutes (user test)
     for token in tokens:
         for v in parse_range(field_name, token):
             low_bad = v <= lower if lower_open else v < lower
@@ -111,8 +112,9 @@ def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
                 hi = ')' if upper_open else ']'
                 raise SweepError(f'{field_name}: {v:g}{" " + unit if unit else ""} (from '
                                  f'{token!r}) is outside {lo}{lower:g}, {upper:g}{hi}')
-            if v in values:
+            if v in seen:
                 raise SweepError(f'{field_name}: {v:g} is given twice (from {token!r})')
+            seen.add(v)
             values.append(v)
     if not values:
         raise SweepError(f'{field_name}: no value given')
