@@ -191,3 +191,21 @@ def test_a_position_without_first_contact_is_named(config) -> None:
     plan = planner.plan(check_ranges(far, (0.08, 0.08), (0.04, 0.04), 5e-3, 50.0,
                                      (0.0, 1.0), 0.01))
     assert not plan.found and 'make no first contact' in plan.reason
+
+
+def test_a_stop_request_ends_the_plan_between_two_position_nodes(config) -> None:
+    """A node that is stopping must not finish seconds of analyses first."""
+    from dam_analysis.errors import Interrupted
+
+    planner = LiftPlanner(config)
+    asked = []
+
+    def stop() -> bool:
+        asked.append(len(planner._analyzers))
+        return len(asked) > 2  # two nodes built, then the signal
+
+    ranges = _ranges(config, planner, tol=2e-3)
+    with pytest.raises(Interrupted, match='planning interrupted'):
+        planner.plan(ranges, stop=stop)
+    assert asked == [0, 1, 2] and len(planner._analyzers) == 2
+    assert planner.plan(ranges).found  # the next request plans as usual

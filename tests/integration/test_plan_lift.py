@@ -159,3 +159,33 @@ def test_command_line_client(server: object) -> None:
     assert bad_length.returncode == 2 and "'one' is not a length" in bad_length.stderr
     missing = _run('--service', '/nobody/here', '--timeout', '1')
     assert missing.returncode == 1 and 'not available' in missing.stderr
+
+
+@pytest.mark.parametrize('signum', ['SIGINT', 'SIGTERM'])
+def test_a_signal_during_a_long_plan_stops_the_server_promptly(signum: str) -> None:
+    """A plan with a new 2.3 mm tolerance builds 11 position nodes (seconds of work); a
+    signal in the middle ends the server within 2 s, cleanly, as at any other moment."""
+    import signal
+    import time
+
+    from dam_interfaces.srv import PlanLift
+
+    with node_process([SERVER]) as proc:
+        ros = RosClient()
+        try:
+            cli = ros.node.create_client(PlanLift, '/plan_lift')
+            assert cli.wait_for_service(timeout_sec=30.0), proc.output()
+            request = PlanLift.Request()
+            request.position_tolerance = 2.3e-3
+            cli.call_async(request)
+            ros.spin_until(lambda: False, 1.5)  # the server is building nodes now
+            assert proc.alive()
+            start = time.monotonic()
+            proc.process.send_signal(getattr(signal, signum))
+            code = proc.process.wait(timeout=20.0)
+            elapsed = time.monotonic() - start
+        finally:
+            ros.close()
+        assert code == 0, proc.output()
+        assert elapsed < 2.0, (elapsed, proc.output())
+        assert 'Traceback' not in proc.output()

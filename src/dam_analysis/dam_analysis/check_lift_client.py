@@ -20,9 +20,9 @@ import math
 import sys
 from collections.abc import Sequence
 
-import rclpy
 from rclpy.utilities import remove_ros_args
 
+from dam_analysis.service_call import call_and_print
 from dam_interfaces.srv import CheckLift
 
 
@@ -95,33 +95,13 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     options = build_parser().parse_args(remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
-    node = rclpy.create_node('check_lift_client')
-    try:
-        client = node.create_client(CheckLift, options.service)
-        if not client.wait_for_service(timeout_sec=options.timeout):
-            print(f'check_lift: service {options.service} is not available '
-                  f'(is check_lift_server running in this ROS_DOMAIN_ID?)', file=sys.stderr)
-            return 1
-        request = CheckLift.Request()
-        request.k_theta = [float(v) for v in options.k_theta]
-        request.delta_theta_p = [float(v) for v in options.delta_theta_p]
-        if options.friction_angle is not None:  # otherwise the default: the configured one
-            request.friction_angle = float(options.friction_angle)
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(node, future, timeout_sec=options.timeout)
-        if not future.done() or future.result() is None:
-            print(f'check_lift: no answer from {options.service} within {options.timeout} s',
-                  file=sys.stderr)
-            return 1
-        response = future.result()
-        print(format_response(request, response))
-        return 0 if response.ok else 2
-    except KeyboardInterrupt:
-        return 1
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    request = CheckLift.Request()
+    request.k_theta = [float(v) for v in options.k_theta]
+    request.delta_theta_p = [float(v) for v in options.delta_theta_p]
+    if options.friction_angle is not None:  # otherwise the default: the configured one
+        request.friction_angle = float(options.friction_angle)
+    return call_and_print('check_lift', argv, CheckLift, options.service, request,
+                          options.timeout, lambda response: format_response(request, response))
 
 
 def entry_point() -> None:

@@ -38,6 +38,8 @@ is not to be trusted where its contact penetration leaves the configured bound).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
@@ -49,9 +51,11 @@ from dam_analysis.hand_limits import limit_notes
 from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_from_request
 from dam_common.config import load_config
 from dam_common.node import declare_config_file, run_node
+from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import CheckLift, PlanLift
 
 _MAX_FRICTION_ANGLE = math.pi / 2
+T = TypeVar('T')
 
 
 class CheckLiftServer(Node):
@@ -111,17 +115,10 @@ class CheckLiftServer(Node):
         if math.isfinite(friction_angle) and friction_angle < 0.0:
             friction_angle = self._default_friction_angle  # NaN/inf: rejected by the core
             defaults.append(f'friction_angle = {math.degrees(friction_angle):.4g} deg')
-        try:
-            result = self._analyzer.check_lift(k_theta, delta_theta_p, friction_angle)
-        except DamAnalysisError as exc:
-            response.ok = False
-            response.message = str(exc)
-            self.get_logger().warning(f'rejected request: {exc}')
-            return response
-        except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
-            response.ok = False
-            response.message = f'internal error while analysing the request: {exc!r}'
-            self.get_logger().error(response.message)
+        result = self._computed(
+            response, 'analysing the request',
+            lambda: self._analyzer.check_lift(k_theta, delta_theta_p, friction_angle))
+        if result is None:
             return response
         response.ok = True
         response.friction_angle = friction_angle
@@ -152,6 +149,23 @@ class CheckLiftServer(Node):
         return response
 
 
+    def _computed(self, response: CheckLift.Response | PlanLift.Response, doing: str,
+                  compute: Callable[[], T]) -> T | None:
+        """``compute()``, or None with ``response.ok`` false and the reason in its message: a
+        malformed request (the core's error names the field and the value) or, so that the
+        server stays up whatever happens, any other error."""
+        try:
+            return compute()
+        except DamAnalysisError as exc:
+            response.ok = False
+            response.message = str(exc)
+            self.get_logger().warning(f'rejected request ({doing}): {exc}')
+        except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
+            response.ok = False
+            response.message = f'internal error while {doing}: {exc!r}'
+            self.get_logger().error(response.message)
+        return None
+
     def _on_plan(self, request: PlanLift.Request, response: PlanLift.Response
                  ) -> PlanLift.Response:
         nan = math.nan
@@ -159,23 +173,18 @@ class CheckLiftServer(Node):
                      'best_k_theta', 'best_delta_theta_p', 'best_worst_case_margin',
                      'csm_k_theta', 'csm_delta_theta_p', 'csm_margin', 'k_theta_cap'):
             setattr(response, name, nan)
-        try:
+        def compute() -> tuple[PlanResult, list[str]]:
             ranges, taken = ranges_from_request(
                 self._planner, request.friction_angle_min, request.friction_angle_max,
                 request.mass_min, request.mass_max, request.position_tolerance,
                 request.k_theta_max, request.delta_theta_p_min, request.delta_theta_p_max,
                 request.min_margin)
-            plan = self._planner.plan(ranges)
-        except DamAnalysisError as exc:
-            response.ok = False
-            response.message = str(exc)
-            self.get_logger().warning(f'rejected plan request: {exc}')
+            return self._planner.plan(ranges, stop=lambda: SHUTDOWN.requested), taken
+
+        answer = self._computed(response, 'planning', compute)
+        if answer is None:
             return response
-        except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
-            response.ok = False
-            response.message = f'internal error while planning: {exc!r}'
-            self.get_logger().error(response.message)
-            return response
+        plan, taken = answer
         response.ok = True
         _fill_plan(response, plan)
         message = plan_verdict(plan)

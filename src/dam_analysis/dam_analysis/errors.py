@@ -17,3 +17,7 @@ class InputError(DamAnalysisError, ValueError):
 
 class NoSolutionError(DamAnalysisError):
     """A kinematic problem has no solution (contact lost, table penetrated, joint limit)."""
+
+
+class Interrupted(DamAnalysisError):
+    """A long computation was asked to stop before it finished (the node is stopping)."""

@@ -21,9 +21,9 @@ import math
 import sys
 from collections.abc import Sequence
 
-import rclpy
 from rclpy.utilities import remove_ros_args
 
+from dam_analysis.service_call import call_and_print
 from dam_interfaces.srv import PlanLift
 
 
@@ -140,28 +140,8 @@ def format_response(response: PlanLift.Response) -> str:
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
     options = build_parser().parse_args(remove_ros_args(argv)[1:])
-    rclpy.init(args=argv)
-    node = rclpy.create_node('plan_lift_client')
-    try:
-        client = node.create_client(PlanLift, options.service)
-        if not client.wait_for_service(timeout_sec=options.timeout):
-            print(f'plan_lift: service {options.service} is not available '
-                  f'(is check_lift_server running in this ROS_DOMAIN_ID?)', file=sys.stderr)
-            return 1
-        future = client.call_async(build_request(options))
-        rclpy.spin_until_future_complete(node, future, timeout_sec=options.timeout)
-        if not future.done() or future.result() is None:
-            print(f'plan_lift: no answer from {options.service} within {options.timeout} s',
-                  file=sys.stderr)
-            return 1
-        response = future.result()
-        print(format_response(response))
-        return 0 if response.ok else 2
-    except KeyboardInterrupt:
-        return 1
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    return call_and_print('plan_lift', argv, PlanLift, options.service, build_request(options),
+                          options.timeout, format_response)
 
 
 def entry_point() -> None:

@@ -40,12 +40,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.errors import InputError, NoSolutionError
+from dam_analysis.errors import InputError, Interrupted, NoSolutionError
 from dam_analysis.hand_limits import HandLimits
 from dam_analysis.lift import STATUS_BOUNDED
 from dam_common.config import DamConfig
@@ -278,13 +279,26 @@ class LiftPlanner:
                 'delta_theta_p': (0.0, float(self.config.task.delta_theta_p_max_rad)),
                 'min_margin': DEFAULT_MIN_MARGIN_N}
 
-    def plan(self, ranges: PlanRanges) -> PlanResult:
-        """The robust pairs for ``ranges`` (module docstring)."""
+    def plan(self, ranges: PlanRanges, stop: Callable[[], bool] | None = None) -> PlanResult:
+        """The robust pairs for ``ranges`` (module docstring).
+
+        ``stop`` is asked before each position node's analysis is built (0.5 s each) and
+        before each node is evaluated; when it returns True the plan ends with
+        :class:`~dam_analysis.errors.Interrupted` (a node that is stopping must not wait for
+        seconds of work).
+        """
+        def check_stop() -> None:
+            if stop is not None and stop():
+                raise Interrupted('planning interrupted: the server is stopping')
+
         g = float(self.config.task.gravity_m_per_s2)
         weight_max = ranges.mass[1] * g
         alpha_max = ranges.friction_angle[1]
         offsets = position_nodes(ranges.position_tolerance)
-        analyzers = [self.analyzer_at(float(x)) for x in offsets]
+        analyzers = []
+        for x in offsets:
+            check_stop()
+            analyzers.append(self.analyzer_at(float(x)))
         failed = [(x, a) for x, a in zip(offsets, analyzers, strict=True)
                   if isinstance(a, NoSolutionError)]
         method = self._method(ranges, offsets)
@@ -305,6 +319,7 @@ class LiftPlanner:
         slopes = np.full((offsets.size, dps.size), -np.inf)
         torque_per_k = np.full((offsets.size, dps.size), np.nan)
         for j, analyzer in enumerate(analyzers):
+            check_stop()
             weight_0 = analyzer.model.object_weight
             for d, dp in enumerate(dps):
                 unit = analyzer.check_lift(1.0, float(dp), alpha_max)
