@@ -114,6 +114,12 @@ def test_a_cap_below_the_needed_stiffness_gives_the_best_available(config, plann
     plan = planner.plan(ranges)
     assert not plan.found and math.isnan(plan.k_theta)
     assert 'is above the cap there' in plan.reason
+    # the displacement named is the one whose need is nearest its cap: with a uniform cap of
+    # 3 N*m/rad, the one that needs the least (a user saw 'inf at 61.75 deg, cap nan')
+    needed = float(plan.reason.split('needs, ')[1].split(' N*m/rad')[0])
+    free = planner.plan(_ranges(config, planner))
+    assert needed == pytest.approx(free.k_theta, rel=1e-3)
+    assert 'cap there, 3 N*m/rad' in plan.reason
     assert plan.best_k_theta <= 3.0 and math.isfinite(plan.best_worst_case_margin)
     assert plan.best_worst_case_margin < ranges.min_margin  # else it would be guaranteed
     text = plan_verdict(plan)

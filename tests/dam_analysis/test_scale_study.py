@@ -138,11 +138,29 @@ def test_the_command_writes_the_table_the_picture_and_the_summary(
     with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
         rows = list(csv.DictReader(stream))
     assert [(r['radius_mm'], r['delta_theta_p_deg']) for r in rows] == [
-        (repr(r), repr(d)) for r in (2.0, 6.0, 10.0, 14.0) for d in (10.0, 20.0)]
+        (r, d) for r in ('2', '6', '10', '14') for d in ('10', '20')]  # no float noise
     assert rows[0]['k_theta_sufficient'] == '' and 'does not reach' in rows[0]['no_first_contact']
     assert float(rows[4]['mass_kg']) == pytest.approx(0.04)  # 10 mm: the configured object
     assert 'delta_theta_p 10 deg: within 0.6 N*m, guaranteed (eq. 18) at' in printed
-    assert 'no first contact at radius 2 mm' in printed
+    assert 'no first contact at radius 2 mm: the distal link does not reach' in printed
+
+
+def test_angles_take_units_and_a_missing_directory_is_refused_before_the_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = str(REPO_ROOT / 'config' / 'dam.yaml')
+    out = tmp_path / 'a.png'
+    assert main(['--radius-range', '10:10:1', '--delta-theta-p', '0.17453292519943295rad',
+                 '--friction-angle', '5deg', '--out', str(out), '--config', config]) == 0
+    with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
+        [row] = list(csv.DictReader(stream))
+    assert row['delta_theta_p_deg'] == '10' and row['k_theta_sufficient'] != ''
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main(['--radius-range', '3:20:18', '--delta-theta-p', '10',
+              '--out', str(tmp_path / 'nowhere' / 'b.png'), '--config', config])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert 'does not exist' in err and 'radius 3 mm' not in err  # refused before any radius
 
 
 @pytest.mark.parametrize(('args', 'words'), [

@@ -8,7 +8,11 @@ import pytest
 
 from ros_testing import RosClient, fixture_command, node_process
 
-pytestmark = pytest.mark.integration
+# A first call right after a server's start can go unanswered on a loaded machine: the client
+# sees the server's request reader before the server sees the client's response reader, and
+# the answer goes to nobody (the same race ``ros2 service call`` has; a CI run saw it once). A
+# failure is run once more (R in the summary).
+pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
 
 def test_check_lift_round_trip_between_processes() -> None:

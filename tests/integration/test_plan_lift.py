@@ -147,6 +147,11 @@ def test_command_line_client(server: object) -> None:
     assert 'guaranteed (eq. 18)       : k_theta ' in done.stdout
     assert 'contact stiffness model   : k_theta ' in done.stdout
     assert 'method: friction: worst case at alpha_max = 6 deg' in done.stdout
+    suffixed = _run('--friction-angle', '3deg:0.10471975511965977rad', '--mass', '0.03:0.05',
+                    '--position-tolerance', '0.001m')
+    assert suffixed.returncode == 0 and suffixed.stdout == done.stdout, suffixed.stderr
+    radians = _run('--friction-angle', '0.0873')  # 5 deg meant, read as 0.0873 deg: named
+    assert radians.returncode == 0 and "'0.0873' is read in degrees" in radians.stderr
     capped = _run('--friction-angle', '5', '--k-theta-max', '3')
     assert capped.returncode == 0, capped.stderr
     assert 'guaranteed (eq. 18)       : none' in capped.stdout

@@ -22,22 +22,9 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
+from dam_analysis.angle_args import parse_angle
 from dam_analysis.service_call import call_and_print
 from dam_interfaces.srv import CheckLift
-
-
-def parse_angle(text: str) -> float:
-    """Parse ``'40deg'``, ``'0.7rad'`` or ``'0.7'`` (radians) into radians."""
-    value = text.strip().lower()
-    try:
-        if value.endswith('deg'):
-            return math.radians(float(value[:-3]))
-        if value.endswith('rad'):
-            return float(value[:-3])
-        return float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f'{text!r} is not an angle (examples: 40deg, 0.7rad, 0.7)') from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='friction angle alpha (default: the server\'s configured value)')
     parser.add_argument('--service', default='/check_lift', help='service name')
     parser.add_argument('--timeout', type=float, default=10.0, metavar='S',
-                        help='seconds to wait for the service and for the answer')
+                        help='seconds to wait for the service and for the answer (default: '
+                             '%(default)s)')
     return parser
 
 

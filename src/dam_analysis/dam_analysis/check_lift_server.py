@@ -80,7 +80,8 @@ class CheckLiftServer(Node):
         self._planner = LiftPlanner(self._config, self._analyzer)
         self._plan_service = self.create_service(PlanLift, 'plan_lift', self._on_plan)
         self.get_logger().info(
-            f'serving {self._service.srv_name} with {self._config.source} '
+            f'serving {self._service.srv_name} and {self._plan_service.srv_name} with '
+            f'{self._config.source} '
             f'(default friction angle {math.degrees(self._default_friction_angle):.3g} deg)')
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:

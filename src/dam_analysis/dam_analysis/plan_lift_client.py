@@ -7,8 +7,10 @@ Examples::
     ros2 run dam_analysis plan_lift --friction-angle 5 --k-theta-max 8 --delta-theta-p 5:30
     ros2 run dam_analysis plan_lift          # the configured friction angle, mass, position
 
-Ranges are ``MIN:MAX`` or one value; friction angles and displacements in degrees, masses in
-kilograms, the position tolerance with a unit (``1mm``, ``0.001m``; metres without one). An
+Ranges are ``MIN:MAX`` or one value; friction angles and displacements in degrees unless
+suffixed (``3deg:6deg``, ``0.05rad:0.1rad``; a bare number below 1 is named in a note, as it is
+more often radians meant), masses in kilograms, the position tolerance with a unit (``1mm``,
+``0.001m``; metres without one). An
 option left out is left out of the request, so the server uses its configuration for it
 (``PlanLift.srv``). Exit status: 0 when the server answered ``ok`` (whether or not a pair is
 guaranteed), 2 when it rejected the request or an argument is malformed, 1 when no answer came.
@@ -23,6 +25,7 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
+from dam_analysis.angle_args import parse_angle_range
 from dam_analysis.service_call import call_and_print
 from dam_interfaces.srv import PlanLift
 
@@ -64,8 +67,10 @@ def build_parser() -> argparse.ArgumentParser:
         prog='plan_lift',
         description='Ask /plan_lift for the (k_theta, delta_theta_p) pair that lifts the '
                     'object over ranges of friction angle, mass and position.')
-    parser.add_argument('--friction-angle', type=parse_range, default=None, metavar='DEG[:DEG]',
-                        help='friction angle alpha range [deg] (default: the configured one)')
+    parser.add_argument('--friction-angle', type=parse_angle_range, default=None,
+                        metavar='ANGLE[:ANGLE]',
+                        help='friction angle alpha range, degrees unless suffixed (3:6, '
+                             '3deg:6deg, 0.05rad:0.1rad; default: the configured one)')
     parser.add_argument('--mass', type=parse_range, default=None, metavar='KG[:KG]',
                         help='object mass range [kg] (default: the configured one)')
     parser.add_argument('--position-tolerance', type=parse_length, default=None,
@@ -75,15 +80,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--k-theta-max', type=float, default=None, metavar='N*m/rad',
                         help='largest finger-1 stiffness to propose (default: the largest '
                              'the device accepts)')
-    parser.add_argument('--delta-theta-p', type=parse_range, default=None, metavar='DEG:DEG',
-                        help='displacement range [deg] (default: all the configuration allows)')
+    parser.add_argument('--delta-theta-p', type=parse_angle_range, default=None,
+                        metavar='ANGLE:ANGLE',
+                        help='displacement range, degrees unless suffixed (default: all the '
+                             'configuration allows)')
     parser.add_argument('--min-margin', type=float, default=None, metavar='N',
                         help='smallest worst-case margin a guaranteed pair keeps [N] '
                              '(default: 0.01)')
     parser.add_argument('--service', default='/plan_lift', help='service name')
     parser.add_argument('--timeout', type=float, default=30.0, metavar='S',
                         help='seconds to wait for the service and for the answer (a first '
-                             'request with a position tolerance builds an analysis per node)')
+                             'request with a position tolerance builds an analysis per node; '
+                             'default: %(default)s)')
     return parser
 
 
@@ -91,8 +99,7 @@ def build_request(options: argparse.Namespace) -> PlanLift.Request:
     """The request of the options; an option left out keeps its field's default."""
     request = PlanLift.Request()
     if options.friction_angle is not None:
-        request.friction_angle_min, request.friction_angle_max = (
-            math.radians(v) for v in options.friction_angle)
+        request.friction_angle_min, request.friction_angle_max = options.friction_angle
     if options.mass is not None:
         request.mass_min, request.mass_max = options.mass
     if options.position_tolerance is not None:
@@ -100,8 +107,7 @@ def build_request(options: argparse.Namespace) -> PlanLift.Request:
     if options.k_theta_max is not None:
         request.k_theta_max = float(options.k_theta_max)
     if options.delta_theta_p is not None:
-        request.delta_theta_p_min, request.delta_theta_p_max = (
-            math.radians(v) for v in options.delta_theta_p)
+        request.delta_theta_p_min, request.delta_theta_p_max = options.delta_theta_p
     if options.min_margin is not None:
         request.min_margin = float(options.min_margin)
     return request

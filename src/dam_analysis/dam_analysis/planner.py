@@ -396,7 +396,13 @@ class LiftPlanner:
             return (f'no delta_theta_p in [{lo:g}, {hi:g}] deg has a worst case that rises '
                     f'with k_theta at alpha_max = {math.degrees(alpha_max):g} deg (eq. 18 '
                     'holds for no stiffness there)')
-        d = int(np.argmin(k_needed / np.where(np.isfinite(cap), cap, np.nan)))
+        usable = np.isfinite(k_needed) & np.isfinite(cap)
+        if not np.any(usable):
+            return (f'no delta_theta_p in [{lo:g}, {hi:g}] deg has both a worst case that rises '
+                    f'with k_theta and a torque the hand can give at alpha_max = '
+                    f'{math.degrees(alpha_max):g} deg')
+        with np.errstate(divide='ignore', invalid='ignore'):
+            d = int(np.argmin(np.where(usable, k_needed / cap, np.inf)))  # nearest to its cap
         return (f'the smallest stiffness eq. 18 needs, {k_needed[d]:.4g} N*m/rad at '
                 f'delta_theta_p {math.degrees(dps[d]):g} deg, is above the cap there, '
                 f'{cap[d]:.4g} N*m/rad (k_theta_max, the device\'s largest stiffness or the '

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dam_analysis.angle_args import parse_degrees
 from dam_analysis.errors import DamAnalysisError
 from dam_analysis.scale_study import ScaleStudy, scale_study, working_ranges
 from dam_common.config import load_config
@@ -86,10 +87,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "hand's torque limit.")
     parser.add_argument('--radius-range', type=parse_radius_range, required=True,
                         metavar='START:STOP:COUNT', help='cylinder radii [mm]')
-    parser.add_argument('--delta-theta-p', type=float, nargs='+', required=True, metavar='DEG',
-                        help='position-joint displacements [deg]')
-    parser.add_argument('--friction-angle', type=float, default=None, metavar='DEG',
-                        help='friction angle alpha [deg] (default: the configured one)')
+    parser.add_argument('--delta-theta-p', type=parse_degrees, nargs='+', required=True,
+                        metavar='ANGLE',
+                        help='position-joint displacements, degrees unless suffixed (10, '
+                             '10deg, 0.1745rad)')
+    parser.add_argument('--friction-angle', type=parse_degrees, default=None, metavar='ANGLE',
+                        help='friction angle alpha, degrees unless suffixed (default: the '
+                             'configured one)')
     parser.add_argument('--constant-mass', action='store_true',
                         help='keep the configured mass (default: scale it with the '
                              'cross-section, same density and length)')
@@ -103,7 +107,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cell(value: float) -> str:
-    return repr(float(value)) if math.isfinite(value) else ''
+    return _number(value) if math.isfinite(value) else ''
+
+
+def _number(value: float) -> str:
+    """12 significant digits: no float noise from degree and millimetre conversions."""
+    return f'{float(value):.12g}'
 
 
 def write_csv(path: Path, study: ScaleStudy) -> None:
@@ -113,8 +122,8 @@ def write_csv(path: Path, study: ScaleStudy) -> None:
         writer.writerow(CSV_COLUMNS)
         for j, radius in enumerate(study.radius):
             for d, dp in enumerate(study.delta_theta_p):
-                writer.writerow((repr(float(radius * 1e3)), repr(float(study.mass[j])),
-                                 repr(float(math.degrees(dp))), _cell(study.k_sufficient[j, d]),
+                writer.writerow((_number(radius * 1e3), _number(study.mass[j]),
+                                 _number(math.degrees(dp)), _cell(study.k_sufficient[j, d]),
                                  _cell(study.k_csm[j, d]), _cell(study.k_torque[j, d]),
                                  study.no_contact[j]))
 
@@ -126,17 +135,19 @@ def plot_study(path: Path, study: ScaleStudy) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=120)
+    fig, ax = plt.subplots(figsize=(10.0, 5.0), dpi=120)
     colours = plt.rcParams['axes.prop_cycle'].by_key()['color']
     r_mm = study.radius * 1e3
     for d, dp in enumerate(study.delta_theta_p):
         colour = colours[d % len(colours)]
         label = f'delta_theta_p = {math.degrees(dp):g} deg'
-        ax.plot(r_mm, study.k_sufficient[:, d], color=colour, linewidth=2.4,
-                label=f'{label}: sufficient (eq. 18)')
+        # markers too: a radius alone (or between two without a value) has no line
+        ax.plot(r_mm, study.k_sufficient[:, d], color=colour, linewidth=2.4, marker='o',
+                markersize=4, label=f'{label}: sufficient (eq. 18)')
         ax.plot(r_mm, study.k_csm[:, d], color=colour, linewidth=1.1, linestyle='--',
-                label=f'{label}: CSM')
+                marker='s', markersize=3, label=f'{label}: CSM')
         ax.plot(r_mm, study.k_torque[:, d], color=colour, linewidth=1.1, linestyle=':',
+                marker='v', markersize=3,
                 label=f'{label}: torque limit {study.torque_limit:g} N*m')
     step = float(np.min(np.diff(r_mm))) if r_mm.size > 1 else 1.0
     shaded = False
@@ -153,11 +164,12 @@ def plot_study(path: Path, study: ScaleStudy) -> None:
     ax.set_xlim(r_mm.min() - step / 2, r_mm.max() + step / 2)
     ax.set_xlabel('cylinder radius R [mm]')
     ax.set_ylabel('compliant-joint stiffness k_theta* (finger 1) [N m/rad]')
-    ax.set_title(f'DAM over object size, alpha = {math.degrees(study.friction_angle):g} deg\n'
-                 'lifts above a boundary; the hand gives the torque below the dotted line',
-                 fontsize=10)
+    mass = ('mass kept' if study.constant_mass else 'mass at the same density')
+    ax.set_title(f'DAM over object size, alpha = {math.degrees(study.friction_angle):g} deg, '
+                 f'{mass}\nlifts above a boundary; the hand gives the torque below the dotted '
+                 'line', fontsize=10)
     ax.grid(True, which='both', alpha=0.3)
-    ax.legend(fontsize=6.5, loc='best')
+    ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))  # outside the curves
     fig.tight_layout()
     fig.savefig(path, format='png')
     plt.close(fig)
@@ -177,11 +189,12 @@ def summary_lines(study: ScaleStudy) -> list[str]:
         lines.append(f'delta_theta_p {math.degrees(study.delta_theta_p[d]):g} deg: within '
                      f'{study.torque_limit:g} N*m, guaranteed (eq. 18) at {runs_text(suf)}; '
                      f'CSM lift at {runs_text(csm)}')
-    missing = [f'{r * 1e3:g}' for r, why in zip(study.radius, study.no_contact, strict=True)
-               if why]
-    if missing:
-        first = next(why for why in study.no_contact if why)
-        lines.append(f'no first contact at radius {", ".join(missing)} mm (e.g. {first})')
+    reasons: dict[str, list[str]] = {}
+    for radius, why in zip(study.radius, study.no_contact, strict=True):
+        if why:
+            reasons.setdefault(why.split(': ', 1)[-1], []).append(f'{radius * 1e3:g}')
+    for why, radii in reasons.items():
+        lines.append(f'no first contact at radius {", ".join(radii)} mm: {why}')
     return lines
 
 
@@ -195,7 +208,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'scale_map: {exc}', file=sys.stderr)
         return 2
     alpha = (config.contact.friction_angle_rad if options.friction_angle is None
-             else math.radians(options.friction_angle))
+             else options.friction_angle)
+    csv_path = options.csv if options.csv is not None else options.out.with_suffix('.csv')
+    for path in (options.out, csv_path):  # before a minute of work, not after
+        if not path.parent.is_dir():
+            parser.error(f'{path}: the directory {str(path.parent)!r} does not exist')
 
     def progress(j: int, radius: float, reason: str) -> None:
         note = f': no first contact ({reason})' if reason else ''
@@ -204,11 +221,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         study = scale_study(config, options.radius_range,
-                            np.radians(options.delta_theta_p), alpha,
+                            np.asarray(options.delta_theta_p), alpha,
                             constant_mass=options.constant_mass, progress=progress)
     except DamAnalysisError as exc:
         parser.error(str(exc))
-    csv_path = options.csv if options.csv is not None else options.out.with_suffix('.csv')
     try:
         write_csv(csv_path, study)
         plot_study(options.out, study)

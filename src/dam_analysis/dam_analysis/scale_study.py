@@ -50,6 +50,7 @@ class ScaleStudy:
         torque limit [N m/rad]; NaN beyond the end of the SPCM branch or without first contact.
     torque_limit : the hand's compliant torque limit [N m].
     no_contact : (R,) why the analysis has no first contact at that radius ('' where it has).
+    constant_mass : the configured mass at every radius (else scaled at the same density).
     """
 
     friction_angle: float
@@ -61,6 +62,7 @@ class ScaleStudy:
     k_torque: np.ndarray
     torque_limit: float
     no_contact: tuple[str, ...]
+    constant_mass: bool = False
 
     def works(self, which: str = 'sufficient') -> np.ndarray:
         """(R, D) bool: the boundary ``which`` ('sufficient' or 'csm') exists and lies below
@@ -158,7 +160,7 @@ def scale_study(config: DamConfig, radii_m: Sequence[float], delta_theta_p: Sequ
     return ScaleStudy(friction_angle=float(friction_angle), radius=radii,
                       mass=np.array(masses), delta_theta_p=dps, k_sufficient=k_suf,
                       k_csm=k_csm, k_torque=k_tau, torque_limit=limit,
-                      no_contact=tuple(reasons))
+                      no_contact=tuple(reasons), constant_mass=constant_mass)
 
 
 def working_ranges(study: ScaleStudy, which: str = 'sufficient') -> list[list[tuple[float,

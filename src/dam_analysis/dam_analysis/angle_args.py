@@ -1,0 +1,67 @@
+"""Angles on the command lines of the analysis tools: ``40deg``, ``0.7rad`` or a bare number.
+
+A bare number is radians for ``check_lift`` (whose options mirror the service's radian fields)
+and degrees for ``plan_lift`` and ``scale_map`` (whose ranges are written in degrees); a unit
+suffix means the same everywhere. A bare number below 1 read as degrees is named in a note on
+standard error, since it is more often radians meant (0.0873 for 5 deg) than a friction angle
+or displacement under a degree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+
+def parse_angle(text: str, bare: str = 'rad') -> float:
+    """``'40deg'``, ``'0.7rad'`` or a bare number (in ``bare``: 'rad' or 'deg') -> radians.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not a number with an optional ``deg`` or ``rad`` suffix, or not finite.
+    """
+    value = text.strip().lower()
+    try:
+        if value.endswith('deg'):
+            number, unit = float(value[:-3]), 'deg'
+        elif value.endswith('rad'):
+            number, unit = float(value[:-3]), 'rad'
+        else:
+            number, unit = float(value), bare
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'{text!r} is not an angle (examples: 40deg, 0.7rad, 0.7)') from None
+    if not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f'{text!r} is not a finite angle')
+    if unit == 'deg' and bare == 'deg' and not value.endswith('deg') \
+            and 0.0 < abs(number) < 1.0:
+        print(f'note: {text!r} is read in degrees ({number:g} deg); write {text}rad for '
+              'radians', file=sys.stderr)
+    return math.radians(number) if unit == 'deg' else number
+
+
+def parse_degrees(text: str) -> float:
+    """A bare number in degrees (or with a unit suffix) -> radians (:func:`parse_angle`)."""
+    return parse_angle(text, bare='deg')
+
+
+def parse_angle_range(text: str) -> tuple[float, float]:
+    """``'3:6'``, ``'3deg:6deg'``, ``'0.05rad:0.1rad'`` or one angle -> (min, max) [rad]; bare
+    numbers are degrees.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Not one or two angles, or max below min.
+    """
+    parts = text.split(':')
+    if len(parts) not in (1, 2):
+        raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one angle')
+    low, high = parse_degrees(parts[0]), parse_degrees(parts[-1])
+    if high < low:
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: empty range, max {math.degrees(high):g} deg is below min '
+            f'{math.degrees(low):g} deg')
+    return low, high
