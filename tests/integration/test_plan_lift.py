@@ -194,3 +194,36 @@ def test_a_signal_during_a_long_plan_stops_the_server_promptly(signum: str) -> N
         assert code == 0, proc.output()
         assert elapsed < 2.0, (elapsed, proc.output())
         assert 'Traceback' not in proc.output()
+
+
+def test_check_lift_answers_while_a_first_plan_builds_its_nodes() -> None:
+    """/plan_lift runs on an executor thread of its own: a plan with a new 2.3 mm tolerance
+    (11 position nodes, seconds of work) does not hold up /check_lift, which the controller
+    gives 2 s."""
+    import time
+
+    from dam_interfaces.srv import CheckLift, PlanLift
+
+    with node_process([SERVER]) as proc:
+        ros = RosClient()
+        try:
+            planner_cli = ros.node.create_client(PlanLift, '/plan_lift')
+            assert planner_cli.wait_for_service(timeout_sec=30.0), proc.output()
+            assert ros.call(CheckLift, '/check_lift', CheckLift.Request()).ok  # warm
+            request = PlanLift.Request()
+            request.position_tolerance = 2.3e-3
+            plan = planner_cli.call_async(request)
+            ros.spin_until(lambda: False, 0.5)
+            answered = []
+            while not plan.done() and len(answered) < 10:
+                start = time.monotonic()
+                response = ros.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=10.0)
+                answered.append((time.monotonic() - start, response.ok, plan.done()))
+            assert ros.wait_future(plan, 60.0) and plan.result().ok, plan.result()
+        finally:
+            ros.close()
+        during = [t for t, ok, plan_done in answered if not plan_done]
+        assert len(during) >= 3, answered  # asked while the plan still ran
+        assert all(ok for _, ok, _ in answered)
+        assert max(during) < 1.0, answered
+        assert proc.alive(), proc.output()

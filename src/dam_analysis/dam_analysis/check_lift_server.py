@@ -26,7 +26,8 @@ where (deg) and why the branch ends.
 The same node serves ``/plan_lift`` (dam_interfaces/srv/PlanLift): the robust pair over ranges
 of friction angle, mass and object position (:mod:`dam_analysis.planner`); its fields left out
 mean the configured values too. The first request with a position tolerance builds an analysis
-per position node (about 0.5 s each, kept); later ones take a few tenths of a second.
+per position node (about 0.5 s each, kept); later ones take a few tenths of a second. Plans run
+on an executor thread of their own, one at a time, so ``/check_lift`` answers meanwhile.
 
 Every answer also says what the analysis assumes of the hand (:mod:`dam_analysis.hand_limits`):
 ``torque_limit`` and ``within_torque_limit`` (a pair guaranteed by eq. 18 whose ``tau_s``
@@ -38,10 +39,12 @@ is not to be trusted where its contact penetration leaves the configured bound).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from typing import TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -77,8 +80,15 @@ class CheckLiftServer(Node):
             self.get_parameter('default_friction_angle').value)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._service = self.create_service(CheckLift, 'check_lift', self._on_request)
-        self._planner = LiftPlanner(self._config, self._analyzer)
-        self._plan_service = self.create_service(PlanLift, 'plan_lift', self._on_plan)
+        # /plan_lift in a callback group of its own, on the second executor thread
+        # (run_node(executor_threads=2)): a first plan with a new position tolerance takes
+        # seconds, and /check_lift goes on answering meanwhile. The planner keeps analyses of
+        # its own, so the two threads share no mutable state; plans run one at a time.
+        self._planner = LiftPlanner(self._config)
+        self._planning = threading.Lock()
+        self._plan_service = self.create_service(
+            PlanLift, 'plan_lift', self._on_plan,
+            callback_group=MutuallyExclusiveCallbackGroup())
         self.get_logger().info(
             f'serving {self._service.srv_name} and {self._plan_service.srv_name} with '
             f'{self._config.source} '
@@ -182,7 +192,8 @@ class CheckLiftServer(Node):
                 request.min_margin)
             return self._planner.plan(ranges, stop=lambda: SHUTDOWN.requested), taken
 
-        answer = self._computed(response, 'planning', compute)
+        with self._planning:
+            answer = self._computed(response, 'planning', compute)
         if answer is None:
             return response
         plan, taken = answer
@@ -193,6 +204,14 @@ class CheckLiftServer(Node):
             message += f' [from the configuration: {", ".join(taken)}]'
         response.message = message
         return response
+
+
+    def destroy_node(self) -> None:
+        """Let a running plan end first: it stops at its next position node once the stop is
+        requested (0.5 s at most), so no thread answers on a destroyed service."""
+        if self._planning.acquire(timeout=2.0):
+            self._planning.release()
+        super().destroy_node()
 
 
 def _fill_plan(response: PlanLift.Response, plan: PlanResult) -> None:
@@ -206,7 +225,7 @@ def _fill_plan(response: PlanLift.Response, plan: PlanResult) -> None:
 
 def main(args: list[str] | None = None) -> None:
     run_node(CheckLiftServer, 'check_lift_server', args,
-             startup_errors=(DamAnalysisError,))
+             startup_errors=(DamAnalysisError,), executor_threads=2)
 
 
 if __name__ == '__main__':

@@ -18,7 +18,11 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import (
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+)
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -135,16 +139,20 @@ def _rcl_error_text(exc: BaseException, args: Sequence[str] | None) -> str:
     return f'invalid ROS arguments: {first}'
 
 
-def spin_until_shutdown(node: Node, shutdown: ShutdownRequest) -> None:
+def spin_until_shutdown(node: Node, shutdown: ShutdownRequest, executor_threads: int = 1
+                        ) -> None:
     """Run ``node``'s callbacks until a stop request or an external shutdown.
 
     A callback that raises is reported in the log and the node goes on serving: one bad
     message, request or timer tick does not end it. On a stop request a node with a
     ``begin_shutdown()`` method (returning a future, or ``None``) is given up to
     :data:`FINISH_TIMEOUT_S` of further spinning to finish what it owes its clients (e.g.
-    the result of an action goal).
+    the result of an action goal). With ``executor_threads`` > 1 the callbacks run on that
+    many threads (a ``MultiThreadedExecutor``): callbacks of different callback groups run
+    side by side, so a long one in a group of its own does not hold up the others.
     """
-    executor = SingleThreadedExecutor(context=node.context)
+    executor = (SingleThreadedExecutor(context=node.context) if executor_threads <= 1 else
+                MultiThreadedExecutor(num_threads=executor_threads, context=node.context))
     executor.add_node(node)
 
     def spin_once() -> bool:
@@ -179,7 +187,7 @@ def spin_until_shutdown(node: Node, shutdown: ShutdownRequest) -> None:
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None,
              startup_errors: tuple[type[BaseException], ...] = (),
              startup_exit_code: int = 1, switch_interval_s: float | None = None,
-             scheduled_gc_period_s: float | None = None) -> None:
+             scheduled_gc_period_s: float | None = None, executor_threads: int = 1) -> None:
     """The life of a node process: start it, serve until SIGINT or SIGTERM, stop it cleanly.
 
     - SIGINT and SIGTERM at any moment, from the entry point's first line on (see
@@ -206,6 +214,9 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
       collection runs from its executor at that period
       (:class:`~dam_common.collector.ScheduledCollector`, set as the node's
       ``garbage_collector`` attribute), not in the middle of a cycle.
+    - ``executor_threads`` > 1 runs the callbacks on that many threads
+      (:func:`spin_until_shutdown`); the node then stops its own long callbacks in its
+      ``destroy_node``.
     """
     shutdown = catch_signals()
     logger = rclpy.logging.get_logger(name)
@@ -243,7 +254,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
             node.garbage_collector = ScheduledCollector(node, scheduled_gc_period_s)
         else:
             gc.freeze()  # no gc.collect() first: a full collection could stall a running thread
-        spin_until_shutdown(node, shutdown)
+        spin_until_shutdown(node, shutdown, executor_threads)
     except StartupInterrupted:
         pass  # stopped while starting: what was built is torn down below, status 0
     finally:
