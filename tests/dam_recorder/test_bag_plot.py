@@ -78,6 +78,18 @@ def test_phases_are_spans_from_one_change_to_the_next(grasp_bag) -> None:
     assert labels == ['APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE']
 
 
+def test_a_phase_too_short_for_its_name_is_labelled_upright() -> None:
+    from matplotlib.figure import Figure
+
+    from dam_recorder.bag_plot import PhaseSpan, _shade_phases
+
+    ax = Figure().add_subplot()
+    _shade_phases(ax, [PhaseSpan('ROLLING_UP', 0.0, 9.0), PhaseSpan('ENVELOPE', 9.0, 9.1),
+                       PhaseSpan('DONE', 9.1, 10.0)], label=True)
+    texts = {t.get_text(): t.get_rotation() for t in ax.texts if t.get_gid() == 'phase_label'}
+    assert texts == {'ROLLING_UP': 0.0, 'ENVELOPE': 90.0, 'DONE': 0.0}
+
+
 def test_height_is_the_rise_in_mm_and_the_margins_and_title_are_written(grasp_bag) -> None:
     result = plot_bag(grasp_bag.path)
     height_ax = result.figure.axes[6]

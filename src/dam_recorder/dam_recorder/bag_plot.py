@@ -288,11 +288,13 @@ def _shade_phases(ax: Any, phases: Sequence[PhaseSpan], label: bool) -> None:
             continue
         ax.axvspan(span.start_s, span.end_s, color=PHASE_COLOURS.get(span.phase, '#eeeeee'),
                    alpha=0.6, lw=0, label=f'phase {span.phase}', gid='phase', zorder=0)
-        # A label only where it fits (7-point capitals: about 6 % of the axis for ROLLING_UP).
+        # Across the span where it fits (7-point capitals: about 6 % of the axis for
+        # ROLLING_UP), else upright above it (a short ENVELOPE had no label; user test).
         wide = span.end_s - span.start_s >= 0.006 * len(span.phase) * total_s
-        if label and wide:
-            ax.text((span.start_s + span.end_s) / 2, 1.02, span.phase, rotation=0,
-                    ha='center', va='bottom', fontsize=7, transform=ax.get_xaxis_transform(),
+        if label:
+            ax.text((span.start_s + span.end_s) / 2, 1.02, span.phase,
+                    rotation=0 if wide else 90, ha='center', va='bottom',
+                    fontsize=7 if wide else 6, transform=ax.get_xaxis_transform(),
                     gid='phase_label')
 
 
