@@ -362,6 +362,20 @@ def test_the_documents_numbers_agree_with_an_independent_count(
                                'eq. 18 guarantees, simulation does not lift')):
         per_alpha = [expected[a]['categories'][i] for a in alphas]
         assert counts[title] == [*per_alpha, sum(per_alpha)], title
+    # section 5, counted from trials.csv here: ground truth against the controller's class
+    with open(sweep_dir / TABLE_FILE, encoding='utf-8', newline='') as stream:
+        table = list(csv.DictReader(stream))
+    block = text.split('## 5.', 1)[1]
+    shown = {cells[0].strip(): [int(c) for c in cells[1:]]
+             for cells in (line.strip('|').split('|') for line in block.splitlines()
+                           if line.startswith('| ') and not line.startswith('| alpha'))}
+    for alpha in alphas:
+        mine = [r for r in table if f"{float(r['friction_angle_deg']):g}" == alpha]
+        said = [r['outcome'] in ('SUCCESS', 'LIFTED_DAM_FAILED') for r in mine]
+        truth = [r['lifted'] == '1' for r in mine]
+        pairs = list(zip(truth, said, strict=True))
+        assert shown[alpha] == [len(mine), pairs.count((True, True)), pairs.count((True, False)),
+                                pairs.count((False, True)), pairs.count((False, False))]
     # the check is not vacuous: the sweep has lifting and failing cells, a compared column
     assert 0 < sum(e['lifting'] for e in expected.values()) < 12
     assert sum(e['compared'] for e in expected.values()) >= 1

@@ -19,6 +19,7 @@ from dam_sim_bridge.sweep_report_rows import (
     CHECKS_NOT_LIFTING,
     LIMIT_FRACTION,
     NEVER_ROSE_FRACTION,
+    controller_verdicts,
 )
 
 #: Cells listed per disagreement category (the figure shows them all).
@@ -236,6 +237,23 @@ def _summary(report: SweepReport) -> list[str]:
     return ['## Summary', ''] + _table(SUMMARY_HEADER, rows) + ['']
 
 
+def _controller(report: SweepReport) -> list[str]:
+    """The controller's classes (``outcome``) against the ground truth (``lifted``)."""
+    verdicts = controller_verdicts([t for c in report.cells for t in c.trials])
+    header = ('alpha [deg]', 'trials', 'lifted, classed lifted', 'lifted, classed FAILURE',
+              'not lifted, classed lifted', 'not lifted, classed FAILURE')
+    rows = [(f'{v.friction_angle_deg:g}', str(v.n_trials), str(v.lifted_classed_lifted),
+             str(v.lifted_classed_failure), str(v.unlifted_classed_lifted),
+             str(v.unlifted_classed_failure)) for v in verdicts]
+    return (['## 5. The controller\'s classes against the ground truth', '',
+             'The sections above judge by the ground truth (`lifted`, the object centre at '
+             'least the lift height up at the end). The controller classes each grasp from its '
+             'joint signals alone (`outcome`: SUCCESS or LIFTED_DAM_FAILED say lifted, '
+             'FAILURE not), as a real hand without ground truth would; where the two differ, '
+             'a researcher reading only the controller\'s classes would count otherwise.', '']
+            + _table(header, rows) + [''])
+
+
 def _false_guarantees(report: SweepReport) -> list[str]:
     n_cells = report.n_false_guarantee_cells
     n_guaranteed = sum(a.n_guaranteed for a in report.angles)
@@ -412,6 +430,7 @@ def render_markdown(report: SweepReport, command: str,
     lines += _boundary_distance(report, figures)
     lines += _missed(report)
     lines += _disagreements(report)
+    lines += _controller(report)
     while lines and lines[-1] == '':
         lines.pop()
     return '\n'.join(lines) + '\n'

@@ -330,3 +330,36 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
                  'next to the boundary': near}
         names = CHECKS_NOT_LIFTING
     return [name for name, _ in names if found[name]]
+
+
+# ------------------------------------------------------------------------------------------
+# The controller's classes against the ground truth
+
+#: The controller's classes that say the object was lifted (the paper's triangle and circle).
+CLASSED_LIFTED = ('SUCCESS', 'LIFTED_DAM_FAILED')
+
+
+@dataclass(frozen=True)
+class ControllerVerdicts:
+    """At one friction angle, the trials by ground truth (``lifted``) and by the controller's
+    class (``outcome``: lifted for :data:`CLASSED_LIFTED`, else FAILURE)."""
+
+    friction_angle_deg: float
+    lifted_classed_lifted: int
+    lifted_classed_failure: int
+    unlifted_classed_lifted: int
+    unlifted_classed_failure: int
+
+    @property
+    def n_trials(self) -> int:
+        return (self.lifted_classed_lifted + self.lifted_classed_failure
+                + self.unlifted_classed_lifted + self.unlifted_classed_failure)
+
+
+def controller_verdicts(trials: Sequence[TrialRow]) -> tuple[ControllerVerdicts, ...]:
+    """The four counts per friction angle, in ascending order of the angle."""
+    counts: dict[float, list[int]] = {}
+    for t in trials:
+        slot = counts.setdefault(t.friction_angle_deg, [0, 0, 0, 0])
+        slot[(0 if t.lifted else 2) + (0 if t.outcome in CLASSED_LIFTED else 1)] += 1
+    return tuple(ControllerVerdicts(alpha, *counts[alpha]) for alpha in sorted(counts))
