@@ -38,6 +38,7 @@ is not to be trusted where its contact penetration leaves the configured bound).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 from collections.abc import Callable
@@ -179,11 +180,9 @@ class CheckLiftServer(Node):
 
     def _on_plan(self, request: PlanLift.Request, response: PlanLift.Response
                  ) -> PlanLift.Response:
-        nan = math.nan
-        for name in ('k_theta', 'delta_theta_p', 'worst_case_margin', 'position_error_bound',
-                     'best_k_theta', 'best_delta_theta_p', 'best_worst_case_margin',
-                     'csm_k_theta', 'csm_delta_theta_p', 'csm_margin', 'k_theta_cap'):
-            setattr(response, name, nan)
+        for name in _PLAN_NUMBERS:  # NaN until a plan says otherwise
+            setattr(response, name, math.nan)
+
         def compute() -> tuple[PlanResult, list[str]]:
             ranges, taken = ranges_from_request(
                 self._planner, request.friction_angle_min, request.friction_angle_max,
@@ -214,13 +213,18 @@ class CheckLiftServer(Node):
         super().destroy_node()
 
 
+#: The fields a PlanResult shares with PlanLift.Response (its other two, ``reason`` and
+#: ``offsets``, go into the message or nowhere), and those of them that are numbers.
+_PLAN_FIELDS = tuple(f.name for f in dataclasses.fields(PlanResult)
+                     if f.name in PlanLift.Response.get_fields_and_field_types())
+_PLAN_NUMBERS = tuple(name for name in _PLAN_FIELDS
+                      if PlanLift.Response.get_fields_and_field_types()[name] == 'double')
+
+
 def _fill_plan(response: PlanLift.Response, plan: PlanResult) -> None:
-    for name in ('found', 'k_theta', 'delta_theta_p', 'worst_case_margin',
-                 'position_error_bound', 'best_k_theta', 'best_delta_theta_p',
-                 'best_worst_case_margin', 'csm_k_theta', 'csm_delta_theta_p', 'csm_margin',
-                 'csm_in_domain', 'k_theta_cap', 'method'):
+    for name in _PLAN_FIELDS:
         value = getattr(plan, name)
-        setattr(response, name, value if isinstance(value, (bool, str)) else float(value))
+        setattr(response, name, float(value) if name in _PLAN_NUMBERS else value)
 
 
 def main(args: list[str] | None = None) -> None:
