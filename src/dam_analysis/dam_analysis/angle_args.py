@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 
 
 def parse_angle(text: str, bare: str = 'rad') -> float:
@@ -35,8 +36,7 @@ def parse_angle(text: str, bare: str = 'rad') -> float:
             f'{text!r} is not an angle (examples: 40deg, 0.7rad, 0.7)') from None
     if not math.isfinite(number):
         raise argparse.ArgumentTypeError(f'{text!r} is not a finite angle')
-    if unit == 'deg' and bare == 'deg' and not value.endswith('deg') \
-            and 0.0 < abs(number) < 1.0:
+    if unit == 'deg' and not value.endswith('deg') and 0.0 < abs(number) < 1.0:  # bare
         print(f'note: {text!r} is read in degrees ({number:g} deg); write {text}rad for '
               'radians', file=sys.stderr)
     return math.radians(number) if unit == 'deg' else number
@@ -47,21 +47,33 @@ def parse_degrees(text: str) -> float:
     return parse_angle(text, bare='deg')
 
 
-def parse_angle_range(text: str) -> tuple[float, float]:
-    """``'3:6'``, ``'3deg:6deg'``, ``'0.05rad:0.1rad'`` or one angle -> (min, max) [rad]; bare
-    numbers are degrees.
+def parse_range(text: str, parse_one: Callable[[str], float] = float,
+                show: Callable[[float], str] = lambda v: f'{v:g}') -> tuple[float, float]:
+    """``'MIN:MAX'`` or one value -> (min, max), each end read by ``parse_one`` and named in
+    messages by ``show``.
 
     Raises
     ------
     argparse.ArgumentTypeError
-        Not one or two angles, or max below min.
+        Not one or two values, a value ``parse_one`` refuses or that is not finite, or max
+        below min.
     """
     parts = text.split(':')
     if len(parts) not in (1, 2):
-        raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one angle')
-    low, high = parse_degrees(parts[0]), parse_degrees(parts[-1])
+        raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one value')
+    try:
+        low, high = parse_one(parts[0]), parse_one(parts[-1])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: not a number') from None
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise argparse.ArgumentTypeError(f'{text!r}: not a finite number')
     if high < low:
         raise argparse.ArgumentTypeError(
-            f'{text!r}: empty range, max {math.degrees(high):g} deg is below min '
-            f'{math.degrees(low):g} deg')
+            f'{text!r}: empty range, max {show(high)} is below min {show(low)}')
     return low, high
+
+
+def parse_angle_range(text: str) -> tuple[float, float]:
+    """``'3:6'``, ``'3deg:6deg'``, ``'0.05rad:0.1rad'`` or one angle -> (min, max) [rad]; bare
+    numbers are degrees (:func:`parse_range` of :func:`parse_degrees`)."""
+    return parse_range(text, parse_degrees, lambda v: f'{math.degrees(v):g} deg')

@@ -25,27 +25,9 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
-from dam_analysis.angle_args import parse_angle_range
+from dam_analysis.angle_args import parse_angle_range, parse_range
 from dam_analysis.service_call import call_and_print
 from dam_interfaces.srv import PlanLift
-
-
-def parse_range(text: str) -> tuple[float, float]:
-    """``'3:6'`` or ``'5'`` -> (min, max) as numbers (``'5'`` -> (5, 5))."""
-    parts = text.split(':')
-    if len(parts) not in (1, 2):
-        raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one value')
-    try:
-        values = [float(p) for p in parts]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r}: not a number') from None
-    if not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f'{text!r}: not a finite number')
-    low, high = values[0], values[-1]
-    if high < low:
-        raise argparse.ArgumentTypeError(f'{text!r}: empty range, max {high:g} is below min '
-                                         f'{low:g}')
-    return low, high
 
 
 def parse_length(text: str) -> float:
