@@ -134,8 +134,9 @@ def test_at_thirty_degrees_nothing_is_guaranteed(config, planner) -> None:
 
 
 def test_the_csm_pair_is_the_largest_smallest_margin(config, planner) -> None:
-    """Its margin is the minimum over the sampled friction angles and the nodes, and no other
-    displacement of a coarse sample beats it at its cap."""
+    """Its margin is the minimum of the CSM margins over the sampled friction angles (at the
+    one position node and mass of this request), and its stiffness keeps to the device's cap.
+    (That no other displacement beats it is not checked here.)"""
     ranges = _ranges(config, planner, tol=0.0, alpha=(3.0, 6.0), mass=(0.04, 0.04))
     plan = planner.plan(ranges)
     analyzer = planner.analyzer_at(0.0)
