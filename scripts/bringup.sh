@@ -3,7 +3,9 @@
 #   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers)
 #   and spcm_controller.
 #
-#   bash scripts/bringup.sh [--backend auto|sim|hardware] [--gui]
+#   bash scripts/bringup.sh [--backend auto|sim|hardware] [--gui] [--object NAME]
+#   (NAME: an object of config/dam.yaml's object.library; the stand-in puts it on the table and
+#   the controller classifies and checks for it; default object.default)
 #   bash scripts/stop.sh          # stops exactly the processes started here, by PID
 #
 # Logs and PIDs go to $DAM_RUN_DIR (default: .run/ in the repository). Discovery stays on this
@@ -14,11 +16,13 @@ RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
 
 backend=auto
 gui=false
+object=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
     --gui) gui=true; shift ;;
-    -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+    --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
+    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
     *) echo "bringup.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -50,8 +54,9 @@ start() {  # start NAME PACKAGE EXECUTABLE [ARGS...]
 
 echo "==> Bringing up the DAM suite (ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}, backend $backend)"
 start check_lift_server dam_analysis check_lift_server
-start hand_driver dam_hand_driver hand_driver --ros-args -p "backend:=$backend" -p "gui:=$gui"
-start spcm_controller dam_spcm_controller spcm_controller
+start hand_driver dam_hand_driver hand_driver --ros-args -p "backend:=$backend" -p "gui:=$gui" \
+  -p "object:=$object"
+start spcm_controller dam_spcm_controller spcm_controller --ros-args -p "object:=$object"
 echo "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}" >"$RUN_DIR/env"
 sleep 1
 for name in check_lift_server hand_driver spcm_controller; do

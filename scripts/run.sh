@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job: bring the DAM suite up (on the PyBullet stand-in when no hand answers), ask
-# /check_lift about the (k_theta, delta_theta_p) pair, grasp the cylinder by Detaching Assist
+# /check_lift about the (k_theta, delta_theta_p) pair, grasp the object by Detaching Assist
 # Motion through the /dam_grasp action, print the outcome, and stop everything it started.
 # The grasp is recorded as an episode bag (bags/episodes/<time>_<outcome>, or under
 # $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed.
@@ -8,6 +8,7 @@
 #   bash scripts/run.sh                                   # the pair configured in config/dam.yaml
 #   bash scripts/run.sh --k-theta 0.5 --delta-theta-p 10deg   # any other pair
 #   bash scripts/run.sh --backend hardware --keep         # a real hand; leave the suite running
+#   bash scripts/run.sh --object square_bar               # another object of object.library
 #
 # Exit status: that of the grasp client (0 success, 3 another outcome, 2 rejected, 1 no answer).
 set -euo pipefail
@@ -19,13 +20,15 @@ k_theta=""
 delta_theta_p=""
 backend=auto
 keep=false
+object=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --k-theta) k_theta=${2:?--k-theta needs a value}; shift 2 ;;
     --delta-theta-p) delta_theta_p=${2:?--delta-theta-p needs a value}; shift 2 ;;
     --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
     --keep) keep=true; shift ;;
-    -h|--help) sed -n '2,14p' "$0"; exit 0 ;;
+    --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
+    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
     *) echo "run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -35,6 +38,16 @@ set +u
 # shellcheck disable=SC1091
 source "$REPO_ROOT/scripts/env.sh"
 set -u
+
+# A name outside the library is refused here, before anything starts.
+DAM_RUN_OBJECT=$object python -c '
+import os, sys
+from dam_common.config import load_config
+from dam_common.errors import ConfigError
+try:
+    load_config().with_object(os.environ["DAM_RUN_OBJECT"])
+except ConfigError as exc:
+    sys.exit(f"run.sh: --object: {exc}")' || exit 2
 
 if [ -z "$k_theta" ] || [ -z "$delta_theta_p" ]; then
   read -r cfg_k cfg_dp < <(python -c '
@@ -46,7 +59,7 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
   delta_theta_p=${delta_theta_p:-$cfg_dp}
 fi
 
-bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend"
+bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend" --object "$object"
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
 
 # The recorder, in episode mode: this grasp becomes one bag.
@@ -92,7 +105,7 @@ rclpy.shutdown()
 PY
 echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_theta_p"
 "$(exe dam_analysis check_lift)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --timeout 30 || true
+  --object "$object" --timeout 30 || true
 echo "==> DAM grasp"
 set +e
 "$(exe dam_spcm_controller dam_grasp)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \

@@ -111,11 +111,46 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
         ('hand.fingers[0].stiffness_ratio', 0.0, r'fingers\[0\]\.stiffness_ratio.*positive.*0\.0'),
         ('hand.fingers[2].base_position_m', [0.0, 0.0], r'fingers\[2\]\.base_position_m'),
         ('hand.initial_position_angle_deg', 120.0, r'initial_position_angle_deg.*120'),
-        ('object.radius_m', 0.0, r'object\.radius_m.*positive.*0\.0'),
-        ('object.mass_kg', float('inf'), r'object\.mass_kg.*finite.*inf'),
+        ('object.library.cylinder.radius_m', 0.0,
+         r'object\.library\.cylinder\.radius_m.*positive.*0\.0'),
+        ('object.library.cylinder.mass_kg', float('inf'),
+         r'object\.library\.cylinder\.mass_kg.*finite.*inf'),
         ('object.axis', [0.0, 0.6, 0.8], r'object\.axis.*horizontal'),
-        ('object.position_m', [0.0, 0.0, 0.001], r'object\.position_m.*into the table'),
-        ('object.shape', 'sphere', r"object\.shape.*'sphere'"),
+        ('object.position_m', [0.0, 0.0, 0.001], r'object\.position_m.*expected 2 values'),
+        ('object.library.cylinder.shape', 'sphere',
+         r"object\.library\.cylinder\.shape.*unknown shape 'sphere'"),
+        ('object.library.cylinder.sides', 6,
+         r"object\.library\.cylinder.*unknown key.*'sides'"),
+        ('object.default', 'pencil', r"object\.default.*'pencil' is not in object\.library"),
+        ('object.library', {}, r'object\.library.*empty'),
+        ('object.library.hex_pencil.sides', 2,
+         r'object\.library\.hex_pencil\.sides.*>= 3.*2'),
+        ('object.library.hex_pencil.across_flats_m', float('nan'),
+         r'object\.library\.hex_pencil\.across_flats_m.*finite.*nan'),
+        ('object.library.elliptic_column.semi_axes_m', [0.008, 0.012],
+         r'object\.library\.elliptic_column\.semi_axes_m.*flat side.*0\.008, 0\.012'),
+        ('object.library.square_bar', {'shape': 'convex_polygon', 'length_m': 0.06,
+                                       'mass_kg': 0.04,
+                                       'vertices_m': [[0, 0], [0.01, 0], [0.002, 0.002],
+                                                      [0, 0.01]]},
+         r'object\.library\.square_bar\.vertices_m.*\[0\.002, 0\.002\].*non-convex'),
+        ('object.library.square_bar', {'shape': 'convex_polygon', 'length_m': 0.06,
+                                       'mass_kg': 0.04,
+                                       'vertices_m': [[0, 0], [0.01, 0], [0.01, 0]]},
+         r'object\.library\.square_bar\.vertices_m.*repeats'),
+        ('object.library.square_bar', {'shape': 'convex_polygon', 'length_m': 0.06,
+                                       'mass_kg': 0.04,
+                                       'vertices_m': [[0, 0], [0.01, 0], [0.0, float('nan')]]},
+         r'object\.library\.square_bar\.vertices_m\[2\]\[1\].*finite.*nan'),
+        ('object.library.square_bar', {'shape': 'convex_polygon', 'length_m': 0.06,
+                                       'mass_kg': 0.04,
+                                       'vertices_m': [[0, 0], [0.01, 0.005], [0.0, 0.01],
+                                                      [-0.01, 0.005]]},
+         r'object\.library\.square_bar\.vertices_m.*rest on a face'),
+        ('object.library.square_bar', {'shape': 'convex_polygon', 'length_m': 0.06,
+                                       'mass_kg': 0.04,
+                                       'vertices_m': [[0, 0], [0.002, 0], [0.03, 0.01]]},
+         r'object\.library\.square_bar\.vertices_m.*tip over'),
         ('contact.friction_angle_deg', 90.0, r'contact\.friction_angle_deg.*90'),
         ('contact.friction_angle_deg', -1.0, r'contact\.friction_angle_deg.*-1'),
         ('contact.cone_faces', 2, r'contact\.cone_faces.*>= 3.*2'),
@@ -162,7 +197,9 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
          r'calibration\.position\.damping_scale_nms_per_rad_per_raw.*positive.*0\.0'),
         ('device.calibration.locked.damping_scale_nms_per_rad_per_raw', _DELETE,
          r'calibration\.locked\.damping_scale_nms_per_rad_per_raw: missing key'),
-        ('object.radius_m', _DELETE, r'object\.radius_m: missing key'),
+        ('object.library.cylinder.radius_m', _DELETE,
+         r'object\.library\.cylinder\.radius_m: missing key'),
+        ('object.default', _DELETE, r'object\.default: missing key'),
         ('hand.fingers[0].colour', 'red', r"hand\.fingers\[0\].*unknown key.*'colour'"),
         ('format_version', 2, r'format_version.*unsupported.*2'),
     ],
@@ -170,6 +207,31 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
 def test_bad_values_are_named(raw: dict[str, Any], path: str, value: Any, expected: str) -> None:
     with pytest.raises(ConfigError, match=expected):
         config_from_dict(_with(raw, path, value))
+
+
+def test_object_library(raw: dict[str, Any]) -> None:
+    """The shipped library, the resting heights, the selection and its refusal."""
+    cfg = load_config(CONFIG_FILE)
+    assert cfg.object.name == 'cylinder'
+    assert set(cfg.objects) >= {'cylinder', 'hex_pencil', 'elliptic_column', 'square_bar'}
+    pencil = cfg.with_object('hex_pencil').object
+    assert pencil.section.inradius == pytest.approx(0.0035)  # 7 mm across flats
+    # each object rests on the table: centroid above z = 0 by its lowest point
+    for obj in cfg.objects.values():
+        assert obj.position_m[2] == pytest.approx(-obj.section.bottom)
+    assert cfg.with_object('elliptic_column').object.position_m[2] == pytest.approx(0.008)
+    assert cfg.with_object('') is cfg
+    with pytest.raises(ConfigError, match=r"'pen' is not in the object library.*hex_pencil"):
+        cfg.with_object('pen')
+    with pytest.raises(ConfigError, match=r"'square_bar' is a square.*no radius"):
+        _ = cfg.with_object('square_bar').object.radius_m
+    data = _with(raw, 'object.library.wedge', {
+        'shape': 'convex_polygon', 'length_m': 0.05, 'mass_kg': 0.02,
+        'vertices_m': [[0.0, 0.0], [0.02, 0.0], [0.0, 0.01]]})
+    wedge = config_from_dict(data).with_object('wedge').object
+    # the centroid of a triangle is the mean of its vertices: 1/3 of its height above the table
+    assert wedge.position_m[2] == pytest.approx(0.01 / 3.0)
+    np.testing.assert_allclose(wedge.section.vertices.mean(axis=0), [0.0, 0.0], atol=1e-15)
 
 
 def test_unknown_top_level_section(raw: dict[str, Any]) -> None:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 from scipy.optimize import brentq
 
-from dam_analysis.model import FingerGeometry, distal_gap_partials
+from dam_analysis.model import FingerGeometry, distal_gap_partials, segment_contact
 
 #: End kinds (:attr:`BranchEnd.kind`).
 END_FOLD = 'fold'
@@ -266,9 +266,14 @@ def fold_reason(geometry: FingerGeometry, theta_l: float, theta_p0: float, theta
     qu = l1 * math.sin(theta_s) + l2 * math.sin(theta_s + theta_l)
     qz = -l1 * math.cos(theta_s) - l2 * math.cos(theta_s + theta_l)
     abu, abz = l3 * math.sin(phi3), -l3 * math.cos(phi3)
-    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
-    t = min(1.0, max(0.0, ((cu - qu) * abu + (cz - qz) * abz) / (l3 * l3)))
-    elevation = math.degrees(math.atan2(qz + t * abz - cz, abs(qu + t * abu - cu)))
+    if geometry.is_circle:
+        cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+        t = min(1.0, max(0.0, ((cu - qu) * abu + (cz - qz) * abz) / (l3 * l3)))
+        elevation = math.degrees(math.atan2(qz + t * abz - cz, abs(qu + t * abu - cu)))
+    else:  # the elevation of the section's normal at the contact
+        sd = segment_contact(geometry, qu, qz, qu + abu, qz + abz)
+        t = sd.t
+        elevation = math.degrees(math.atan2(sd.normal[1], abs(sd.normal[0])))
     where = 'fingertip' if t >= 1.0 - 1e-12 else 'inner side of the distal link'
     beyond = ('the distal link passes over the object and loses contact' if g_p > 0.0 else
               'the distal link would have to pass into the object')

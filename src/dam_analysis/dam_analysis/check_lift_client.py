@@ -6,6 +6,7 @@ Examples::
     ros2 run dam_analysis check_lift --k-theta 0.5 0.25 0.25 --delta-theta-p 0.7 \\
         --friction-angle 5deg
     ros2 run dam_analysis check_lift        # the server's configured task pair
+    ros2 run dam_analysis check_lift --object square_bar --delta-theta-p 20deg
 
 Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). An option left out
 is left out of the request, so the server uses its configuration for it (``CheckLift.srv``).
@@ -41,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
                              '(default: the server\'s configured task.delta_theta_p_deg)')
     parser.add_argument('--friction-angle', type=parse_angle, default=None, metavar='ANGLE',
                         help='friction angle alpha (default: the server\'s configured value)')
+    parser.add_argument('--object', default='', metavar='NAME',
+                        help='column object of the configuration\'s object.library (default: '
+                             'the server\'s object.default)')
     parser.add_argument('--service', default='/check_lift', help='service name')
     parser.add_argument('--timeout', type=float, default=10.0, metavar='S',
                         help='seconds to wait for the service and for the answer (default: '
@@ -62,6 +66,7 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
     k_text = ', '.join(f'{v:g}' for v in request.k_theta) or configured
     dp_text = ', '.join(f'{math.degrees(v):.4g}' for v in request.delta_theta_p) or configured
     lines = [
+        f'object                   : {response.object}',
         f'k_theta         [N*m/rad]: {k_text}',
         f'delta_theta_p   [deg]    : {dp_text}',
         f'lift guaranteed (eq. 18) : {yes_no[bool(response.lift_guaranteed)]}'
@@ -88,6 +93,7 @@ def main(args: Sequence[str] | None = None) -> int:
     request.delta_theta_p = [float(v) for v in options.delta_theta_p]
     if options.friction_angle is not None:  # otherwise the default: the configured one
         request.friction_angle = float(options.friction_angle)
+    request.object = options.object
     return call_and_print('check_lift', argv, CheckLift, options.service, request,
                           options.timeout, lambda response: format_response(request, response))
 

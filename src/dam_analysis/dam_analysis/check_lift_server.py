@@ -29,6 +29,11 @@ mean the configured values too. The first request with a position tolerance buil
 per position node (about 0.5 s each, kept); later ones take a few tenths of a second. Plans run
 on an executor thread of their own, one at a time, so ``/check_lift`` answers meanwhile.
 
+Both services answer for a column object of the configuration's ``object.library`` named in
+the request's ``object`` field (empty: ``object.default``); the analysis of each object is
+built on its first request (about half a second) and kept. An unknown name, or an object the
+fingers make no first contact with, is a malformed request naming it.
+
 Every answer also says what the analysis assumes of the hand (:mod:`dam_analysis.hand_limits`):
 ``torque_limit`` and ``within_torque_limit`` (a pair guaranteed by eq. 18 whose ``tau_s``
 exceeds what the hand gives is, the message says, "guaranteed by eq. 18 but not for this
@@ -50,10 +55,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from dam_analysis.analysis import LiftAnalyzer
-from dam_analysis.errors import DamAnalysisError
+from dam_analysis.errors import DamAnalysisError, InputError, NoSolutionError
 from dam_analysis.hand_limits import limit_notes
 from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_from_request
-from dam_common.config import load_config
+from dam_common.config import DamConfig, load_config
+from dam_common.errors import ConfigError
 from dam_common.node import declare_config_file, run_node
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import CheckLift, PlanLift
@@ -69,7 +75,11 @@ class CheckLiftServer(Node):
         super().__init__('check_lift_server')
         config_file = declare_config_file(self)
         self._config = load_config(config_file or None)
-        self._analyzer = LiftAnalyzer(self._config)
+        #: one analysis per object, built on its first request (each executor thread keeps
+        #: its own: /check_lift's analyzers and /plan_lift's planners share nothing)
+        self._analyzers: dict[str, LiftAnalyzer] = {
+            self._config.object.name: LiftAnalyzer(self._config)}
+        self._planners: dict[str, LiftPlanner] = {}
         self._default_friction_angle = self._config.contact.friction_angle_rad
         self.declare_parameter(
             'default_friction_angle', self._default_friction_angle,
@@ -85,15 +95,16 @@ class CheckLiftServer(Node):
         # (run_node(executor_threads=2)): a first plan with a new position tolerance takes
         # seconds, and /check_lift goes on answering meanwhile. The planner keeps analyses of
         # its own, so the two threads share no mutable state; plans run one at a time.
-        self._planner = LiftPlanner(self._config)
+        self._planners[self._config.object.name] = LiftPlanner(self._config)
         self._planning = threading.Lock()
         self._plan_service = self.create_service(
             PlanLift, 'plan_lift', self._on_plan,
             callback_group=MutuallyExclusiveCallbackGroup())
         self.get_logger().info(
             f'serving {self._service.srv_name} and {self._plan_service.srv_name} with '
-            f'{self._config.source} '
-            f'(default friction angle {math.degrees(self._default_friction_angle):.3g} deg)')
+            f'{self._config.source} (objects: {", ".join(self._config.objects)}; default '
+            f'{self._config.object.name}; default friction angle '
+            f'{math.degrees(self._default_friction_angle):.3g} deg)')
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for param in params:
@@ -118,6 +129,12 @@ class CheckLiftServer(Node):
         response.friction_angle = math.nan  # until an answer is computed
         response.torque_limit = math.nan
         defaults = []
+        name = self._object_name(request.object, defaults)
+        analyzer = self._computed(response, 'preparing the object',
+                                  lambda: self._cached(self._analyzers, name, LiftAnalyzer))
+        if analyzer is None:
+            return response
+        response.object = name
         if not k_theta:
             k_theta = [task.k_theta_nm_per_rad]
             defaults.append(f'k_theta = {task.k_theta_nm_per_rad:g} N*m/rad')
@@ -129,7 +146,7 @@ class CheckLiftServer(Node):
             defaults.append(f'friction_angle = {math.degrees(friction_angle):.4g} deg')
         result = self._computed(
             response, 'analysing the request',
-            lambda: self._analyzer.check_lift(k_theta, delta_theta_p, friction_angle))
+            lambda: analyzer.check_lift(k_theta, delta_theta_p, friction_angle))
         if result is None:
             return response
         response.ok = True
@@ -150,7 +167,7 @@ class CheckLiftServer(Node):
             message = 'lift guaranteed (eq. 18)'
         else:
             message = 'lift not guaranteed for every admissible contact force'
-        notes = limit_notes(self._analyzer.limits, response.compliant_torque,
+        notes = limit_notes(analyzer.limits, response.compliant_torque,
                             response.lift_guaranteed, response.csm_penetration,
                             response.csm_lift)
         if notes:
@@ -160,6 +177,35 @@ class CheckLiftServer(Node):
         response.message = message
         return response
 
+    def _object_name(self, requested: str, defaults: list[str]) -> str:
+        """The object a request names; an empty name is the default, noted in ``defaults``."""
+        if requested:
+            return requested
+        defaults.append(f'object = {self._config.object.name}')
+        return self._config.object.name
+
+    def _cached(self, cache: dict[str, T], name: str, build: Callable[[DamConfig], T]) -> T:
+        """``cache[name]``, built from the configuration with that object on first use.
+
+        Raises
+        ------
+        InputError
+            ``name`` is not in the object library, or the fingers reach no first contact
+            with the object (the message names it).
+        """
+        if name not in cache:
+            try:
+                config = self._config.with_object(name)
+            except ConfigError as exc:
+                raise InputError(f'object: {exc}') from exc
+            try:
+                cache[name] = build(config)
+            except NoSolutionError as exc:
+                raise InputError(f'object: {name!r} ({config.object.section.describe()}) '
+                                 f'cannot be analysed with this hand: {exc}') from exc
+            self.get_logger().info(f'analysis of object {name!r} '
+                                   f'({config.object.section.describe()}) ready')
+        return cache[name]
 
     def _computed(self, response: CheckLift.Response | PlanLift.Response, doing: str,
                   compute: Callable[[], T]) -> T | None:
@@ -182,21 +228,26 @@ class CheckLiftServer(Node):
                  ) -> PlanLift.Response:
         for name in _PLAN_NUMBERS:  # NaN until a plan says otherwise
             setattr(response, name, math.nan)
+        taken: list[str] = []
+        object_name = self._object_name(request.object, taken)
 
         def compute() -> tuple[PlanResult, list[str]]:
-            ranges, taken = ranges_from_request(
-                self._planner, request.friction_angle_min, request.friction_angle_max,
+            planner = self._cached(self._planners, object_name, LiftPlanner)
+            ranges, from_config = ranges_from_request(
+                planner, request.friction_angle_min, request.friction_angle_max,
                 request.mass_min, request.mass_max, request.position_tolerance,
                 request.k_theta_max, request.delta_theta_p_min, request.delta_theta_p_max,
                 request.min_margin)
-            return self._planner.plan(ranges, stop=lambda: SHUTDOWN.requested), taken
+            return planner.plan(ranges, stop=lambda: SHUTDOWN.requested), from_config
 
         with self._planning:
             answer = self._computed(response, 'planning', compute)
         if answer is None:
             return response
-        plan, taken = answer
+        plan, from_config = answer
+        taken += from_config
         response.ok = True
+        response.object = object_name
         _fill_plan(response, plan)
         message = plan_verdict(plan)
         if taken:

@@ -8,6 +8,7 @@ thin dashed line, one colour per friction angle. Examples::
     ros2 run dam_analysis lift_map --friction-angles 1 5 30 --out map.png
     ros2 run dam_analysis lift_map --friction-angles 5 --n-delta-theta-p 400 \\
         --delta-theta-p-max 30 --k-max 20 --out map5.png --csv map5.csv
+    ros2 run dam_analysis lift_map --object square_bar --friction-angles 5 --out bar.png
 
 Friction angles and ``--delta-theta-p-max`` are in degrees. The CSV has the columns
 ``alpha_deg, delta_theta_p_deg, k_theta_sufficient, k_theta_csm`` [deg, deg, N m/rad, N m/rad];
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from dam_analysis.analysis import LiftAnalyzer
+from dam_analysis.errors import NoSolutionError
 from dam_analysis.regions import Boundaries
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
@@ -61,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--k-max', type=float, default=None, metavar='N*m/rad',
                         help='top of the k_theta axis (default: from the boundaries, at least '
                              f'{DEFAULT_K_MAX:g}, see default_k_max)')
+    parser.add_argument('--object', default='', metavar='NAME',
+                        help='column object of the configuration\'s object.library (default: '
+                             'object.default)')
     parser.add_argument('--config', type=Path, default=None, metavar='YAML',
                         help='configuration file (default: the installed config/dam.yaml)')
     return parser
@@ -139,12 +144,14 @@ def default_k_max(boundaries: Sequence[Boundaries]) -> float:
 
 
 def plot_map(path: Path, friction_angles_deg: Sequence[float],
-             boundaries: Sequence[Boundaries], k_max: float, delta_theta_p_max: float) -> None:
+             boundaries: Sequence[Boundaries], k_max: float, delta_theta_p_max: float,
+             object_text: str = '') -> None:
     """Draw the boundaries and hatch the sufficient regions; save to ``path``.
 
     Parameters
     ----------
     k_max : top of the k_theta axis [N m/rad]; delta_theta_p_max : right end [deg].
+    object_text : the object, for the title (e.g. ``'square_bar: square, 16 mm across flats'``).
     """
     import matplotlib
     matplotlib.use('Agg')
@@ -172,7 +179,8 @@ def plot_map(path: Path, friction_angles_deg: Sequence[float],
     ax.set_ylim(0.0, k_max)
     ax.set_xlabel('position-joint displacement delta_theta_p [deg]')
     ax.set_ylabel('compliant-joint stiffness k_theta (finger 1) [N m/rad]')
-    ax.set_title('Lift regions (hatched: sufficient condition holds)')
+    title = 'Lift regions (hatched: sufficient condition holds)'
+    ax.set_title(f'{title}\n{object_text}' if object_text else title, fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7, loc='upper right')
     fig.tight_layout()
@@ -186,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
     check_options(parser, options)
     try:
-        config = load_config(options.config)
+        config = load_config(options.config).with_object(options.object)
     except ConfigError as exc:
         print(f'lift_map: {exc}', file=sys.stderr)
         return 2
@@ -196,7 +204,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f'--delta-theta-p-max: {dp_max:g} deg exceeds the configured maximum '
                      f'{config_max:g} deg')
     start = time.perf_counter()
-    analyzer = LiftAnalyzer(config)
+    try:
+        analyzer = LiftAnalyzer(config)
+    except NoSolutionError as exc:
+        print(f'lift_map: object {config.object.name!r} ({config.object.section.describe()}) '
+              f'cannot be analysed with this hand: {exc}', file=sys.stderr)
+        return 2
     print(f'lift_map: SPCM paths cached in {time.perf_counter() - start:.2f} s',
           file=sys.stderr, flush=True)
     dps = np.radians(np.linspace(0.0, dp_max, options.n_delta_theta_p))
@@ -206,7 +219,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     k_max = options.k_max if options.k_max is not None else default_k_max(boundaries)
     try:
         write_csv(csv_path, options.friction_angles, boundaries)
-        plot_map(options.out, options.friction_angles, boundaries, k_max, dp_max)
+        plot_map(options.out, options.friction_angles, boundaries, k_max, dp_max,
+                 f'{config.object.name}: {config.object.section.describe()}')
     except OSError as exc:
         print(f'lift_map: cannot write output: {exc}', file=sys.stderr)
         return 1

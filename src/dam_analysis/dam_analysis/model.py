@@ -8,11 +8,14 @@ base). A link at cumulative angle ``phi`` points along ``(sin phi, -cos phi)``: 
 hangs straight down and a positive angle flexes the finger inward (the sign convention of
 :class:`dam_common.config.FingerConfig`).
 
-Every link is a capsule (segment plus ``link_radius_m``); the object is a cylinder lying on the
-table, so in the finger plane it is a disc of radius ``R`` centred at the cylinder axis. The
-distal (third) link touches the object when the distance from the disc centre to its segment
-equals ``R + r`` (eqs. 2-4 of Kaneko et al.: the two surfaces meet at one point and their
-normals are opposite there).
+Every link is a capsule (segment plus ``link_radius_m``); the object is a column lying on the
+table, so in the finger plane it is its convex cross-section (:mod:`dam_common.cross_section`:
+a disc, an ellipse or a convex polygon) placed at the column's centroid. The distal (third)
+link touches the object when the distance from the cross-section to its segment equals ``r``
+(eqs. 2-4 of Kaneko et al.: the two surfaces meet at one point and their normals are opposite
+there). For the paper's circular cylinder that distance is the distance from the disc centre
+minus ``R``, which the functions here evaluate in closed form; every other section goes
+through :meth:`~dam_common.cross_section.CrossSection.segment_distance`.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 
 from dam_analysis.errors import NoSolutionError
 from dam_common.config import DamConfig
+from dam_common.cross_section import Circle, CrossSection, SegmentDistance
 
 #: Step of the scan that closes the compliant joint to the first contact [rad].
 _SCAN_STEP_RAD = math.radians(0.05)
@@ -31,7 +35,7 @@ _SCAN_STEP_RAD = math.radians(0.05)
 
 @dataclass(frozen=True)
 class FingerGeometry:
-    """One finger reduced to its plane, with the object disc in that plane.
+    """One finger reduced to its plane, with the object's cross-section in that plane.
 
     Attributes
     ----------
@@ -40,9 +44,13 @@ class FingerGeometry:
     joint_axis : (3,) unit vector of every joint axis (positive angle flexes inward).
     link_lengths : (3,) [m].
     link_radius : capsule radius r [m].
-    object_center : (2,) cylinder axis in plane coordinates ``(u, z)`` relative to the base [m].
-    object_radius : R [m].
+    object_center : (2,) the column's centroid in plane coordinates ``(u, z)`` relative to the
+        base [m].
+    object_radius : R of a circular section [m]; for any other section its circumradius
+        (only the circle's closed forms read it).
     base_height : world z of the base [m] (the table is z = 0).
+    section : the cross-section in plane coordinates about ``object_center`` (mirrored for a
+        finger whose ``u`` axis points against the section's ``x`` axis).
     """
 
     base_position: np.ndarray
@@ -53,6 +61,12 @@ class FingerGeometry:
     object_center: np.ndarray
     object_radius: float
     base_height: float
+    section: CrossSection
+
+    @property
+    def is_circle(self) -> bool:
+        """The section is a disc: the closed forms of the circle apply."""
+        return isinstance(self.section, Circle)
 
     def to_world(self, point_uz: np.ndarray) -> np.ndarray:
         """Plane point(s) ``(..., 2)`` relative to the base -> world point(s) ``(..., 3)`` [m]."""
@@ -94,14 +108,41 @@ def closest_point_on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray
     return a + t * ab, t
 
 
+def segment_contact(geometry: FingerGeometry, au: float, az: float, bu: float, bz: float
+                    ) -> SegmentDistance:
+    """Closest pair between the segment ``[a, b]`` (plane coordinates [m]) and the object.
+
+    Returns the :class:`~dam_common.cross_section.SegmentDistance` of the section, with its
+    points moved back to plane coordinates relative to the base.
+    """
+    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+    sd = geometry.section.segment_distance(au - cu, az - cz, bu - cu, bz - cz)
+    (su, sz), (qu, qz) = sd.segment_point, sd.section_point
+    return SegmentDistance(sd.distance, (su + cu, sz + cz), (qu + cu, qz + cz), sd.normal, sd.t)
+
+
 def link_clearances(geometry: FingerGeometry, joints: np.ndarray) -> np.ndarray:
-    """Signed gap between each capsule link and the object disc, ``(3,)`` [m] (< 0: overlap)."""
+    """Signed gap between each capsule link and the object, ``(3,)`` [m] (< 0: overlap)."""
     gaps = np.empty(3)
     for k in range(3):
-        q, _ = closest_point_on_segment(joints[k], joints[k + 1], geometry.object_center)
-        gaps[k] = float(np.linalg.norm(q - geometry.object_center)) - (
-            geometry.object_radius + geometry.link_radius)
+        if geometry.is_circle:
+            q, _ = closest_point_on_segment(joints[k], joints[k + 1], geometry.object_center)
+            gaps[k] = float(np.linalg.norm(q - geometry.object_center)) - (
+                geometry.object_radius + geometry.link_radius)
+        else:
+            a, b = joints[k], joints[k + 1]
+            gaps[k] = segment_contact(geometry, float(a[0]), float(a[1]), float(b[0]),
+                                      float(b[1])).distance - geometry.link_radius
     return gaps
+
+
+def _section_gap(geometry: FingerGeometry, qu: float, qz: float, tu: float, tz: float
+                 ) -> tuple[float, float, float, float, float]:
+    """Gap of the distal segment ``[q, t]`` to a non-circular section: (gap, p_u, p_z, n_u,
+    n_z) with ``p`` the closest segment point and ``n`` the section's outward normal."""
+    sd = segment_contact(geometry, qu, qz, tu, tz)
+    pu, pz = sd.segment_point
+    return sd.distance - geometry.link_radius, pu, pz, sd.normal[0], sd.normal[1]
 
 
 def table_clearance(geometry: FingerGeometry, joints: np.ndarray) -> float:
@@ -115,11 +156,13 @@ def distal_gap(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p
 
     Returns
     -------
-    gap : distance(disc centre, distal segment) - (R + r) [m]; zero is the contact of eqs. 2-4.
+    gap : distance(section, distal segment) - r [m] (for a disc: distance(centre, segment) -
+        (R + r)); zero is the contact of eqs. 2-4.
     dgap_dtheta_s : [m/rad]. Rotating the whole finger about the compliant joint moves a plane
         point ``p`` with velocity ``(-p_z, p_u)``; by the envelope theorem the gap changes at
-        ``n . (-q_z, q_u)`` with ``q`` the closest point and ``n`` the unit vector from the
-        disc centre to ``q``.
+        ``n . (-q_z, q_u)`` with ``q`` the closest segment point and ``n`` the section's
+        outward normal at the closest section point (for a disc: the unit vector from the
+        centre to ``q``).
     """
     phi12 = theta_s + theta_l
     phi3 = phi12 + theta_p
@@ -128,6 +171,9 @@ def distal_gap(geometry: FingerGeometry, theta_s: float, theta_l: float, theta_p
     qz = -l1 * math.cos(theta_s) - l2 * math.cos(phi12)
     tu = qu + l3 * math.sin(phi3)
     tz = qz - l3 * math.cos(phi3)
+    if not geometry.is_circle:
+        gap, pu, pz, nu, nz = _section_gap(geometry, qu, qz, tu, tz)
+        return gap, nu * (-pz) + nz * pu
     cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
     abu, abz = tu - qu, tz - qz
     t = ((cu - qu) * abu + (cz - qz) * abz) / (abu * abu + abz * abz)
@@ -151,7 +197,7 @@ def distal_gap_partials(geometry: FingerGeometry, theta_s: float, theta_l: float
 
     Returns
     -------
-    gap : distance(disc centre, distal segment) - (R + r) [m].
+    gap : distance(section, distal segment) - r [m].
     g_s : d gap / d theta_s [m/rad], rotation of the whole finger about the compliant joint.
     g_p : d gap / d theta_p [m/rad], rotation of the distal link about the position joint
         ``q``: a point ``p`` moves with ``(-(p_z - q_z), p_u - q_u)`` per radian, and by the
@@ -166,6 +212,9 @@ def distal_gap_partials(geometry: FingerGeometry, theta_s: float, theta_l: float
     qz = -l1 * math.cos(theta_s) - l2 * math.cos(phi12)
     tu = qu + l3 * math.sin(phi3)
     tz = qz - l3 * math.cos(phi3)
+    if not geometry.is_circle:
+        gap, pu, pz, nu, nz = _section_gap(geometry, qu, qz, tu, tz)
+        return gap, nu * (-pz) + nz * pu, nu * (-(pz - qz)) + nz * (pu - qu)
     cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
     abu, abz = tu - qu, tz - qz
     t = min(1.0, max(0.0, ((cu - qu) * abu + (cz - qz) * abz) / (abu * abu + abz * abz)))
@@ -191,7 +240,7 @@ class HandModel:
     limits_s, limits_p : (min, max) of the compliant and position joints [rad].
     stiffness_ratios : (n,) k_theta_i / k_theta.
     object_weight : m_B g [N].
-    object_center : (3,) world position of the cylinder axis (centre of gravity) [m].
+    object_center : (3,) world position of the column's centroid (centre of gravity) [m].
     friction_angle : configured alpha [rad].
     cone_faces : L of eq. (7).
     contact_stiffness : (3,) diagonal of K_pi [N/m] (normal, in-plane tangent, axial).
@@ -226,15 +275,21 @@ def finger_geometries(config: DamConfig) -> tuple[FingerGeometry, ...]:
         axis = finger.joint_axis
         if abs(abs(float(axis @ obj.axis)) - 1.0) > 1e-9:
             raise NoSolutionError(f'finger {finger.name}: joint axis {axis.tolist()} is not '
-                                  f'parallel to the cylinder axis {obj.axis.tolist()}; the '
+                                  f'parallel to the object axis {obj.axis.tolist()}; the '
                                   'planar contact model needs parallel axes')
         rel = obj.position_m - base
+        # the finger's u axis is the section's x axis or its opposite (both are normal to the
+        # object axis): mirror the section for the latter
+        section = obj.section
+        if float(finger.inward_direction @ obj.section_x) < 0.0:
+            section = section.mirrored()
+        radius = section.radius if isinstance(section, Circle) else section.circumradius
         out.append(FingerGeometry(
             base_position=base, inward_direction=finger.inward_direction, joint_axis=axis,
             link_lengths=np.asarray(hand.link_lengths_m, dtype=np.float64),
             link_radius=hand.link_radius_m,
             object_center=np.array([float(rel @ finger.inward_direction), float(rel[2])]),
-            object_radius=obj.radius_m, base_height=float(base[2])))
+            object_radius=radius, base_height=float(base[2]), section=section))
     return tuple(out)
 
 

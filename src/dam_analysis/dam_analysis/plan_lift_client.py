@@ -69,6 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--min-margin', type=float, default=None, metavar='N',
                         help='smallest worst-case margin a guaranteed pair keeps [N] '
                              '(default: 0.01)')
+    parser.add_argument('--object', default='', metavar='NAME',
+                        help='column object of the configuration\'s object.library (default: '
+                             'the server\'s object.default)')
     parser.add_argument('--service', default='/plan_lift', help='service name')
     parser.add_argument('--timeout', type=float, default=30.0, metavar='S',
                         help='seconds to wait for the service and for the answer (a first '
@@ -92,6 +95,7 @@ def build_request(options: argparse.Namespace) -> PlanLift.Request:
         request.delta_theta_p_min, request.delta_theta_p_max = options.delta_theta_p
     if options.min_margin is not None:
         request.min_margin = float(options.min_margin)
+    request.object = options.object
     return request
 
 
@@ -103,7 +107,7 @@ def format_response(response: PlanLift.Response) -> str:
     """Human-readable rendering of a PlanLift answer."""
     if not response.ok:
         return f'REJECTED: {response.message}'
-    lines = []
+    lines = [f'object                    : {response.object}']
     if response.found:
         pair = _pair(response.k_theta, response.delta_theta_p)
         lines.append(f'guaranteed (eq. 18)       : {pair}, worst-case margin '

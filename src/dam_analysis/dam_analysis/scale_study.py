@@ -32,6 +32,7 @@ from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.errors import InputError, NoSolutionError
 from dam_analysis.hand_limits import HandLimits
 from dam_common.config import DamConfig
+from dam_common.cross_section import Circle
 
 
 @dataclass(frozen=True)
@@ -81,16 +82,20 @@ def scaled_config(config: DamConfig, radius_m: float, constant_mass: bool = Fals
     Raises
     ------
     InputError
-        ``radius_m`` is not a positive finite number (the value is named).
+        ``radius_m`` is not a positive finite number (the value is named), or the object is
+        not a circular cylinder.
     """
     if not (math.isfinite(radius_m) and radius_m > 0.0):
         raise InputError(f'radius: expected a positive number of metres, got {radius_m!r}')
     obj = config.object
+    if not isinstance(obj.section, Circle):
+        raise InputError(f'the scale study scales a circular cylinder; object {obj.name!r} is a '
+                         f'{obj.section.describe()}')
     position = np.array(obj.position_m, dtype=np.float64)
     position[2] = radius_m
     mass = obj.mass_kg if constant_mass else obj.mass_kg * (radius_m / obj.radius_m) ** 2
     return dataclasses.replace(config, object=dataclasses.replace(
-        obj, radius_m=float(radius_m), position_m=position, mass_kg=float(mass)))
+        obj, section=Circle(float(radius_m)), position_m=position, mass_kg=float(mass)))
 
 
 def torque_stiffness(analyzer: LiftAnalyzer, delta_theta_p: float) -> float:

@@ -4,8 +4,10 @@ With the object held fixed, a displacement ``delta_theta_p`` of the position joi
 and the compliant joint turns by ``delta_theta_s`` so that the distal link keeps touching the
 object: the contact point lies on both surfaces (eq. 2), is the same point seen from the object
 and from the finger (eq. 3) and the surface normals are opposite (eq. 4). For a capsule link
-and a cylinder with parallel axes these three conditions reduce to one scalar equation,
-``gap(theta_s, theta_p) = 0`` (:func:`dam_analysis.model.distal_gap`), solved by Newton's method.
+and a convex column with parallel axes these three conditions reduce to one scalar equation,
+``gap(theta_s, theta_p) = 0`` (:func:`dam_analysis.model.distal_gap`), solved by Newton's method:
+the contact is the closest pair of the distal segment and the cross-section, on a polygon's
+vertex or face, on an ellipse or a disc anywhere. The circle keeps closed-form fast paths.
 
 The physical solution branch is followed by continuation from the first contact
 (``delta_theta_p = 0``, ``delta_theta_s = 0``) on a fine grid (:class:`SpcmPath`, built once);
@@ -30,7 +32,13 @@ import numpy as np
 
 from dam_analysis.branch_end import END_RANGE, BranchEnd, locate_branch_end, solve_bracketed
 from dam_analysis.errors import NoSolutionError
-from dam_analysis.model import FingerGeometry, HandModel, distal_gap, joint_positions
+from dam_analysis.model import (
+    FingerGeometry,
+    HandModel,
+    distal_gap,
+    joint_positions,
+    segment_contact,
+)
 
 #: Grid step of the cached continuation path [rad].
 PATH_STEP_RAD = math.radians(0.05)
@@ -88,12 +96,18 @@ def contact_state(geometry: FingerGeometry, theta_s: float, theta_l: float, thet
     """Contact point, normals and SPCM rate for a posture that satisfies eqs. 2-4."""
     joints = joint_positions(geometry, theta_s, theta_l, theta_p)
     q, tip = joints[2], joints[3]
-    c = geometry.object_center
-    ab = tip - q
-    t = min(1.0, max(0.0, float((c - q) @ ab) / float(ab @ ab)))
-    closest = q + t * ab
-    n_uz = (closest - c) / float(np.linalg.norm(closest - c))
-    p_uz = c + geometry.object_radius * n_uz
+    if geometry.is_circle:
+        c = geometry.object_center
+        ab = tip - q
+        t = min(1.0, max(0.0, float((c - q) @ ab) / float(ab @ ab)))
+        closest = q + t * ab
+        n_uz = (closest - c) / float(np.linalg.norm(closest - c))
+        p_uz = c + geometry.object_radius * n_uz
+    else:
+        sd = segment_contact(geometry, float(q[0]), float(q[1]), float(tip[0]), float(tip[1]))
+        t = sd.t
+        closest, n_uz = np.array(sd.segment_point), np.array(sd.normal)
+        p_uz = np.array(sd.section_point)
     # implicit differentiation of gap(theta_s, theta_p) = 0 (envelope theorem, both derivatives
     # are the normal component of the rigid-rotation velocity of the closest segment point)
     g_s = float(n_uz @ np.array([-closest[1], closest[0]]))
@@ -144,10 +158,15 @@ def posture_problem(geometry: FingerGeometry, theta_s: float, theta_l: float, th
     clearance = geometry.base_height + min(0.0, z1, z2, z3) - geometry.link_radius
     if clearance < 0.0:
         return f'the finger passes {-clearance * 1e3:.3f} mm through the table'
-    cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
-    reach = geometry.object_radius + geometry.link_radius
-    d1 = _segment_distance(0.0, 0.0, u1, z1, cu, cz)[0]
-    d2 = _segment_distance(u1, z1, u2, z2, cu, cz)[0]
+    if geometry.is_circle:
+        cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
+        reach = geometry.object_radius + geometry.link_radius
+        d1 = _segment_distance(0.0, 0.0, u1, z1, cu, cz)[0]
+        d2 = _segment_distance(u1, z1, u2, z2, cu, cz)[0]
+    else:  # distances to the section itself: the reach is the capsule radius
+        reach = geometry.link_radius
+        d1 = segment_contact(geometry, 0.0, 0.0, u1, z1).distance
+        d2 = segment_contact(geometry, u1, z1, u2, z2).distance
     if min(d1, d2) - reach < -1e-9:
         return (f'a proximal link penetrates the object by {(reach - min(d1, d2)) * 1e3:.3f} '
                 'mm (contact would move off the distal link)')
@@ -164,6 +183,9 @@ def plane_contact(geometry: FingerGeometry, theta_s: float, theta_l: float, thet
     object's outward unit normal n_CB.
     """
     _, _, u2, z2, u3, z3 = plane_joints(geometry, theta_s, theta_l, theta_p)
+    if not geometry.is_circle:
+        sd = segment_contact(geometry, u2, z2, u3, z3)
+        return (*sd.section_point, *sd.normal, sd.t >= 1.0 - 1e-12)
     cu, cz = float(geometry.object_center[0]), float(geometry.object_center[1])
     abu, abz = u3 - u2, z3 - z2
     t = min(1.0, max(0.0, ((cu - u2) * abu + (cz - z2) * abz) / (abu * abu + abz * abz)))
@@ -308,6 +330,8 @@ class SpcmPath:
         guess = nodes[j] + frac * (nodes[j + 1] - nodes[j]) if frac > 0.0 else nodes[j]
         if not math.isfinite(guess):
             guess = nodes[j]
+        if not self.geometry.is_circle:
+            return self._section_state(delta_theta_p, guess)
         l1, l2, l3, cu, cz, radius, reach_gap, theta_l, theta_p0 = self._consts
         theta_p = theta_p0 + delta_theta_p
         sin, cos = math.sin, math.cos
@@ -361,6 +385,24 @@ class SpcmPath:
             raise NoSolutionError(f'finger {self.index + 1} at delta_theta_p = '
                                   f'{math.degrees(delta_theta_p):.4f} deg: {problem}')
         return (sol, *state)
+
+    def _section_state(self, delta_theta_p: float, guess: float
+                       ) -> tuple[float, float, float, float, float, bool]:
+        """:meth:`plane_state` of a non-circular section: Newton's method of
+        :func:`newton_theta_s` from ``guess``, the checks of :func:`posture_problem` and the
+        contact of :func:`plane_contact` (the circle's scalar twins do not apply)."""
+        model = self.model
+        theta_p = model.theta_p0 + delta_theta_p
+        sol = newton_theta_s(self.geometry, model.theta_l0, theta_p, guess)
+        if sol is None or abs(sol - guess) > 10.0 * self.step:
+            raise NoSolutionError(f'finger {self.index + 1}: Newton failed at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.4f} deg')
+        sol = self.theta_s0 if delta_theta_p == 0.0 else min(sol, self.theta_s0)
+        problem = self._problem(sol, delta_theta_p)
+        if problem is not None:
+            raise NoSolutionError(f'finger {self.index + 1} at delta_theta_p = '
+                                  f'{math.degrees(delta_theta_p):.4f} deg: {problem}')
+        return (sol, *plane_contact(self.geometry, sol, model.theta_l0, theta_p))
 
     def _tail_state(self, delta_theta_p: float
                     ) -> tuple[float, float, float, float, float, bool]:
@@ -417,6 +459,10 @@ class SpcmPath:
     def _checked_contact(self, theta_s: float, theta_p: float
                          ) -> tuple[float, float, float, float, bool] | None:
         """:func:`plane_contact` of a posture, None where :func:`posture_problem` objects."""
+        if not self.geometry.is_circle:
+            if self._problem(theta_s, theta_p - self.model.theta_p0) is not None:
+                return None
+            return plane_contact(self.geometry, theta_s, self._consts[7], theta_p)
         u1, z1, u2, z2, u3, z3 = plane_joints(self.geometry, theta_s, self._consts[7], theta_p)
         if not self._posture_ok(theta_s, theta_p, u1, z1, u2, z2, z3):
             return None

@@ -12,6 +12,7 @@ This module is pure Python (numpy and PyYAML); it does not import rclpy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -22,6 +23,14 @@ from typing import Any
 import numpy as np
 import yaml
 
+from dam_common.cross_section import (
+    Circle,
+    ConvexPolygon,
+    CrossSection,
+    Ellipse,
+    check_convex_polygon,
+    regular_polygon,
+)
 from dam_common.errors import ConfigError
 from dam_common.strict_yaml import safe_load_unique
 
@@ -97,14 +106,40 @@ class HandConfig:
 
 @dataclass(frozen=True)
 class ObjectConfig:
-    """The cylinder lying on the table."""
+    """A column object lying on the table (one entry of the ``object.library``).
 
-    shape: str
-    radius_m: float
+    ``section`` is its cross-section in the plane normal to ``axis``
+    (:mod:`dam_common.cross_section`: ``x`` along ``axis x z``, ``z`` up, origin at the
+    centroid), in the pose it rests in; ``position_m`` is the centroid resting on the table.
+    """
+
+    name: str
+    shape: str  # 'circle', 'ellipse', 'regular_polygon' or 'convex_polygon' (the YAML's)
+    section: CrossSection
     length_m: float
     mass_kg: float
-    position_m: np.ndarray  # (3,) centre of gravity [m]
+    position_m: np.ndarray  # (3,) centre of gravity [m], resting on the table
     axis: np.ndarray  # (3,) unit axis, horizontal
+
+    @property
+    def radius_m(self) -> float:
+        """Radius of a circular cylinder [m].
+
+        Raises
+        ------
+        ConfigError
+            The object is not a circular cylinder.
+        """
+        if not isinstance(self.section, Circle):
+            raise ConfigError(f'object {self.name!r} is a {self.section.describe()}, not a '
+                              'circular cylinder: it has no radius')
+        return self.section.radius
+
+    @property
+    def section_x(self) -> np.ndarray:
+        """(3,) world direction of the section's ``x`` axis: ``axis x z``."""
+        x = np.cross(self.axis, [0.0, 0.0, 1.0])
+        return x / float(np.linalg.norm(x))
 
 
 @dataclass(frozen=True)
@@ -215,6 +250,24 @@ class DamConfig:
     sim: SimConfig
     device: DeviceConfig
     source: str = field(default='<dict>')
+    #: Every object of ``object.library`` by name; :attr:`object` is the configured default.
+    objects: Mapping[str, ObjectConfig] = field(default_factory=dict)
+
+    def with_object(self, name: str) -> DamConfig:
+        """The same configuration with the library object ``name`` in place of the default
+        (an empty name keeps the default).
+
+        Raises
+        ------
+        ConfigError
+            No object of that name in the library (the message lists the names).
+        """
+        if name == '' or name == self.object.name:
+            return self
+        if name not in self.objects:
+            raise ConfigError(f'object {name!r} is not in the object library '
+                              f'(known: {", ".join(sorted(self.objects))})')
+        return dataclasses.replace(self, object=self.objects[name])
 
     @property
     def object_weight_n(self) -> float:
@@ -291,7 +344,8 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
     root.only_keys({'format_version', 'hand', 'object', 'contact', 'task', 'controller',
                     'classification', 'sim', 'device'})
     hand = _hand(root.child('hand'))
-    obj = _object(root.child('object'))
+    objects, default = _objects(root.child('object'))
+    obj = objects[default]
     contact = _contact(root.child('contact'))
     task = _task(root.child('task'), hand)
     controller = _controller(root.child('controller'))
@@ -299,7 +353,8 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
     sim = _sim(root.child('sim'), hand)
     device = _device(root.child('device'))
     return DamConfig(hand=hand, object=obj, contact=contact, task=task, controller=controller,
-                     classification=classification, sim=sim, device=device, source=source)
+                     classification=classification, sim=sim, device=device, source=source,
+                     objects=objects)
 
 
 # --------------------------------------------------------------------------------------------
@@ -362,12 +417,19 @@ def _hand(node: _Node) -> HandConfig:
                       initial_position_angle_rad=pos_rad)
 
 
-def _object(node: _Node) -> ObjectConfig:
-    node.only_keys({'shape', 'radius_m', 'length_m', 'mass_kg', 'position_m', 'axis'})
-    shape = node.child('shape').string()
-    if shape != 'cylinder':
-        raise node.child('shape').error(f'only "cylinder" is supported, got {shape!r}')
-    radius = node.child('radius_m').number(positive=True)
+#: Most vertices a convex polygon in the object library may have.
+_MAX_POLYGON_VERTICES = 256
+_SHAPE_KEYS = {
+    'circle': {'radius_m'},
+    'ellipse': {'semi_axes_m'},
+    'regular_polygon': {'sides', 'across_flats_m'},
+    'convex_polygon': {'vertices_m'},
+}
+
+
+def _objects(node: _Node) -> tuple[dict[str, ObjectConfig], str]:
+    """The object library and the name of the default object."""
+    node.only_keys({'default', 'position_m', 'axis', 'library'})
     axis_node = node.child('axis')
     axis = axis_node.vector(3)
     norm = float(np.linalg.norm(axis))
@@ -375,17 +437,77 @@ def _object(node: _Node) -> ObjectConfig:
         raise axis_node.error('axis must not be the zero vector')
     axis = axis / norm
     if abs(axis[2]) > 1e-9:
-        raise axis_node.error(f'the cylinder must lie on the table (horizontal axis), got '
+        raise axis_node.error(f'the object must lie on the table (horizontal axis), got '
                               f'{axis_node.raw!r}')
-    position_node = node.child('position_m')
-    position = position_node.vector(3)
-    if position[2] < radius - 1e-12:
-        raise position_node.error(f'z = {position[2]!r} puts the cylinder into the table '
-                                  f'(radius {radius!r} m)')
-    return ObjectConfig(shape=shape, radius_m=radius,
+    place = node.child('position_m').vector(2)
+    library_node = node.child('library')
+    library = library_node.require_mapping()
+    if not library:
+        raise library_node.error('the object library is empty')
+    objects = {}
+    for key in library:
+        entry = library_node.child(str(key))
+        name = _Node(key, entry.path, entry.source).identifier()
+        objects[name] = _library_object(entry, name, axis, place)
+    default_node = node.child('default')
+    default = default_node.string()
+    if default not in objects:
+        raise default_node.error(f'{default!r} is not in object.library '
+                                 f'(known: {", ".join(objects)})')
+    return objects, default
+
+
+def _library_object(node: _Node, name: str, axis: np.ndarray, place: np.ndarray
+                    ) -> ObjectConfig:
+    """One named column object; its centroid stands at ``place`` (x, y), resting on the table."""
+    shape_node = node.child('shape')
+    shape = shape_node.string()
+    if shape not in _SHAPE_KEYS:
+        raise shape_node.error(f'unknown shape {shape!r} (known: {", ".join(_SHAPE_KEYS)})')
+    node.only_keys({'shape', 'length_m', 'mass_kg'} | _SHAPE_KEYS[shape])
+    section: CrossSection
+    if shape == 'circle':
+        section = Circle(node.child('radius_m').number(positive=True))
+    elif shape == 'ellipse':
+        axes_node = node.child('semi_axes_m')
+        a, b = axes_node.vector(2, positive=True)
+        if a < b:
+            raise axes_node.error(f'an elliptic column lies on its flat side: the horizontal '
+                                  f'semi-axis must be the larger, got {axes_node.raw!r}')
+        section = Ellipse(float(a), float(b))
+    elif shape == 'regular_polygon':
+        sides = node.child('sides').integer(minimum=3, maximum=_MAX_POLYGON_VERTICES)
+        section = regular_polygon(sides, node.child('across_flats_m').number(positive=True))
+    else:
+        section = _convex_polygon(node.child('vertices_m'), name)
+    position = np.array([float(place[0]), float(place[1]), section.rest_height])
+    return ObjectConfig(name=name, shape=shape, section=section,
                         length_m=node.child('length_m').number(positive=True),
                         mass_kg=node.child('mass_kg').number(positive=True),
                         position_m=position, axis=axis)
+
+
+def _convex_polygon(node: _Node, name: str) -> ConvexPolygon:
+    """A convex polygon from ``vertices_m``, resting stably on one of its faces as given."""
+    items = node.sequence()
+    if not 3 <= len(items) <= _MAX_POLYGON_VERTICES:
+        raise node.error(f'expected 3 to {_MAX_POLYGON_VERTICES} vertices, got {len(items)}')
+    vertices = np.array([node.item(k).vector(2) for k in range(len(items))])
+    try:
+        check_convex_polygon(vertices)
+    except ValueError as exc:
+        raise node.error(str(exc).removeprefix('vertices: ')) from exc
+    polygon = ConvexPolygon(vertices, f'convex polygon {name!r} of {len(items)} vertices')
+    v = polygon.vertices
+    scale = float(np.abs(v).max())
+    low = np.flatnonzero(v[:, 1] <= polygon.bottom + 1e-9 * scale)
+    if low.size < 2:
+        raise node.error('the polygon must rest on a face: its lowest z must be shared by two '
+                         f'vertices, got {node.raw!r}')
+    if not float(v[low, 0].min()) < 0.0 < float(v[low, 0].max()):
+        raise node.error('the polygon would tip over: its centroid does not stand above the '
+                         f'face it rests on, got {node.raw!r}')
+    return polygon
 
 
 def _contact(node: _Node) -> ContactConfig:

@@ -28,6 +28,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from dam_common.collector import ScheduledCollector
+from dam_common.config import DamConfig
 from dam_common.errors import DamCommonError
 from dam_common.parameter_services import harden_parameter_services
 from dam_common.shutdown import ShutdownRequest, StartupInterrupted, catch_signals
@@ -57,6 +58,27 @@ def declare_config_file(node: Node) -> str:
     return str(node.declare_parameter(
         'config_file', '',
         ParameterDescriptor(description=CONFIG_FILE_DESCRIPTION, read_only=True)).value)
+
+
+def declare_object(node: Node, config: DamConfig) -> DamConfig:
+    """Declare the read-only ``object`` parameter on ``node``; ``config`` with that object.
+
+    The value names an object of the configuration's ``object.library``; empty (the
+    default) keeps ``object.default``.
+
+    Raises
+    ------
+    ConfigError
+        The name is not in the library (the message lists the names).
+    """
+    name = str(node.declare_parameter(
+        'object', '',
+        ParameterDescriptor(
+            description='column object of the configuration\'s object.library (known: '
+                        f'{", ".join(config.objects)}); empty: object.default '
+                        f'({config.object.name})',
+            read_only=True)).value)
+    return config.with_object(name)
 
 
 def declare_thread_priority(node: Node, default: int = 50,

@@ -47,6 +47,9 @@ backend : string, read-only, one of auto, hardware, sim
     ``auto`` probes the device for ``device.probe_timeout_s`` and starts the simulated
     stand-in (``dam_sim_bridge sim_bridge``, a child process) when nothing answers;
     ``hardware`` never falls back; ``sim`` always starts the stand-in.
+object : string, read-only
+    The column object of the configuration's ``object.library`` a stand-in this driver starts
+    puts on the table (empty: ``object.default``); a real hand ignores it.
 thread_priority : int, read-only, in [0, 99], default 50
     ``SCHED_FIFO`` priority of the device-link thread, also passed to a stand-in it starts
     (0: normal scheduling); the node's other threads (executor, middleware) run one below it.
@@ -90,6 +93,7 @@ from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
+    declare_object,
     declare_thread_priority,
     run_node,
 )
@@ -273,7 +277,7 @@ class HandDriverNode(Node):
                 description='open the PyBullet window of a stand-in this driver starts (needs '
                             'a display)', read_only=True)).value)
         self._scheduling = 'not started'
-        self.config = load_config(config_file or None)
+        self.config = declare_object(self, load_config(config_file or None))
         dev = self.config.device
         hand = self.config.hand
         self.joint_names = list(hand.joint_names)
@@ -384,6 +388,7 @@ class HandDriverNode(Node):
                f'gui:={str(self._gui).lower()}']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
+        cmd += ['-p', f'object:={self.config.object.name}']
         # A session of its own: Ctrl-C in the terminal reaches the driver only, which stops the
         # stand-in itself (a signal in the stand-in's first milliseconds, before it handles
         # signals, would end it with a traceback); it dies with the driver however that dies.

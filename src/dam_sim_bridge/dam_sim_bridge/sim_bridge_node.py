@@ -9,7 +9,7 @@ is its client. The node adds what only a simulator has:
 Topics
 ------
 /sim/object_pose : geometry_msgs/PoseStamped
-    Ground-truth pose of the cylinder, frame ``world``, at ``pose_rate_hz``.
+    Ground-truth pose of the object (its centroid), frame ``world``, at ``pose_rate_hz``.
 /clock : rosgraph_msgs/Clock
     Simulated time, at ``pose_rate_hz``, when ``publish_clock`` is true.
 
@@ -27,6 +27,9 @@ Parameters
 ----------
 config_file : string, read-only
     DAM configuration file; empty: ``DAM_CONFIG`` or the installed ``config/dam.yaml``.
+object : string, read-only
+    The column object on the table, a name of the configuration's ``object.library`` (empty:
+    ``object.default``); its convex mesh is a prism of the cross-section.
 gui : bool, read-only
     Open the PyBullet window (also ``--gui`` on the command line); refused without a display.
 publish_clock : bool, read-only
@@ -59,6 +62,7 @@ from dam_common.config import load_config
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
+    declare_object,
     declare_thread_priority,
     run_node,
 )
@@ -113,7 +117,7 @@ class SimBridgeNode(Node):
         self._thread_priority = declare_thread_priority(self)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self._config = load_config(config_file or None)
+        self._config = declare_object(self, load_config(config_file or None))
         with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
             world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
             try:

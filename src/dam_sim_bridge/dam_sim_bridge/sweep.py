@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from dam_common.cross_section import ConvexPolygon
 from dam_sim_bridge.errors import SweepError
 
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
@@ -351,6 +352,8 @@ def config_values(config: Any) -> Any:
                 for f in dataclasses.fields(config) if f.name != 'source'}
     if isinstance(config, Mapping):
         return {str(k): config_values(v) for k, v in sorted(config.items())}
+    if isinstance(config, ConvexPolygon):
+        return {'vertices': config_values(config.vertices), 'name': config.name}
     if isinstance(config, (np.ndarray, list, tuple)):
         return [config_values(v) for v in np.asarray(config, dtype=object).tolist()]
     if isinstance(config, np.generic):

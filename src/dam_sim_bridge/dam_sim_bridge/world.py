@@ -24,11 +24,13 @@ Model
   the enveloping grasp (paper section 2: "lifting it up toward the palm, and firmly
   grasping"); without it a cylinder squeezed below its equator by constant finger torques
   squirts upward out of the hand. Its friction with the object is the fingers' ``tan(alpha)``.
-* The table is a static box whose top is the plane ``z = 0``; the cylinder (``object``) lies on
-  it with its axis along ``object.axis``. Its collision shape is a regular prism of
-  :attr:`WorldOptions.object_faces` faces tangent to the cylinder (zero collision margin), with
-  the solid cylinder's mass and inertia: Bullet's primitive cylinder creeps and rolls away on a
-  flat table by itself (about 0.17 m in 5 s), the prism rests.
+* The table is a static box whose top is the plane ``z = 0``; the column object (``object``,
+  one of the configuration's object library) lies on it with its axis along ``object.axis``.
+  Its collision shape is the convex mesh of a prism of its cross-section (zero collision
+  margin): a polygon's own vertices, a circle or an ellipse as
+  :attr:`WorldOptions.object_faces` faces tangent to it, with the homogeneous column's mass and
+  inertia (:func:`prism_inertia`). Bullet's primitive cylinder creeps and rolls away on a flat
+  table by itself (about 0.17 m in 5 s), the prism rests.
 * Friction. Bullet combines the lateral friction of two bodies by multiplying them. The finger
   links get ``tan(alpha)``, the object ``1.0`` and the table
   ``contact.table_friction_coefficient``, so finger-object = ``tan(alpha)`` and table-object =
@@ -113,6 +115,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from dam_common.cross_section import Circle, CrossSection
 from dam_common.scalars import clip
 from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
@@ -302,26 +305,62 @@ def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
     return (float(rot[0] * s), float(rot[1] * s), float(rot[2] * s), math.cos(math.pi / 4.0))
 
 
-def prism_vertices(radius_m: float, length_m: float, faces: int,
-                   face_angle_rad: float = 0.0) -> list[list[float]]:
-    """Vertices of a regular prism along z whose flat faces are tangent to the cylinder.
+def prism_vertices(section: CrossSection, length_m: float, faces: int) -> np.ndarray:
+    """Vertices (2m, 3) of the prism of ``section``'s outline in the object's body frame [m].
 
-    The inradius is ``radius_m``; one face's outward normal points at ``face_angle_rad`` in the
-    local xy plane (the face the prism rests on). The corners stick out by
-    ``radius_m * (1 / cos(pi / faces) - 1)``.
+    The body frame has its z axis along the column axis and, as :func:`_axis_quaternion` turns
+    it, its x axis along the section's ``x`` (``axis x z``) and its y axis straight down: a
+    section point ``(x, z)`` is the body point ``(x, -z, +-length/2)``. A circle or an ellipse
+    becomes ``faces`` faces tangent to it, one of them on the table
+    (:meth:`~dam_common.cross_section.CrossSection.outline`); a polygon keeps its vertices.
     """
-    corner = radius_m / math.cos(math.pi / faces)
+    outline = section.outline(faces)
     half = length_m / 2.0
-    angles = [face_angle_rad + math.pi * (2 * k + 1) / faces for k in range(faces)]
-    return [[corner * math.cos(a), corner * math.sin(a), z] for a in angles
-            for z in (-half, half)]
+    return np.array([[x, -z, w] for x, z in outline for w in (-half, half)], dtype=np.float64)
 
 
-def _down_angle(quaternion: Sequence[float]) -> float:
-    """Angle in the body's xy plane of the world's -z direction, for a body at ``quaternion``."""
-    rot = np.array(pybullet.getMatrixFromQuaternion(list(quaternion))).reshape(3, 3)
-    down = rot.T @ np.array([0.0, 0.0, -1.0])
-    return math.atan2(float(down[1]), float(down[0]))
+def prism_triangles(n_outline: int) -> list[int]:
+    """Triangle indices of the closed prism of :func:`prism_vertices` (outward winding)."""
+    tris: list[int] = []
+    for k in range(n_outline):
+        a0, a1 = 2 * k, 2 * k + 1
+        b0, b1 = 2 * ((k + 1) % n_outline), 2 * ((k + 1) % n_outline) + 1
+        tris += [a0, b0, b1, a0, b1, a1]
+    for k in range(1, n_outline - 1):
+        tris += [0, 2 * (k + 1), 2 * k]  # the end cap at -length/2
+        tris += [1, 2 * k + 1, 2 * (k + 1) + 1]  # the end cap at +length/2
+    return tris
+
+
+def prism_inertia(section: CrossSection, mass_kg: float, length_m: float
+                  ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """Principal inertia [kg*m^2] of the homogeneous prism of ``section`` about its centroid,
+    and the orientation (x, y, z, w) of its principal axes in the body frame of
+    :func:`prism_vertices` (a rotation about the body z axis; identity for a section symmetric
+    about its vertical axis).
+
+    With ``S_xx = int x^2 dA``, ``S_zz = int z^2 dA``, ``S_xz = int x z dA`` of the section
+    and the body point ``(x, -z, w)``: ``I_xx = m (S_zz / A + L^2 / 12)``,
+    ``I_yy = m (S_xx / A + L^2 / 12)``, ``I_zz = m (S_xx + S_zz) / A`` and the tensor's
+    ``xy`` entry ``m S_xz / A``.
+    """
+    area = section.area
+    s_xx, s_zz = section.second_moments
+    s_xz = section.product_moment
+    axial = length_m ** 2 / 12.0
+    i_xx = mass_kg * (s_zz / area + axial)
+    i_yy = mass_kg * (s_xx / area + axial)
+    i_zz = mass_kg * (s_xx + s_zz) / area
+    # the tensor's xy entry, -int x_b y_b dm with the body's y_b = -z
+    i_xy = mass_kg * s_xz / area
+    if abs(i_xy) <= 1e-12 * max(i_xx, i_yy):
+        return (i_xx, i_yy, i_zz), (0.0, 0.0, 0.0, 1.0)
+    # principal axes: the frame turned about z by beta, tan(2 beta) = 2 I_xy / (I_xx - I_yy)
+    beta = 0.5 * math.atan2(2.0 * i_xy, i_xx - i_yy)
+    c, s = math.cos(beta), math.sin(beta)
+    j_xx = c * c * i_xx + 2.0 * c * s * i_xy + s * s * i_yy
+    j_yy = s * s * i_xx - 2.0 * c * s * i_xy + c * c * i_yy
+    return (j_xx, j_yy, i_zz), (0.0, 0.0, math.sin(beta / 2.0), math.cos(beta / 2.0))
 
 
 def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
@@ -485,25 +524,29 @@ class HandWorld:
                                        rgbaColor=[0.6, 0.5, 0.4, 1.0])
         self.table_id = pb.createMultiBody(0.0, box, box_vis, basePosition=[0.0, 0.0, -hz])
         self.palm_id = self._build_palm()
-        # Object: the cylinder, local z along object.axis.
+        # Object: the column, local z along object.axis, a convex mesh of its cross-section.
         obj = self.config.object
-        cyl = pb.createCollisionShape(
-            pybullet.GEOM_MESH,
-            vertices=prism_vertices(obj.radius_m, obj.length_m, self.options.object_faces,
-                                    _down_angle(_axis_quaternion(obj.axis))))
-        cyl_vis = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=obj.radius_m,
-                                       length=obj.length_m, rgbaColor=[0.2, 0.4, 0.8, 1.0])
-        self.object_id = pb.createMultiBody(obj.mass_kg, cyl, cyl_vis,
+        vertices = prism_vertices(obj.section, obj.length_m, self.options.object_faces)
+        inertia, inertia_frame = prism_inertia(obj.section, obj.mass_kg, obj.length_m)
+        hull = pb.createCollisionShape(pybullet.GEOM_MESH, vertices=vertices.tolist())
+        if isinstance(obj.section, Circle):
+            visual = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=obj.section.radius,
+                                          length=obj.length_m, rgbaColor=[0.2, 0.4, 0.8, 1.0])
+        else:
+            visual = pb.createVisualShape(pybullet.GEOM_MESH, vertices=vertices.tolist(),
+                                          indices=prism_triangles(len(vertices) // 2),
+                                          rgbaColor=[0.2, 0.4, 0.8, 1.0])
+        self.object_id = pb.createMultiBody(obj.mass_kg, hull, visual,
                                             basePosition=obj.position_m.tolist(),
-                                            baseOrientation=_axis_quaternion(obj.axis))
+                                            baseOrientation=_axis_quaternion(obj.axis),
+                                            baseInertialFrameOrientation=inertia_frame)
         for body in (self.table_id, self.object_id):
             pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
                               rollingFriction=0.0, spinningFriction=0.0)
-        # Zero margin: the hull is the cylinder's true surface; exact solid-cylinder inertia
+        # Zero margin: the hull is the object's true surface; the homogeneous prism's inertia
         # (Bullet would use the hull's bounding box).
         pb.changeDynamics(self.object_id, -1, collisionMargin=0.0,
-                          localInertiaDiagonal=list(solid_cylinder_inertia(
-                              obj.mass_kg, obj.length_m, obj.radius_m)))
+                          localInertiaDiagonal=list(inertia))
         self._pb.setJointMotorControlArray(
             self.hand_id, self._joints.indices, pybullet.VELOCITY_CONTROL,
             forces=[0.0] * self.n_joints)

@@ -17,17 +17,21 @@ A real hand only measures joint angles (encoders) and joint torques (torque sens
    physically admissible centres: no finger penetrates the object, the object is above the
    table, and every finger touches the object on the *inner* (flexion) side of its nearest
    link -- under a positive (flexing) torque a finger that is at rest must be pushing against
-   the object, not resting on its outer side.
+   the object, not resting on its outer side. An object of another cross-section (a polygon,
+   an ellipse: its orientation is unknown once it rolls) is fitted by the circle of the mean
+   of its inradius and circumradius; its boundary strays from that circle by at most half
+   their difference, ``radius_spread``.
 2. **In contact** (``contact``): every finger's distance residual ``|d_i - rho|`` is at most
-   ``contact_tolerance``.
+   ``contact_tolerance`` (plus ``radius_spread``).
 3. **Load held** (``load_held``): every compliant-joint torque is at least
    ``load_torque_threshold`` (flexion), and no compliant or position joint is within
    ``limit_margin`` of a joint limit (a finger closing on empty space ends at its limit).
 4. **Lifted** (``lifted``): the estimated centre is at least ``lift_height`` above its
    initial height (object resting on the table).
 5. **Enveloped** (``enveloped``): the object is caged by the fingers -- every fingertip lies
-   at least ``cage_depth_ratio * r`` below the object's centre, and the free gap between the
-   innermost fingertips of the two opposing sides is smaller than the object's diameter, so
+   at least ``cage_depth_ratio * r`` below the object's centre (``r`` the inradius), and the
+   free gap between the innermost fingertips of the two opposing sides is smaller than the
+   object's narrowest width (a cylinder's diameter), so
    it cannot drop out without the fingers opening (paper Fig. 6(d)).
 
 ``SUCCESS`` = contact and load held and lifted and enveloped; ``LIFTED_DAM_FAILED`` = contact
@@ -77,11 +81,20 @@ class HandGeometry:
     inward_sign
         (n,) +1 if the finger closes towards +u, -1 towards -u.
     object_radius
-        Cylinder radius [m].
+        Radius of the circle fitted to the object [m]: a cylinder's radius; for any other
+        cross-section the mean of its inradius and circumradius.
     object_z0
-        Height of the cylinder's centre resting on the table [m].
+        Height of the object's centroid resting on the table [m].
     table_z
         Height of the table top [m].
+    radius_spread
+        Half the difference of the section's circumradius and inradius [m] (zero for a
+        cylinder): how far the section's boundary strays from the fitted circle. It widens
+        the contact tolerance, and the inradius ``object_radius - radius_spread`` is the
+        depth the cage is measured in and the lowest centre height admitted.
+    object_width
+        Narrowest width of the section [m] (the diameter of a cylinder; NaN: twice
+        ``object_radius``): an opening narrower than it keeps the object caged.
     """
 
     link_lengths: np.ndarray
@@ -91,6 +104,8 @@ class HandGeometry:
     object_radius: float
     object_z0: float
     table_z: float = 0.0
+    radius_spread: float = 0.0
+    object_width: float = math.nan
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'link_lengths',
@@ -112,6 +127,13 @@ class HandGeometry:
                            finite_scalar('object_radius', self.object_radius, positive=True))
         object.__setattr__(self, 'object_z0', finite_scalar('object_z0', self.object_z0))
         object.__setattr__(self, 'table_z', finite_scalar('table_z', self.table_z))
+        spread = finite_scalar('radius_spread', self.radius_spread)
+        if not 0.0 <= spread < self.object_radius:
+            raise InputError(f'radius_spread must lie in [0, object_radius), got {spread!r}')
+        object.__setattr__(self, 'radius_spread', spread)
+        width = 2.0 * self.object_radius if math.isnan(self.object_width) else \
+            finite_scalar('object_width', self.object_width, positive=True)
+        object.__setattr__(self, 'object_width', width)
 
     @classmethod
     def from_config(cls, config: DamConfig) -> HandGeometry:
@@ -134,10 +156,14 @@ class HandGeometry:
             base.append([float(np.dot(finger.base_position_m, e_u)),
                          float(finger.base_position_m[2])])
             sign.append(math.copysign(1.0, s))
+        section = config.object.section
         return cls(link_lengths=np.asarray(config.hand.link_lengths_m, dtype=np.float64),
                    link_radius=config.hand.link_radius_m, base_uz=np.array(base),
-                   inward_sign=np.array(sign), object_radius=config.object.radius_m,
-                   object_z0=float(config.object.position_m[2]))
+                   inward_sign=np.array(sign),
+                   object_radius=0.5 * (section.inradius + section.circumradius),
+                   object_z0=float(config.object.position_m[2]),
+                   radius_spread=0.5 * (section.circumradius - section.inradius),
+                   object_width=section.min_width)
 
     @property
     def n_fingers(self) -> int:
@@ -147,6 +173,11 @@ class HandGeometry:
     def contact_distance(self) -> float:
         """``rho = r + r_l``: distance of the object centre from a touching link's axis [m]."""
         return self.object_radius + self.link_radius
+
+    @property
+    def inradius(self) -> float:
+        """``object_radius - radius_spread``: the section's inradius [m]."""
+        return self.object_radius - self.radius_spread
 
 
 def finger_points(geometry: HandGeometry, positions: np.ndarray) -> np.ndarray:
@@ -248,7 +279,7 @@ def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
     pts = finger_points(geometry, positions)
     normals = _link_inner_normals(geometry, positions)
     rho = geometry.contact_distance
-    r = geometry.object_radius
+    r = geometry.inradius
     lo = pts.reshape(-1, 2).min(axis=0) - rho
     hi = pts.reshape(-1, 2).max(axis=0) + rho
     lo[1] = max(lo[1], geometry.table_z + r)
@@ -361,7 +392,7 @@ def _enveloped(geometry: HandGeometry, pts: np.ndarray, centre: np.ndarray,
     tip_plus_side = float(tips[plus, 0].max())  # fingers coming from -u: their largest u
     tip_minus_side = float(tips[~plus, 0].min())  # fingers coming from +u: their smallest u
     gap = tip_minus_side - tip_plus_side - 2.0 * geometry.link_radius
-    return gap < 2.0 * geometry.object_radius
+    return gap < geometry.object_width
 
 
 def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.ndarray,
@@ -397,7 +428,7 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     hi = finite_vector('upper', upper, 3 * n)
     est = estimate_object(geometry, q)
     pts = finger_points(geometry, q)
-    contact = est.found and est.max_residual <= s.contact_tolerance
+    contact = est.found and est.max_residual <= s.contact_tolerance + geometry.radius_spread
     moving = np.zeros(3 * n, dtype=bool)
     moving[0::3] = True
     moving[2::3] = True
@@ -407,7 +438,7 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     lift = float(est.centre[1] - geometry.object_z0) if est.found else math.nan
     lifted = bool(est.found and lift >= s.lift_height)
     enveloped = bool(contact and _enveloped(geometry, pts, est.centre,
-                                            s.cage_depth_ratio * geometry.object_radius))
+                                            s.cage_depth_ratio * geometry.inradius))
     if contact and load_held and lifted:
         outcome = Outcome.SUCCESS if enveloped else Outcome.LIFTED_DAM_FAILED
     else:

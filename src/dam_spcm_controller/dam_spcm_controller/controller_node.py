@@ -24,7 +24,10 @@ Topics and services
 
 Parameters
 ----------
-See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only), ``require_lift_guarantee``
+See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only), ``object`` (read-only, a name
+of the configuration's ``object.library``, empty: ``object.default``: the object the outcome is
+classified for and ``/check_lift`` is asked about; give the stand-in the same),
+``require_lift_guarantee``
 (bool) and ``impedance_on_device`` (bool, default ``controller.impedance_on_device`` of the
 configuration, true): the compliant joints are commanded in MODE_IMPEDANCE (per-finger
 ``k_theta_i``, ``theta_0``, the ``damping`` parameter) and the device runs the impedance law at
@@ -34,8 +37,8 @@ MODE_TORQUE; ``envelope_constant_torque`` (bool, default false): ENVELOPE applie
 SPCM impedance (in simulation the constant torque pushes the lifted object out of the hand:
 ``docs/simulation_grasp.md``); ``thread_priority`` (int, read-only, default 45, 0: off): every
 thread of the node (middleware and executor) runs under ``SCHED_FIFO`` at that priority where
-permitted, below the driver's device thread. All but ``config_file`` and ``thread_priority``
-may be changed while no grasp runs.
+permitted, below the driver's device thread. All but ``config_file``, ``object`` and
+``thread_priority`` may be changed while no grasp runs.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
+    declare_object,
     declare_thread_priority,
     run_node,
 )
@@ -141,7 +145,7 @@ class SpcmControllerNode(Node):
         config_file = declare_config_file(self)
         self._thread_priority = declare_thread_priority(
             self, default=_THREAD_PRIORITY, what='every thread of the controller')
-        self._config = load_config(config_file or None)
+        self._config = declare_object(self, load_config(config_file or None))
         self._base_params = SequenceParams.from_config(self._config)
         self._layout = self._base_params.layout
         self._geometry = HandGeometry.from_config(self._config)
@@ -608,6 +612,7 @@ class SpcmControllerNode(Node):
         request.k_theta = [k]
         request.delta_theta_p = [dp]
         request.friction_angle = CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG
+        request.object = self._config.object.name
         answer: Future = Future()
         deadline = time.monotonic() + self._values['check_lift_timeout']
         sent = []

@@ -48,6 +48,7 @@ def lift_answer(response: CheckLift.Response) -> LiftAnswer:
     answer.within_torque_limit = bool(response.within_torque_limit)
     answer.csm_penetration = [float(v) for v in response.csm_penetration]
     answer.csm_in_domain = bool(response.csm_in_domain)
+    answer.object = response.object
     return answer
 
 
