@@ -50,10 +50,18 @@ def test_an_invalid_config_file_is_refused_by_key(tmp_path: Path, package: str,
     text = (repo / 'config' / 'dam.yaml').read_text(encoding='utf-8')
     bad = tmp_path / 'dam.yaml'
     data = yaml.safe_load(text)
-    data['object']['radius_m'] = -0.01
+    data['object']['library']['cylinder']['radius_m'] = -0.01
     bad.write_text(yaml.safe_dump(data), encoding='utf-8')
     proc = _start(package, executable, '-p', f'config_file:={bad}')
-    _assert_refused(proc, status, 'radius_m', '-0.01')
+    _assert_refused(proc, status, 'object.library.cylinder.radius_m', '-0.01')
+
+
+@pytest.mark.parametrize(('package', 'executable', 'status'), [
+    node for node in NODES if node[1] in ('hand_driver', 'sim_bridge', 'spcm_controller')])
+def test_an_object_outside_the_library_is_refused_by_name(package: str, executable: str,
+                                                          status: int) -> None:
+    proc = _start(package, executable, '-p', 'object:=pencil')
+    _assert_refused(proc, status, "'pencil' is not in the object library", 'hex_pencil')
 
 
 @pytest.mark.parametrize(('package', 'executable', 'override', 'word'), [

@@ -148,7 +148,8 @@ class SimBridgeNode(Node):
         self.get_logger().info(
             f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '
             f'states to port {dev.state_port} at {dev.rate_hz:g} Hz '
-            f'({self._device.steps_per_cycle} physics steps per cycle), config '
+            f'({self._device.steps_per_cycle} physics steps per cycle), object '
+            f'{self._config.object.name} ({self._config.object.section.describe()}), config '
             f'{self._config.source}{", GUI" if gui else ""}')
 
     # ---------------------------------------------------------------------------------------

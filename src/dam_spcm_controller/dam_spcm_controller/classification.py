@@ -18,11 +18,11 @@ A real hand only measures joint angles (encoders) and joint torques (torque sens
    table, and every finger touches the object on the *inner* (flexion) side of its nearest
    link -- under a positive (flexing) torque a finger that is at rest must be pushing against
    the object, not resting on its outer side. An object of another cross-section (a polygon,
-   an ellipse: its orientation is unknown once it rolls) is fitted by the circle of the mean
-   of its inradius and circumradius; its boundary strays from that circle by at most half
-   their difference, ``radius_spread``.
-2. **In contact** (``contact``): every finger's distance residual ``|d_i - rho|`` is at most
-   ``contact_tolerance`` (plus ``radius_spread``).
+   an ellipse) may have turned as it rolled: its centre *and* its orientation ``psi`` are
+   fitted, with ``d_i`` the distance from the finger's links to the turned section
+   (:func:`estimate_section`).
+2. **In contact** (``contact``): every finger's distance residual is at most
+   ``contact_tolerance``.
 3. **Load held** (``load_held``): every compliant-joint torque is at least
    ``load_torque_threshold`` (flexion), and no compliant or position joint is within
    ``limit_margin`` of a joint limit (a finger closing on empty space ends at its limit).
@@ -51,6 +51,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dam_common.cross_section import Circle, CrossSection
 from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.errors import InputError
 
@@ -95,6 +96,9 @@ class HandGeometry:
     object_width
         Narrowest width of the section [m] (the diameter of a cylinder; NaN: twice
         ``object_radius``): an opening narrower than it keeps the object caged.
+    section
+        The cross-section in the plane (``u``, ``z``; its own frame in the pose it rests in),
+        None for a cylinder (the closed forms of a disc apply).
     """
 
     link_lengths: np.ndarray
@@ -106,6 +110,7 @@ class HandGeometry:
     table_z: float = 0.0
     radius_spread: float = 0.0
     object_width: float = math.nan
+    section: CrossSection | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'link_lengths',
@@ -157,13 +162,15 @@ class HandGeometry:
                          float(finger.base_position_m[2])])
             sign.append(math.copysign(1.0, s))
         section = config.object.section
+        # the plane's u axis is axis x z, the section's x axis: no mirror
         return cls(link_lengths=np.asarray(config.hand.link_lengths_m, dtype=np.float64),
                    link_radius=config.hand.link_radius_m, base_uz=np.array(base),
                    inward_sign=np.array(sign),
                    object_radius=0.5 * (section.inradius + section.circumradius),
                    object_z0=float(config.object.position_m[2]),
                    radius_spread=0.5 * (section.circumradius - section.inradius),
-                   object_width=section.min_width)
+                   object_width=section.min_width,
+                   section=None if isinstance(section, Circle) else section)
 
     @property
     def n_fingers(self) -> int:
@@ -246,10 +253,14 @@ class ObjectEstimate:
         (2,) estimated centre ``(u, z)`` [m]; NaN if no admissible centre exists.
     residuals
         (n,) ``d_i - rho`` per finger [m] (NaN if no admissible centre).
+    orientation
+        Angle the section has turned by from its resting pose [rad] (about the object axis,
+        from ``u`` towards ``z``); NaN for a cylinder.
     """
 
     centre: np.ndarray
     residuals: np.ndarray
+    orientation: float = math.nan
 
     @property
     def found(self) -> bool:
@@ -316,6 +327,137 @@ def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
             step /= 2.0
     d, _ = _distances(pts, normals, centre[None, :])
     return ObjectEstimate(centre, d[0] - rho)
+
+
+#: Orientations of the section :func:`estimate_section` fits the centre at (every 5 deg).
+_SECTION_ANGLES = 72
+
+
+def _section_distances(geometry: HandGeometry, pts: np.ndarray, normals: np.ndarray,
+                       centre: np.ndarray, psi: float) -> tuple[np.ndarray, bool]:
+    """Distance from each finger's nearest link axis to the section turned by ``psi`` about
+    ``centre``, ``(n,)`` [m], and whether the pose is admissible (every finger on the inner
+    side of its nearest link, the section above the table, or in it by at most 2 % of
+    ``rho`` as a simulated object sinks a little)."""
+    section = geometry.section
+    assert section is not None
+    c, s = math.cos(psi), math.sin(psi)
+    cu, cz = float(centre[0]), float(centre[1])
+    # lowest point: the support along world -z, seen in the section's frame
+    low_u, low_z = section.support(-s, -c)  # world (0, -1) turned by -psi
+    if cz + s * low_u + c * low_z < geometry.table_z - 0.02 * geometry.contact_distance:
+        return np.full(pts.shape[0], math.nan), False
+    d = np.empty(pts.shape[0])
+    for i in range(pts.shape[0]):
+        best, inner = math.inf, False
+        for k in range(3):
+            au, az = pts[i, k, 0] - cu, pts[i, k, 1] - cz
+            bu, bz = pts[i, k + 1, 0] - cu, pts[i, k + 1, 1] - cz
+            # into the section's frame: turn by -psi
+            sd = section.segment_distance(c * au + s * az, -s * au + c * az,
+                                          c * bu + s * bz, -s * bu + c * bz)
+            if sd.distance < best:
+                nu, nz = sd.normal
+                world_n = (c * nu - s * nz, s * nu + c * nz)
+                best = sd.distance
+                # the object lies on the inner side: the link's inner normal points at it
+                inner = float(normals[i, k, 0] * world_n[0] + normals[i, k, 1] * world_n[1]) < 0
+        d[i] = best
+        if not inner:
+            return d, False
+    return d, True
+
+
+def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
+                     contact_tolerance: float = 2e-3, tolerance: float = 1e-6
+                     ) -> ObjectEstimate:
+    """Fit a non-circular section to the finger posture: the lowest pose the joints allow.
+
+    The joints do not fix a turned section's pose: fingers 2 and 3 stand side by side, so the
+    plane holds two contact conditions (finger 1 and the pair) for three unknowns, the centre
+    ``(u, z)`` and the orientation ``psi``. For every 5 deg of ``psi`` the centre is fitted
+    (least squares of ``d_i - r_l``, a pattern search down to ``tolerance`` [m] from the
+    circle fit's centre and from the section resting on the table below it; admissible: no
+    finger penetrates by more than ``contact_tolerance`` (a simulated or soft contact sinks
+    in), every finger on the inner side of its nearest link, the section above the table).
+    Of the poses whose residuals are all within
+    ``contact_tolerance`` [m] the lowest is taken -- "lifted" then holds only when every pose
+    the joints allow is lifted; without such a pose, the best fit.
+
+    Parameters
+    ----------
+    geometry
+        Hand and object geometry with a ``section``.
+    positions
+        (3n,) joint angles [rad].
+
+    Raises
+    ------
+    InputError
+        ``geometry`` has no section (use :func:`estimate_object`).
+    """
+    if geometry.section is None:
+        raise InputError('estimate_section needs a geometry with a section')
+    first = estimate_object(geometry, positions)
+    n = geometry.n_fingers
+    if not first.found:
+        return first
+    pts = finger_points(geometry, positions)
+    normals = _link_inner_normals(geometry, positions)
+    r_l = geometry.link_radius
+    pen_tol = contact_tolerance
+    moves = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]],
+                     dtype=np.float64)
+
+    def cost(centre: np.ndarray, psi: float) -> float:
+        d, ok = _section_distances(geometry, pts, normals, centre, psi)
+        if not ok or np.any(d < r_l - pen_tol):
+            return math.inf
+        return float(np.sum((d - r_l) ** 2))
+
+    def fit(centre: np.ndarray, psi: float) -> tuple[np.ndarray, float]:
+        value = cost(centre, psi)
+        step = 1e-3 if not math.isfinite(value) else 2.5e-4
+        if not math.isfinite(value):  # find an admissible start on a coarse ring first
+            for radius in (1e-3, 2e-3, 4e-3):
+                for move in moves:
+                    trial = centre + radius * move
+                    c = cost(trial, psi)
+                    if c < value:
+                        best, value = trial, c
+                if math.isfinite(value):
+                    centre = best
+                    break
+            if not math.isfinite(value):
+                return centre, value
+        while step >= tolerance:
+            values = [cost(centre + step * move, psi) for move in moves]
+            k = int(np.argmin(values))
+            if values[k] < value:
+                centre, value = centre + step * moves[k], values[k]
+            else:
+                step /= 2.0
+        return centre, value
+
+    section = geometry.section
+    poses = []
+    for psi in np.arange(_SECTION_ANGLES) * (2.0 * math.pi / _SECTION_ANGLES):
+        psi = float(psi)
+        # two starts: the circle fit's centre, and below it the section resting on the table
+        # (the lowest pose is wanted, and a higher local fit must not hide it)
+        low_u, low_z = section.support(-math.sin(psi), -math.cos(psi))
+        resting = geometry.table_z - (math.sin(psi) * low_u + math.cos(psi) * low_z)
+        for start in (first.centre, np.array([first.centre[0], resting])):
+            centre, value = fit(start.copy(), psi)
+            if math.isfinite(value):
+                d, _ = _section_distances(geometry, pts, normals, centre, psi)
+                poses.append((float(np.max(np.abs(d - r_l))), float(centre[1]), value,
+                              centre.copy(), psi, d - r_l))
+    if not poses:
+        return ObjectEstimate(np.full(2, np.nan), np.full(n, np.nan))
+    fitting = [p for p in poses if p[0] <= contact_tolerance]
+    chosen = min(fitting, key=lambda p: p[1]) if fitting else min(poses, key=lambda p: p[2])
+    return ObjectEstimate(chosen[3], chosen[5], chosen[4])
 
 
 @dataclass(frozen=True)
@@ -426,9 +568,10 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     tau = finite_vector('efforts', efforts, 3 * n)
     lo = finite_vector('lower', lower, 3 * n)
     hi = finite_vector('upper', upper, 3 * n)
-    est = estimate_object(geometry, q)
+    est = estimate_object(geometry, q) if geometry.section is None else \
+        estimate_section(geometry, q, contact_tolerance=s.contact_tolerance)
     pts = finger_points(geometry, q)
-    contact = est.found and est.max_residual <= s.contact_tolerance + geometry.radius_spread
+    contact = est.found and est.max_residual <= s.contact_tolerance
     moving = np.zeros(3 * n, dtype=bool)
     moving[0::3] = True
     moving[2::3] = True

@@ -241,7 +241,9 @@ class SpcmControllerNode(Node):
                 self.get_logger().warning(
                     f'{refused}: the controller runs with normal scheduling; on a busy machine '
                     f'/joint_states may reach it late (thread_priority:=0 silences this)')
-            self.get_logger().info(f'spcm_controller ready ({self._config.source}); joints '
+            obj = self._config.object
+            self.get_logger().info(f'spcm_controller ready ({self._config.source}); object '
+                                   f'{obj.name} ({obj.section.describe()}); joints '
                                    f'{list(self._layout.joint_names)}')
         except BaseException:  # e.g. a stop request: the node is not handed out to stop it
             self._intake.stop()

@@ -1,0 +1,84 @@
+"""An action client of /dam_grasp with observers of the stand-in's ground truth, shared by the
+grasp integration tests."""
+
+from __future__ import annotations
+
+import time
+
+from ros_testing import RosClient
+
+
+class Grasper:
+    """Action client of /dam_grasp plus observers of the ground truth and the commands."""
+
+    def __init__(self) -> None:
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.action import ActionClient
+        from sensor_msgs.msg import JointState
+
+        from dam_interfaces.action import DamGrasp
+        from dam_interfaces.msg import HandCommand
+
+        self.client = RosClient()
+        node = self.client.node
+        self.poses: list[tuple[float, float]] = []  # (monotonic time, object z [m])
+        self.command: HandCommand | None = None
+        self.joint_state: JointState | None = None
+        self.feedback_phases: list[str] = []
+        node.create_subscription(
+            PoseStamped, '/sim/object_pose',
+            lambda m: self.poses.append((time.monotonic(), m.pose.position.z)), 50)
+        self._watches: list = []
+        self._watch_types = (HandCommand, JointState)
+        self.watch(True)
+        self.action = ActionClient(node, DamGrasp, '/dam_grasp')
+        self.goal_type = DamGrasp.Goal
+
+    def watch(self, on: bool) -> None:
+        """Follow /hand/command and /joint_states (500 Hz each: a fifth of a core for this
+        process on a machine that the real-time nodes keep busy) only when a test needs them."""
+        node = self.client.node
+        for sub in self._watches:
+            node.destroy_subscription(sub)
+        self._watches = []
+        if on:
+            command_type, joint_state_type = self._watch_types
+            self._watches = [
+                node.create_subscription(command_type, '/hand/command',
+                                         lambda m: setattr(self, 'command', m), 10),
+                node.create_subscription(joint_state_type, '/joint_states',
+                                         lambda m: setattr(self, 'joint_state', m), 10)]
+
+    def z(self) -> float:
+        return self.poses[-1][1]
+
+    def z_between(self, t0: float, t1: float) -> list[float]:
+        return [z for t, z in self.poses if t0 <= t <= t1]
+
+    def send(self, k_theta: float, delta_theta_p: float):
+        def on_feedback(msg) -> None:
+            phase = msg.feedback.phase
+            if not self.feedback_phases or self.feedback_phases[-1] != phase:
+                self.feedback_phases.append(phase)
+
+        self.feedback_phases = []
+        future = self.action.send_goal_async(
+            self.goal_type(k_theta=[k_theta], delta_theta_p=[delta_theta_p]),
+            feedback_callback=on_feedback)
+        assert self.client.wait_future(future, 10.0), 'no answer to the goal'
+        handle = future.result()
+        assert handle.accepted
+        return handle
+
+    def result(self, handle, timeout: float = 30.0):
+        future = handle.get_result_async()
+        if not self.client.wait_future(future, timeout):
+            controller = getattr(self, 'controller', None)
+            log = controller.output()[-4000:] if controller is not None else ''
+            raise AssertionError(f'no result within {timeout} s (goal status '
+                                 f'{handle.status}); controller log:\n{log}')
+        return future.result()
+
+    def close(self) -> None:
+        self.action.destroy()
+        self.client.close()
