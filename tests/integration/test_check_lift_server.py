@@ -411,7 +411,15 @@ def test_command_line_client_defaults_and_beyond_the_branch(
     assert 'k_theta         [N*m/rad]: configured on the server' in default.stdout
     assert 'lift guaranteed (eq. 18) : yes' in default.stdout
     assert ('from the configuration: k_theta = 10 N*m/rad, delta_theta_p = 10 deg, '
-            'friction_angle = 5 deg') in default.stdout
+            'friction_angle = 5 deg, object = cylinder]') in default.stdout
+    assert 'object                   : cylinder' in default.stdout
+    bar = _run_client('--object', 'square_bar', '--delta-theta-p', '20deg')
+    assert bar.returncode == 0, bar.stderr
+    assert 'object                   : square_bar' in bar.stdout
+    assert bar.stdout != default.stdout
+    pencil = _run_client('--object', 'pencil')
+    assert pencil.returncode == 2 and 'REJECTED' in pencil.stdout
+    assert "'pencil' is not in the object library" in pencil.stdout
     beyond = _run_client('--k-theta', '7', '--delta-theta-p', '65deg')
     assert beyond.returncode == 0, beyond.stderr
     assert 'lift guaranteed (eq. 18) : no   worst-case margin none' in beyond.stdout

@@ -83,7 +83,7 @@ def test_a_default_constructed_request_plans_for_the_configuration(client: RosCl
     _same(response, _expected(planner))
     assert response.message.startswith('guaranteed over the ranges: k_theta ')
     assert ('[from the configuration: friction_angle = 5 deg, mass = 0.04 kg, k_theta_max = '
-            '100 N*m/rad, min_margin = 0.01 N]') in response.message
+            '100 N*m/rad, min_margin = 0.01 N, object = cylinder]') in response.message
 
 
 def test_the_issue_s_ranges_cross_dds_as_the_core_answers_them(client: RosClient,
@@ -227,3 +227,19 @@ def test_check_lift_answers_while_a_first_plan_builds_its_nodes() -> None:
         assert all(ok for _, ok, _ in answered)
         assert max(during) < 1.0, answered
         assert proc.alive(), proc.output()
+
+
+def test_a_plan_for_a_named_object(client: RosClient) -> None:
+    """``object`` selects a column of the library; the plan is that object's, and a name
+    outside the library is refused by name."""
+    response = _call(client, object='square_bar')
+    assert response.ok, response.message
+    assert response.object == 'square_bar'
+    _same(response, _expected(LiftPlanner(CONFIG.with_object('square_bar'))))
+    default = _call(client)
+    assert default.object == 'cylinder' and 'object = cylinder]' in default.message
+    assert (response.csm_k_theta, response.csm_delta_theta_p) != (
+        default.csm_k_theta, default.csm_delta_theta_p)
+    unknown = _call(client, object='pencil')
+    assert not unknown.ok and "'pencil'" in unknown.message and unknown.object == ''
+    assert _call(client).ok

@@ -128,8 +128,9 @@ class CheckLiftServer(Node):
         friction_angle = float(request.friction_angle)
         response.friction_angle = math.nan  # until an answer is computed
         response.torque_limit = math.nan
-        defaults = []
-        name = self._object_name(request.object, defaults)
+        defaults: list[str] = []
+        object_default: list[str] = []  # last in the message's list
+        name = self._object_name(request.object, object_default)
         analyzer = self._computed(response, 'preparing the object',
                                   lambda: self._cached(self._analyzers, name, LiftAnalyzer))
         if analyzer is None:
@@ -172,6 +173,7 @@ class CheckLiftServer(Node):
                             response.csm_lift)
         if notes:
             message += '; ' + '; '.join(notes)
+        defaults += object_default
         if defaults:
             message += f' [from the configuration: {", ".join(defaults)}]'
         response.message = message
@@ -245,7 +247,7 @@ class CheckLiftServer(Node):
         if answer is None:
             return response
         plan, from_config = answer
-        taken += from_config
+        taken = from_config + taken
         response.ok = True
         response.object = object_name
         _fill_plan(response, plan)
