@@ -21,6 +21,7 @@ This module is pure Python (math and numpy); it does not import rclpy.
 from __future__ import annotations
 
 import math
+import operator
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -94,8 +95,8 @@ class CrossSection(ABC):
         """(m, 2) counter-clockwise vertices of a polygon for a mesh [m].
 
         A circle or an ellipse gives ``faces`` vertices whose faces are tangent to it (the
-        mesh contains the curve, off by at most :attr:`outline_error`); a polygon gives its
-        own vertices.
+        mesh contains the curve; a corner stands off it by ``1 / cos(pi / faces) - 1`` of
+        the radius there); a polygon gives its own vertices.
         """
 
     @abstractmethod
@@ -238,6 +239,7 @@ class Circle(CrossSection):
         return self
 
     def scaled(self, factor: float) -> Circle:
+        _check_length('factor', factor, '')
         return Circle(self.radius * factor)
 
     def outline(self, faces: int) -> np.ndarray:
@@ -321,6 +323,7 @@ class Ellipse(CrossSection):
         return self
 
     def scaled(self, factor: float) -> Ellipse:
+        _check_length('factor', factor, '')
         return Ellipse(self.semi_axis_x * factor, self.semi_axis_z * factor)
 
     def outline(self, faces: int) -> np.ndarray:
@@ -448,6 +451,7 @@ class ConvexPolygon(CrossSection):
         return ConvexPolygon(self.vertices[::-1] * np.array([-1.0, 1.0]), self.name)
 
     def scaled(self, factor: float) -> ConvexPolygon:
+        _check_length('factor', factor, '')
         return ConvexPolygon(self.vertices * factor, self.name)
 
     def outline(self, faces: int) -> np.ndarray:
@@ -506,8 +510,13 @@ def regular_polygon(sides: int, across_flats: float) -> ConvexPolygon:
     ValueError
         ``sides`` < 3 or ``across_flats`` not a positive finite number.
     """
-    if isinstance(sides, bool) or not isinstance(sides, int) or sides < 3:
+    try:
+        count = operator.index(sides) if not isinstance(sides, bool) else -1
+    except TypeError:
+        count = -1
+    if count < 3:
         raise ValueError(f'sides: expected an integer >= 3, got {sides!r}')
+    sides = count
     _check_length('across_flats', across_flats)
     inradius = across_flats / 2.0
     circumradius = inradius / math.cos(math.pi / sides)
@@ -572,10 +581,10 @@ def polygon_centroid(vertices: np.ndarray) -> np.ndarray:
         6.0 * area)
 
 
-def _check_length(name: str, value: float) -> None:
+def _check_length(name: str, value: float, unit: str = ' of metres') -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
             or not math.isfinite(value) or value <= 0.0:
-        raise ValueError(f'{name}: expected a positive number of metres, got {value!r}')
+        raise ValueError(f'{name}: expected a positive number{unit}, got {value!r}')
 
 
 def _quadratic_interval(qa: float, qb: float, qc: float) -> tuple[float, float] | None:
@@ -614,8 +623,8 @@ def _ellipse_closest(a: float, b: float, y0: float, y1: float) -> tuple[float, f
             if g == 0.0:
                 return y0, y1
             r0 = (a / b) ** 2
-            s = _ellipse_root(r0, z0, z1, g)
-            return r0 * y0 / (s + r0), y1 / (s + 1.0)
+            u = _ellipse_root(r0, z0, z1, g)
+            return r0 * y0 / (u - 1.0 + r0), y1 / u
         return 0.0, b
     numer = a * y0
     denom = a * a - b * b
@@ -626,21 +635,25 @@ def _ellipse_closest(a: float, b: float, y0: float, y1: float) -> tuple[float, f
 
 
 def _ellipse_root(r0: float, z0: float, z1: float, g: float) -> float:
-    """Root ``s`` of ``(r0 z0 / (s + r0))^2 + (z1 / (s + 1))^2 = 1`` by bisection."""
+    """Root ``u = s + 1`` of ``(r0 z0 / (s + r0))^2 + (z1 / (s + 1))^2 = 1`` by bisection.
+
+    Eberly's root ``s`` tends to -1 for a point near the major axis; bisecting on ``u``
+    instead keeps its relative precision there, so that ``x1 = y1 / u`` stays exact.
+    """
     n0 = r0 * z0
-    s0 = z1 - 1.0
-    s1 = 0.0 if g < 0.0 else math.hypot(n0, z1) - 1.0
-    s = s0
-    for _ in range(200):
-        s = 0.5 * (s0 + s1)
-        if s in (s0, s1):
+    u0 = z1
+    u1 = 1.0 if g < 0.0 else math.hypot(n0, z1)
+    u = u0
+    for _ in range(1100):  # bisection to the floating-point spacing at u (> 1e-308 / z1)
+        u = 0.5 * (u0 + u1)
+        if u in (u0, u1):
             break
-        ratio0, ratio1 = n0 / (s + r0), z1 / (s + 1.0)
+        ratio0, ratio1 = n0 / (u - 1.0 + r0), z1 / u
         value = ratio0 * ratio0 + ratio1 * ratio1 - 1.0
         if value > 0.0:
-            s0 = s
+            u0 = u
         elif value < 0.0:
-            s1 = s
+            u1 = u
         else:
             break
-    return s
+    return u
