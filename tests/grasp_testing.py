@@ -3,9 +3,12 @@ grasp integration tests."""
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
-from ros_testing import RosClient
+from ros_testing import RosClient, installed_executable, node_process
 
 
 class Grasper:
@@ -82,3 +85,41 @@ class Grasper:
     def close(self) -> None:
         self.action.destroy()
         self.client.close()
+
+
+@contextlib.contextmanager
+def grasp_stack(config_file: Path, object_name: str = '') -> Iterator[Grasper]:
+    """The stand-in (started by the driver, ``backend:=sim``), the driver, the analysis
+    server and the controller as separate processes with ``config_file``, the driver and the
+    controller given ``object:=object_name``; a :class:`Grasper` once joint states and the
+    object pose flow and the action server is up. Every process must still be alive at the
+    end."""
+    from std_srvs.srv import Trigger
+
+    env = {'DAM_CONFIG': str(config_file)}
+    selected = ['-p', f'object:={object_name}'] if object_name else []
+    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                       '--ros-args', '-p', 'backend:=sim', *selected], env=env) as driver, \
+            node_process([installed_executable('dam_analysis', 'check_lift_server')],
+                         env=env) as analysis, \
+            node_process([installed_executable('dam_spcm_controller', 'spcm_controller'),
+                          '--ros-args', *selected], env=env) as controller:
+        grasper = Grasper()
+        try:
+            ready = False
+            for _ in range(4):  # a stand-in stalled at start-up leaves the driver in ERROR:
+                ready = grasper.client.spin_until(  # then ~/reset, as its log says
+                    lambda: bool(grasper.poses) and grasper.joint_state is not None, 10.0)
+                if ready:
+                    break
+                grasper.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
+            assert ready, driver.output()
+            grasper.watch(False)
+            assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
+            grasper.controller = controller
+            grasper.analysis = analysis
+            yield grasper
+        finally:
+            grasper.close()
+            for proc in (controller, analysis, driver):
+                assert proc.alive(), proc.output()

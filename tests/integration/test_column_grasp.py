@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 import yaml
 from grasp_testing import Grasper as _Grasper
-from std_srvs.srv import Trigger
+from grasp_testing import grasp_stack
 
-from ros_testing import free_udp_ports, installed_executable, node_process
+from ros_testing import free_udp_ports
 
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
@@ -44,33 +44,8 @@ def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope='module')
 def stack(config_file: Path) -> Iterator[_Grasper]:
-    env = {'DAM_CONFIG': str(config_file)}
-    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
-                       '--ros-args', '-p', 'backend:=sim', '-p', f'object:={OBJECT}'],
-                      env=env) as driver, \
-            node_process([installed_executable('dam_analysis', 'check_lift_server')],
-                         env=env) as analysis, \
-            node_process([installed_executable('dam_spcm_controller', 'spcm_controller'),
-                          '--ros-args', '-p', f'object:={OBJECT}'], env=env) as controller:
-        grasper = _Grasper()
-        try:
-            ready = False
-            for _ in range(4):  # a stand-in stalled at start-up leaves the driver in ERROR
-                ready = grasper.client.spin_until(
-                    lambda: bool(grasper.poses) and grasper.joint_state is not None, 10.0)
-                if ready:
-                    break
-                grasper.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
-            assert ready, driver.output()
-            grasper.watch(False)
-            assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
-            grasper.controller = controller
-            grasper.analysis = analysis
-            yield grasper
-        finally:
-            grasper.close()
-            for proc in (controller, analysis, driver):
-                assert proc.alive(), proc.output()
+    with grasp_stack(config_file, OBJECT) as grasper:
+        yield grasper
 
 
 def test_the_stand_in_puts_the_hexagonal_bar_on_the_table(stack: _Grasper) -> None:

@@ -32,9 +32,10 @@ from pathlib import Path
 import pytest
 import yaml
 from grasp_testing import Grasper as _Grasper
+from grasp_testing import grasp_stack
 from std_srvs.srv import Trigger
 
-from ros_testing import free_udp_ports, installed_executable, node_process
+from ros_testing import free_udp_ports, installed_executable
 
 # Real-time runs on a shared 2-core machine: a test that fails is run once more (the rerun is
 # reported as R in pytest's summary); a deterministic failure fails twice.
@@ -56,31 +57,8 @@ def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope='module')
 def stack(config_file: Path) -> Iterator[_Grasper]:
-    env = {'DAM_CONFIG': str(config_file)}
-    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
-                       '--ros-args', '-p', 'backend:=sim'], env=env) as driver, \
-            node_process([installed_executable('dam_analysis', 'check_lift_server')],
-                         env=env) as analysis, \
-            node_process([installed_executable('dam_spcm_controller', 'spcm_controller')],
-                         env=env) as controller:
-        grasper = _Grasper()
-        try:
-            ready = False
-            for _ in range(4):  # a stand-in stalled at start-up leaves the driver in ERROR:
-                ready = grasper.client.spin_until(  # then ~/reset, as its log says
-                    lambda: bool(grasper.poses) and grasper.joint_state is not None, 10.0)
-                if ready:
-                    break
-                grasper.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
-            assert ready, driver.output()
-            grasper.watch(False)
-            assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
-            grasper.controller = controller
-            yield grasper
-        finally:
-            grasper.close()
-            for proc in (controller, analysis, driver):
-                assert proc.alive(), proc.output()
+    with grasp_stack(config_file) as grasper:
+        yield grasper
 
 
 #: (k_theta [N*m/rad], delta_theta_p [deg]) at the configured friction angle (5 deg) whose
@@ -166,7 +144,6 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper, lockstep,
     assert min(held) - z_table > LIFT_M, f'dropped to {(min(held) - z_table) * 1e3:.2f} mm'
     # Let go with the one documented call; a world reset afterwards stays as reset (before,
     # the held grasp re-grasped the reset object at once).
-    from std_srvs.srv import Trigger
 
     released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
                                  timeout=30.0)
@@ -185,7 +162,6 @@ def _reset_world(stack: _Grasper) -> None:
     commanding), put the object back on the table and open the hand. The reset can stall the
     stand-in for longer than the driver's state timeout; then the driver is in ERROR and is
     brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
-    from std_srvs.srv import Trigger
 
     # joint states flowing (a previous reset may have left the driver in ERROR)
     assert stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request()).success

@@ -142,6 +142,12 @@ class CrossSection(ABC):
         through."""
 
     @property
+    def symmetry_period(self) -> float:
+        """Smallest turn [rad] that maps the section onto itself (2 pi: no symmetry; 0: every
+        turn, a circle)."""
+        return 2.0 * math.pi
+
+    @property
     def rest_height(self) -> float:
         """Height of the centroid above the table when the section rests on it [m]."""
         return -self.bottom
@@ -273,6 +279,10 @@ class Circle(CrossSection):
     def min_width(self) -> float:
         return 2.0 * self.radius
 
+    @property
+    def symmetry_period(self) -> float:
+        return 0.0
+
 
 @dataclass(frozen=True)
 class Ellipse(CrossSection):
@@ -358,6 +368,10 @@ class Ellipse(CrossSection):
     def min_width(self) -> float:
         return 2.0 * min(self.semi_axis_x, self.semi_axis_z)
 
+    @property
+    def symmetry_period(self) -> float:
+        return math.pi
+
 
 class ConvexPolygon(CrossSection):
     """A convex polygon given by its vertices [m], moved so that its centroid is the origin.
@@ -376,8 +390,10 @@ class ConvexPolygon(CrossSection):
 
     kind = 'polygon'
 
-    def __init__(self, vertices: Sequence[Sequence[float]] | np.ndarray, name: str = '') -> None:
+    def __init__(self, vertices: Sequence[Sequence[float]] | np.ndarray, name: str = '',
+                 symmetry_period: float = 2.0 * math.pi) -> None:
         v = check_convex_polygon(vertices)
+        self._symmetry_period = float(symmetry_period)
         self.vertices: np.ndarray = v - polygon_centroid(v)
         self.vertices.setflags(write=False)
         self.name = name
@@ -448,11 +464,12 @@ class ConvexPolygon(CrossSection):
         return t0, t1
 
     def mirrored(self) -> ConvexPolygon:
-        return ConvexPolygon(self.vertices[::-1] * np.array([-1.0, 1.0]), self.name)
+        return ConvexPolygon(self.vertices[::-1] * np.array([-1.0, 1.0]), self.name,
+                             self._symmetry_period)
 
     def scaled(self, factor: float) -> ConvexPolygon:
         _check_length('factor', factor, '')
-        return ConvexPolygon(self.vertices * factor, self.name)
+        return ConvexPolygon(self.vertices * factor, self.name, self._symmetry_period)
 
     def outline(self, faces: int) -> np.ndarray:
         return self.vertices.copy()
@@ -472,6 +489,11 @@ class ConvexPolygon(CrossSection):
         cross = x * z1 - x1 * z
         return (float(np.sum(cross * (x * x + x * x1 + x1 * x1))) / 12.0,
                 float(np.sum(cross * (z * z + z * z1 + z1 * z1))) / 12.0)
+
+    @property
+    def symmetry_period(self) -> float:
+        """``2 pi / sides`` for :func:`regular_polygon`; 2 pi otherwise."""
+        return self._symmetry_period
 
     @property
     def product_moment(self) -> float:
@@ -525,7 +547,8 @@ def regular_polygon(sides: int, across_flats: float) -> ConvexPolygon:
     vertices = circumradius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     names = {3: 'triangle', 4: 'square', 5: 'pentagon', 6: 'hexagon', 8: 'octagon'}
     name = names.get(sides, f'regular {sides}-gon')
-    return ConvexPolygon(vertices, f'{name}, {across_flats * 1e3:.4g} mm across flats')
+    return ConvexPolygon(vertices, f'{name}, {across_flats * 1e3:.4g} mm across flats',
+                         2.0 * math.pi / sides)
 
 
 def check_convex_polygon(vertices: Sequence[Sequence[float]] | np.ndarray) -> np.ndarray:
@@ -635,25 +658,38 @@ def _ellipse_closest(a: float, b: float, y0: float, y1: float) -> tuple[float, f
 
 
 def _ellipse_root(r0: float, z0: float, z1: float, g: float) -> float:
-    """Root ``u = s + 1`` of ``(r0 z0 / (s + r0))^2 + (z1 / (s + 1))^2 = 1`` by bisection.
+    """Root ``u = s + 1`` of ``F(u) = (r0 z0 / (u - 1 + r0))^2 + (z1 / u)^2 - 1``.
 
-    Eberly's root ``s`` tends to -1 for a point near the major axis; bisecting on ``u``
-    instead keeps its relative precision there, so that ``x1 = y1 / u`` stays exact.
+    Eberly's root ``s`` tends to -1 for a point near the major axis; solving for ``u``
+    instead keeps its relative precision there, so that ``x1 = y1 / u`` stays exact. ``F`` is
+    convex and decreasing for ``u > 0`` and ``F(z1) >= 0``, so Newton's method from ``z1``
+    climbs to the root without overshooting; a bisection of the bracket finishes what it
+    leaves (a flat start far from the root).
     """
     n0 = r0 * z0
-    u0 = z1
-    u1 = 1.0 if g < 0.0 else math.hypot(n0, z1)
-    u = u0
-    for _ in range(1100):  # bisection to the floating-point spacing at u (> 1e-308 / z1)
-        u = 0.5 * (u0 + u1)
-        if u in (u0, u1):
+    lo, hi = z1, (1.0 if g < 0.0 else math.hypot(n0, z1))
+    u = lo
+    for _ in range(100):  # Newton from the left: F(u) >= 0 all the way
+        a, b = n0 / (u - 1.0 + r0), z1 / u
+        value = a * a + b * b - 1.0
+        if value < 0.0:  # rounding put u past the root: it lies in [lo, u]
+            hi = u
             break
-        ratio0, ratio1 = n0 / (u - 1.0 + r0), z1 / u
-        value = ratio0 * ratio0 + ratio1 * ratio1 - 1.0
+        lo = u
+        step = value / (2.0 * (a * a / (u - 1.0 + r0) + b * b / u))
+        if not step > 4e-16 * u:
+            return u
+        u = min(u + step, hi)
+    for _ in range(1100):  # bisection to the floating-point spacing at u
+        u = 0.5 * (lo + hi)
+        if u in (lo, hi):
+            break
+        a, b = n0 / (u - 1.0 + r0), z1 / u
+        value = a * a + b * b - 1.0
         if value > 0.0:
-            u0 = u
+            lo = u
         elif value < 0.0:
-            u1 = u
+            hi = u
         else:
             break
     return u

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -329,8 +329,12 @@ def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
     return ObjectEstimate(centre, d[0] - rho)
 
 
-#: Orientations of the section :func:`estimate_section` fits the centre at (every 5 deg).
-_SECTION_ANGLES = 72
+class FitInterrupted(InputError):
+    """:func:`estimate_section` was asked to stop."""
+
+
+#: Step of the orientations :func:`estimate_section` fits the centre at [rad] (5 deg).
+_SECTION_ANGLE_STEP = math.radians(5.0)
 
 
 def _section_distances(geometry: HandGeometry, pts: np.ndarray, normals: np.ndarray,
@@ -369,13 +373,14 @@ def _section_distances(geometry: HandGeometry, pts: np.ndarray, normals: np.ndar
 
 
 def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
-                     contact_tolerance: float = 2e-3, tolerance: float = 1e-6
-                     ) -> ObjectEstimate:
+                     contact_tolerance: float = 2e-3, tolerance: float = 1e-5,
+                     stop: Callable[[], bool] | None = None) -> ObjectEstimate:
     """Fit a non-circular section to the finger posture: the lowest pose the joints allow.
 
     The joints do not fix a turned section's pose: fingers 2 and 3 stand side by side, so the
     plane holds two contact conditions (finger 1 and the pair) for three unknowns, the centre
-    ``(u, z)`` and the orientation ``psi``. For every 5 deg of ``psi`` the centre is fitted
+    ``(u, z)`` and the orientation ``psi``. For every 5 deg of ``psi`` over one period of the
+    section's symmetry (60 deg for a hexagon, 180 deg for an ellipse) the centre is fitted
     (least squares of ``d_i - r_l``, a pattern search down to ``tolerance`` [m] from the
     circle fit's centre and from the section resting on the table below it; admissible: no
     finger penetrates by more than ``contact_tolerance`` (a simulated or soft contact sinks
@@ -391,10 +396,16 @@ def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
     positions
         (3n,) joint angles [rad].
 
+    stop
+        Polled between orientations; when it returns true the fit ends with
+        :class:`FitInterrupted` (a node that is asked to stop).
+
     Raises
     ------
     InputError
         ``geometry`` has no section (use :func:`estimate_object`).
+    FitInterrupted
+        ``stop()`` returned true.
     """
     if geometry.section is None:
         raise InputError('estimate_section needs a geometry with a section')
@@ -440,8 +451,11 @@ def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
         return centre, value
 
     section = geometry.section
+    period = section.symmetry_period or 2.0 * math.pi
     poses = []
-    for psi in np.arange(_SECTION_ANGLES) * (2.0 * math.pi / _SECTION_ANGLES):
+    for psi in np.arange(0.0, period - 1e-9, _SECTION_ANGLE_STEP):
+        if stop is not None and stop():
+            raise FitInterrupted('the object fit was interrupted')
         psi = float(psi)
         # two starts: the circle fit's centre, and below it the section resting on the table
         # (the lowest pose is wanted, and a higher local fit must not hide it)
@@ -540,7 +554,8 @@ def _enveloped(geometry: HandGeometry, pts: np.ndarray, centre: np.ndarray,
 def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.ndarray,
                          positions: np.ndarray, efforts: np.ndarray,
                          settings: ClassifierSettings | None = None,
-                         joint_names: Sequence[str] | None = None) -> Classification:
+                         joint_names: Sequence[str] | None = None,
+                         stop: Callable[[], bool] | None = None) -> Classification:
     """Classify the settled final state of a grasp from joint angles and torques.
 
     Parameters
@@ -557,6 +572,13 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
         Thresholds; defaults of :class:`ClassifierSettings` if ``None``.
     joint_names
         (3n,) names used in :attr:`Classification.reason`; indices if ``None``.
+    stop
+        Passed to :func:`estimate_section` (a non-circular section only).
+
+    Raises
+    ------
+    FitInterrupted
+        ``stop()`` returned true during the fit of a non-circular section.
     """
     s = settings or ClassifierSettings()
     n = geometry.n_fingers
@@ -569,7 +591,7 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     lo = finite_vector('lower', lower, 3 * n)
     hi = finite_vector('upper', upper, 3 * n)
     est = estimate_object(geometry, q) if geometry.section is None else \
-        estimate_section(geometry, q, contact_tolerance=s.contact_tolerance)
+        estimate_section(geometry, q, contact_tolerance=s.contact_tolerance, stop=stop)
     pts = finger_points(geometry, q)
     contact = est.found and est.max_residual <= s.contact_tolerance
     moving = np.zeros(3 * n, dtype=bool)

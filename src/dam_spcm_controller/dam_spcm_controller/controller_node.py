@@ -72,11 +72,13 @@ from dam_common.node import (
     run_node,
 )
 from dam_common.realtime import set_process_priority
+from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
 from dam_spcm_controller.classification import (
     ClassifierSettings,
+    FitInterrupted,
     HandGeometry,
     Outcome,
     classify_from_joints,
@@ -812,7 +814,11 @@ class SpcmControllerNode(Node):
                              eff: np.ndarray, t0: float) -> DamGrasp.Result:
         try:
             c = classify_from_joints(self._geometry, self._layout.lower, self._layout.upper,
-                                     pos, eff, self._classifier, self._layout.joint_names)
+                                     pos, eff, self._classifier, self._layout.joint_names,
+                                     stop=lambda: SHUTDOWN.requested)
+        except FitInterrupted:
+            return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
+                                'grasp done, not classified: the controller is stopping', t0)
         except Exception as exc:  # noqa: BLE001 - the node must stay up whatever happens
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
                                 f'grasp done, classification failed: {exc!r}', t0)
