@@ -182,3 +182,41 @@ def test_installed_command() -> None:
     assert exe.is_file(), 'build the workspace (scripts/setup.sh)'
     done = subprocess.run([str(exe), '--help'], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and '--radius-range' in done.stdout, done.stderr
+
+
+def test_another_column_is_scaled_uniformly_by_its_half_height(config) -> None:
+    """The hexagonal pencil scaled to a half height of 9 mm is the library's hexagonal bar
+    (18 mm across flats); with the bar's mass both give the same boundaries."""
+    import dataclasses
+
+    from dam_analysis.analysis import LiftAnalyzer
+
+    pencil = config.with_object('hex_pencil')
+    bar = config.with_object('hex_bar')
+    scaled = scaled_config(pencil, 0.009)
+    section = scaled.object.section
+    np.testing.assert_allclose(section.vertices, bar.object.section.vertices, atol=1e-15)
+    assert scaled.object.position_m[2] == pytest.approx(0.009)  # resting on a face
+    assert scaled.object.mass_kg == pytest.approx(pencil.object.mass_kg * (9.0 / 3.5) ** 2)
+    same_mass = dataclasses.replace(scaled, object=dataclasses.replace(
+        scaled.object, mass_kg=bar.object.mass_kg))
+    dps = np.radians([5.0, 10.0])
+    ours = LiftAnalyzer(same_mass).boundaries(math.radians(5.0), dps)
+    theirs = LiftAnalyzer(bar).boundaries(math.radians(5.0), dps)
+    np.testing.assert_allclose(ours.sufficient, theirs.sufficient, rtol=1e-9)
+    np.testing.assert_allclose(ours.csm, theirs.csm, rtol=1e-9)
+
+
+def test_the_command_scales_a_named_object(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / 'pencil.png'
+    assert main(['--object', 'hex_pencil', '--radius-range', '3:9:3', '--delta-theta-p', '10',
+                 '--out', str(out)]) == 0
+    printed = capsys.readouterr().out
+    with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
+        rows = list(csv.DictReader(stream))
+    assert [float(r['half_height_mm']) for r in rows] == [3.0, 6.0, 9.0]
+    assert 'guaranteed (eq. 18) at 9 mm' in printed, printed
+    assert main(['--object', 'pencil', '--radius-range', '3:9:3', '--delta-theta-p', '10',
+                 '--out', str(out)]) == 2
+    assert "'pencil' is not in the object library" in capsys.readouterr().err

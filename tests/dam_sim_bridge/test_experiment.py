@@ -7,6 +7,7 @@ DIR`` writes the same signals as ``.npz`` files for inspection.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -159,3 +160,30 @@ def test_column_objects_are_classified_no_better_than_the_ground_truth(
     if name == 'hex_bar' and k_theta == 5.0:
         assert result.lifted and result.lift_final > 0.015, result.lift_final
         assert result.outcome is Outcome.SUCCESS, result.joint_reason
+
+
+def test_the_section_fit_over_one_symmetry_period_equals_the_full_turn(cfg: DamConfig) -> None:
+    """A hexagon repeats every 60 deg: the fit over one period finds the pose of the fit over
+    the whole turn; and a stop request ends the fit."""
+    from dam_common.cross_section import ConvexPolygon
+    from dam_spcm_controller.classification import FitInterrupted, estimate_section
+
+    config = cfg.with_object('hex_bar')
+    world = HandWorld(config)
+    try:
+        run_experiment(config, 5.0, math.radians(40.0), world=world)
+        positions = world.joint_states().positions
+    finally:
+        world.close()
+    geometry = HandGeometry.from_config(config)
+    hexagon = geometry.section
+    assert hexagon is not None and hexagon.symmetry_period == pytest.approx(math.pi / 3.0)
+    full_turn = dataclasses.replace(geometry, section=ConvexPolygon(hexagon.vertices))
+    assert full_turn.section.symmetry_period == pytest.approx(2.0 * math.pi)
+    one_period = estimate_section(geometry, positions)
+    whole = estimate_section(full_turn, positions)
+    np.testing.assert_allclose(one_period.centre, whole.centre, atol=2e-5)
+    assert math.remainder(one_period.orientation - whole.orientation,
+                          math.pi / 3.0) == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(FitInterrupted):
+        estimate_section(geometry, positions, stop=lambda: True)

@@ -1,6 +1,7 @@
-"""``scale_map``: for which cylinder sizes does DAM work with this hand?
+"""``scale_map``: for which object sizes does DAM work with this hand?
 
-Draws the lift boundaries ``k_theta*`` (finger 1's stiffness) against the cylinder's radius at
+Draws the lift boundaries ``k_theta*`` (finger 1's stiffness) against the object's size (a
+cylinder's radius, another column's half height: ``--object NAME``, scaled uniformly) at
 chosen displacements (:mod:`dam_analysis.scale_study`): the sufficient condition of eq. (18) as
 a solid line, the contact stiffness model dashed, and dotted the stiffness above which the
 hand cannot give the SPCM torque. Examples::
@@ -9,9 +10,12 @@ hand cannot give the SPCM torque. Examples::
         --friction-angle 5 --out scale.png
     ros2 run dam_analysis scale_map --radius-range 5:15:11 --delta-theta-p 15 \\
         --constant-mass --csv scale.csv
+    ros2 run dam_analysis scale_map --object hex_pencil --radius-range 3:12:10 \\
+        --delta-theta-p 10 --out pencil.png
 
 Radii are in millimetres (``start:stop:count``), displacements and the friction angle in
-degrees. The CSV has the columns ``radius_mm, mass_kg, delta_theta_p_deg, k_theta_sufficient,
+degrees. The CSV has the columns ``radius_mm`` (``half_height_mm`` for a column that is not a
+cylinder)``, mass_kg, delta_theta_p_deg, k_theta_sufficient,
 k_theta_csm, k_theta_torque_limit, no_first_contact`` [mm, kg, deg, N m/rad x 3, text]; an
 empty stiffness cell means none lifts there (or no first contact, then the last column says
 why). The summary printed at the end gives, per displacement, the radii at which the
@@ -32,7 +36,7 @@ import numpy as np
 
 from dam_analysis.angle_args import parse_degrees
 from dam_analysis.errors import DamAnalysisError
-from dam_analysis.scale_study import ScaleStudy, scale_study, working_ranges
+from dam_analysis.scale_study import ScaleStudy, scale_study, size_name, working_ranges
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
 from dam_common.ros_args import strip_ros_args
@@ -82,11 +86,16 @@ def parse_radius_range(text: str) -> np.ndarray:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='scale_map',
-        description='Lift boundaries k_theta* against the cylinder radius (scale-dependent '
+        description='Lift boundaries k_theta* against the object size (scale-dependent '
                     'grasp): sufficient condition (eq. 18), contact stiffness model and the '
                     "hand's torque limit.")
     parser.add_argument('--radius-range', type=parse_radius_range, required=True,
-                        metavar='START:STOP:COUNT', help='cylinder radii [mm]')
+                        metavar='START:STOP:COUNT',
+                        help='sizes [mm]: cylinder radii, or half heights of another column '
+                             '(its centroid\'s height on the table)')
+    parser.add_argument('--object', default='', metavar='NAME',
+                        help='column object of the configuration\'s object.library to scale '
+                             '(default: object.default)')
     parser.add_argument('--delta-theta-p', type=parse_degrees, nargs='+', required=True,
                         metavar='ANGLE',
                         help='position-joint displacements, degrees unless suffixed (10, '
@@ -117,9 +126,11 @@ def _number(value: float) -> str:
 
 def write_csv(path: Path, study: ScaleStudy) -> None:
     """One row per radius and displacement (:data:`CSV_COLUMNS`)."""
+    columns = CSV_COLUMNS if study.size_name == 'radius' else (
+        'half_height_mm', *CSV_COLUMNS[1:])
     with open(path, 'w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream, lineterminator='\n')
-        writer.writerow(CSV_COLUMNS)
+        writer.writerow(columns)
         for j, radius in enumerate(study.radius):
             for d, dp in enumerate(study.delta_theta_p):
                 writer.writerow((_number(radius * 1e3), _number(study.mass[j]),
@@ -162,10 +173,12 @@ def plot_study(path: Path, study: ScaleStudy) -> None:
         ax.set_yscale('log')
         ax.set_ylim(values.min() / 1.5, values.max() * 1.5)
     ax.set_xlim(r_mm.min() - step / 2, r_mm.max() + step / 2)
-    ax.set_xlabel('cylinder radius R [mm]')
+    ax.set_xlabel('cylinder radius R [mm]' if study.size_name == 'radius' else
+                  f'{study.object_name} half height h [mm] (centroid resting on the table)')
     ax.set_ylabel('compliant-joint stiffness k_theta* (finger 1) [N m/rad]')
     mass = ('mass kept' if study.constant_mass else 'mass at the same density')
-    ax.set_title(f'DAM over object size, alpha = {math.degrees(study.friction_angle):g} deg, '
+    ax.set_title(f'DAM over the size of {study.object_name}, alpha = '
+                 f'{math.degrees(study.friction_angle):g} deg, '
                  f'{mass}\nlifts above a boundary; the hand gives the torque below the dotted '
                  'line', fontsize=10)
     ax.grid(True, which='both', alpha=0.3)
@@ -179,7 +192,7 @@ def summary_lines(study: ScaleStudy) -> list[str]:
     """Per displacement, the radius runs [mm] where each boundary lifts within the torque."""
     def runs_text(runs: list[tuple[float, float]]) -> str:
         if not runs:
-            return 'no radius'
+            return f'no {study.size_name}'
         return ', '.join(f'{a * 1e3:g} mm' if a == b else f'{a * 1e3:g}-{b * 1e3:g} mm'
                          for a, b in runs)
 
@@ -194,7 +207,7 @@ def summary_lines(study: ScaleStudy) -> list[str]:
         if why:
             reasons.setdefault(why.split(': ', 1)[-1], []).append(f'{radius * 1e3:g}')
     for why, radii in reasons.items():
-        lines.append(f'no first contact at radius {", ".join(radii)} mm: {why}')
+        lines.append(f'no first contact at {study.size_name} {", ".join(radii)} mm: {why}')
     return lines
 
 
@@ -203,7 +216,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
     try:
-        config = load_config(options.config)
+        config = load_config(options.config).with_object(options.object)
     except ConfigError as exc:
         print(f'scale_map: {exc}', file=sys.stderr)
         return 2
@@ -216,8 +229,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def progress(j: int, radius: float, reason: str) -> None:
         note = f': no first contact ({reason})' if reason else ''
-        print(f'scale_map: radius {radius * 1e3:g} mm ({j + 1}/{options.radius_range.size})'
-              f'{note}', file=sys.stderr, flush=True)
+        print(f'scale_map: {size_name(config.object.section)} {radius * 1e3:g} mm '
+              f'({j + 1}/{options.radius_range.size}){note}', file=sys.stderr, flush=True)
 
     try:
         study = scale_study(config, options.radius_range,

@@ -1,4 +1,4 @@
-"""Scale study: the lift boundaries ``k_theta*`` against the size of the cylinder.
+"""Scale study: the lift boundaries ``k_theta*`` against the size of the object.
 
 The paper's authors switch grasp strategies with the object's size ("scale-dependent grasp",
 refs. [6]-[11]); DAM is their strategy for objects about as small as a fingertip. This module
@@ -13,8 +13,12 @@ torque reaches the hand's limit (:mod:`dam_analysis.hand_limits`),
 above which the hand cannot give what eq. (18) counts on. DAM works with this hand at a
 radius and displacement where ``k* < k_torque``.
 
-The mass follows the size at the configured object's density (``m = m_0 (R / R_0)^2``, the
-same length) unless it is kept constant. A radius at which the fingers cannot make the first
+A column of another cross-section (a polygon, an ellipse) is scaled the same way, uniformly
+about its centroid; its size is then its half height ``h``, the height of its centroid resting
+on the table (half the width across flats of a regular polygon lying on a face, the vertical
+semi-axis of an ellipse; a cylinder's ``h`` is its radius). The mass follows the size at the
+configured object's density (``m = m_0 (h / h_0)^2``, the same length) unless it is kept
+constant. A radius at which the fingers cannot make the first
 contact of the analysis (the hanging finger already overlaps the object, a proximal link
 touches first, the joint limit is reached first) has no boundary; the reason is kept.
 """
@@ -32,7 +36,7 @@ from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.errors import InputError, NoSolutionError
 from dam_analysis.hand_limits import HandLimits
 from dam_common.config import DamConfig
-from dam_common.cross_section import Circle
+from dam_common.cross_section import Circle, CrossSection
 
 
 @dataclass(frozen=True)
@@ -42,7 +46,8 @@ class ScaleStudy:
     Attributes
     ----------
     friction_angle : alpha [rad].
-    radius : (R,) cylinder radii [m].
+    radius : (R,) sizes [m]: the cylinder's radius, another column's half height (see
+        :func:`size_name`).
     mass : (R,) object masses [kg].
     delta_theta_p : (D,) position-joint displacements [rad].
     k_sufficient, k_csm : (R, D) lower boundaries of the sufficient and CSM regions
@@ -52,6 +57,8 @@ class ScaleStudy:
     torque_limit : the hand's compliant torque limit [N m].
     no_contact : (R,) why the analysis has no first contact at that radius ('' where it has).
     constant_mass : the configured mass at every radius (else scaled at the same density).
+    object_name : the library object that was scaled.
+    size_name : ``'radius'`` for a cylinder, ``'half height'`` for another column.
     """
 
     friction_angle: float
@@ -64,6 +71,8 @@ class ScaleStudy:
     torque_limit: float
     no_contact: tuple[str, ...]
     constant_mass: bool = False
+    object_name: str = 'cylinder'
+    size_name: str = 'radius'
 
     def works(self, which: str = 'sufficient') -> np.ndarray:
         """(R, D) bool: the boundary ``which`` ('sufficient' or 'csm') exists and lies below
@@ -73,29 +82,35 @@ class ScaleStudy:
             return np.isfinite(k) & (k < self.k_torque)
 
 
+def size_name(section: CrossSection) -> str:
+    """What the scale study calls a section's size: ``'radius'`` for a disc, ``'half height'``
+    (the centroid's height resting on the table) for any other section."""
+    return 'radius' if isinstance(section, Circle) else 'half height'
+
+
 def scaled_config(config: DamConfig, radius_m: float, constant_mass: bool = False
                   ) -> DamConfig:
-    """The configuration with the cylinder scaled to ``radius_m`` [m]: resting on the table
-    (axis at height ``radius_m``, same horizontal place), mass at the configured density
-    (``m_0 (R / R_0)^2``) or kept.
+    """The configuration with the object scaled to the size ``radius_m`` [m] (a cylinder's
+    radius, another column's half height): uniformly about its centroid, resting on the
+    table at the same horizontal place, mass at the configured density (``m_0 (h / h_0)^2``)
+    or kept.
 
     Raises
     ------
     InputError
-        ``radius_m`` is not a positive finite number (the value is named), or the object is
-        not a circular cylinder.
+        ``radius_m`` is not a positive finite number (the value is named).
     """
     if not (math.isfinite(radius_m) and radius_m > 0.0):
         raise InputError(f'radius: expected a positive number of metres, got {radius_m!r}')
     obj = config.object
-    if not isinstance(obj.section, Circle):
-        raise InputError(f'the scale study scales a circular cylinder; object {obj.name!r} is a '
-                         f'{obj.section.describe()}')
+    factor = radius_m / obj.section.rest_height
+    section = Circle(float(radius_m)) if isinstance(obj.section, Circle) else \
+        obj.section.scaled(factor)
     position = np.array(obj.position_m, dtype=np.float64)
-    position[2] = radius_m
-    mass = obj.mass_kg if constant_mass else obj.mass_kg * (radius_m / obj.radius_m) ** 2
+    position[2] = section.rest_height
+    mass = obj.mass_kg if constant_mass else obj.mass_kg * factor ** 2
     return dataclasses.replace(config, object=dataclasses.replace(
-        obj, section=Circle(float(radius_m)), position_m=position, mass_kg=float(mass)))
+        obj, section=section, position_m=position, mass_kg=float(mass)))
 
 
 def torque_stiffness(analyzer: LiftAnalyzer, delta_theta_p: float) -> float:
@@ -120,8 +135,8 @@ def scale_study(config: DamConfig, radii_m: Sequence[float], delta_theta_p: Sequ
 
     Parameters
     ----------
-    config : the validated configuration (its cylinder is scaled, nothing else changes).
-    radii_m : (R,) cylinder radii [m], positive.
+    config : the validated configuration (its object is scaled, nothing else changes).
+    radii_m : (R,) sizes [m], positive: the cylinder's radius or another column's half height.
     delta_theta_p : (D,) displacements [rad], in ``[0, task.delta_theta_p_max]``.
     friction_angle : alpha [rad], ``0 <= alpha < pi/2``.
     constant_mass : keep the configured mass instead of scaling it with the cross-section.
@@ -165,7 +180,9 @@ def scale_study(config: DamConfig, radii_m: Sequence[float], delta_theta_p: Sequ
     return ScaleStudy(friction_angle=float(friction_angle), radius=radii,
                       mass=np.array(masses), delta_theta_p=dps, k_sufficient=k_suf,
                       k_csm=k_csm, k_torque=k_tau, torque_limit=limit,
-                      no_contact=tuple(reasons), constant_mass=constant_mass)
+                      no_contact=tuple(reasons), constant_mass=constant_mass,
+                      object_name=config.object.name,
+                      size_name=size_name(config.object.section))
 
 
 def working_ranges(study: ScaleStudy, which: str = 'sufficient') -> list[list[tuple[float,
