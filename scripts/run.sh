@@ -28,7 +28,7 @@ while [ $# -gt 0 ]; do
     --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
     --keep) keep=true; shift ;;
     --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
-    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
     *) echo "run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done

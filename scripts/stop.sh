@@ -2,6 +2,8 @@
 # Stop the processes scripts/bringup.sh started: by the PIDs it recorded, SIGINT first (clean
 # shutdown, the driver stops its stand-in), SIGKILL after 10 s. Never by name.
 set -uo pipefail
+# A closed stdout (run.sh | head) must not stop it halfway, with processes left running.
+trap '' PIPE
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
 shopt -s nullglob

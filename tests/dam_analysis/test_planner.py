@@ -52,6 +52,17 @@ def test_a_larger_friction_angle_never_raises_the_worst_case(analyzer) -> None:
         assert all(b <= a + 1e-12 for a, b in zip(margins, margins[1:], strict=False)), margins
 
 
+def test_no_csm_pair_where_the_csm_lifts_with_none(config) -> None:
+    """The hexagonal pencil: its fingertips meet the upper faces and push it down, so the CSM
+    lifts it with no pair; the plan names none and says why, rather than a pair whose margin
+    is negative."""
+    pencil = LiftPlanner(config.with_object('hex_pencil'))
+    plan = pencil.plan(_ranges(config, pencil, tol=0.0))
+    assert not plan.found
+    assert math.isnan(plan.csm_k_theta) and math.isnan(plan.csm_margin)
+    assert 'predicts a lift for no pair under the cap' in plan_verdict(plan)
+
+
 def test_the_position_grid() -> None:
     np.testing.assert_allclose(position_nodes(0.0), [0.0])
     np.testing.assert_allclose(position_nodes(1e-3), [-1e-3, -5e-4, 0.0, 5e-4, 1e-3])

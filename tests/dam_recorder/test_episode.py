@@ -70,11 +70,18 @@ def test_non_finite_strings_become_floats_and_check_lift_may_be_null() -> None:
     ({'goal': {'k_theta': []}}, "dam_episode.summary.goal: missing key 'delta_theta_p'"),
     ({'duration_s': 'long'}, "dam_episode.summary.duration_s: expected a number (or \"nan\", "
                              "\"inf\", \"-inf\"), got 'long'"),
+    ({'object': 7}, "dam_episode.summary.object: expected a string, got 7"),
 ])
 def test_malformed_values_are_named_with_their_key(changes, message) -> None:
     with pytest.raises(EpisodeError) as info:
         parse_summary(json.dumps(summary(**changes)))
     assert message in str(info.value)
+
+
+def test_the_object_is_read_and_a_bag_without_it_still_parses() -> None:
+    """The grasped object's name (newer bags); a bag of a version without it: empty."""
+    assert parse_summary(json.dumps(summary(object='hex_bar'))).object == 'hex_bar'
+    assert parse_summary(json.dumps(summary())).object == ''
 
 
 def test_missing_keys_and_text_that_is_no_json_object_are_refused() -> None:

@@ -102,7 +102,7 @@ class CheckLiftServer(Node):
             callback_group=MutuallyExclusiveCallbackGroup())
         self.get_logger().info(
             f'serving {self._service.srv_name} and {self._plan_service.srv_name} with '
-            f'{self._config.source} (objects: {", ".join(self._config.objects)}; default '
+            f'{self._config.source} (objects: {", ".join(sorted(self._config.objects))}; default '
             f'{self._config.object.name}; default friction angle '
             f'{math.degrees(self._default_friction_angle):.3g} deg)')
 

@@ -152,7 +152,8 @@ class PlanResult:
         bounded worst-case margin under the cap (the guaranteed one's neighbour in quality
         when ``found``; the best available otherwise) [N m/rad, rad, N].
     csm_k_theta, csm_delta_theta_p, csm_margin : the pair whose smallest CSM margin over the
-        ranges is largest, and that margin [N m/rad, rad, N].
+        ranges is largest, and that margin [N m/rad, rad, N]; NaN when that margin is not
+        positive (the CSM predicts a lift for no pair under the cap).
     csm_in_domain : the CSM stays inside its domain of validity at that pair everywhere it
         was evaluated.
     k_theta_cap : the cap at ``delta_theta_p`` (of the guaranteed or else the best pair).
@@ -384,7 +385,7 @@ class LiftPlanner:
                     inside = inside and r.csm_in_domain
             if worst > best[2]:
                 best = (k, float(dp), worst, inside)
-        if not math.isfinite(best[2]):
+        if not best[2] > 0.0:  # the CSM lifts with no pair: none to propose
             return math.nan, math.nan, math.nan, False
         return best
 
@@ -443,15 +444,19 @@ def _bounded_max(values: np.ndarray) -> np.ndarray:
 
 
 def plan_verdict(plan: PlanResult) -> str:
-    """One line: the guaranteed pair, or why there is none and the best available."""
+    """One line: the guaranteed pair, or why there is none and the best available; and when
+    the CSM predicts a lift for no pair, that too."""
     if plan.found:
-        return (f'guaranteed over the ranges: k_theta {plan.k_theta:.4g} N*m/rad at '
+        text = (f'guaranteed over the ranges: k_theta {plan.k_theta:.4g} N*m/rad at '
                 f'delta_theta_p {math.degrees(plan.delta_theta_p):.4g} deg (worst-case margin '
                 f'{plan.worst_case_margin:.4g} N, {plan.position_error_bound:.2g} N less at '
                 'most between the position nodes)')
-    text = f'no pair is guaranteed over the ranges: {plan.reason}'
-    if math.isfinite(plan.best_worst_case_margin):
-        text += (f'; best available: k_theta {plan.best_k_theta:.4g} N*m/rad at '
-                 f'delta_theta_p {math.degrees(plan.best_delta_theta_p):.4g} deg, worst-case '
-                 f'margin {plan.best_worst_case_margin:.4g} N')
+    else:
+        text = f'no pair is guaranteed over the ranges: {plan.reason}'
+        if math.isfinite(plan.best_worst_case_margin):
+            text += (f'; best available: k_theta {plan.best_k_theta:.4g} N*m/rad at '
+                     f'delta_theta_p {math.degrees(plan.best_delta_theta_p):.4g} deg, '
+                     f'worst-case margin {plan.best_worst_case_margin:.4g} N')
+    if math.isnan(plan.csm_margin):
+        text += '; the contact stiffness model predicts a lift for no pair under the cap'
     return text

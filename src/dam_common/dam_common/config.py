@@ -453,7 +453,7 @@ def _objects(node: _Node) -> tuple[dict[str, ObjectConfig], str]:
     default = default_node.string()
     if default not in objects:
         raise default_node.error(f'{default!r} is not in object.library '
-                                 f'(known: {", ".join(objects)})')
+                                 f'(known: {", ".join(sorted(objects))})')
     return objects, default
 
 

@@ -75,7 +75,7 @@ def declare_object(node: Node, config: DamConfig) -> DamConfig:
         'object', '',
         ParameterDescriptor(
             description='column object of the configuration\'s object.library (known: '
-                        f'{", ".join(config.objects)}); empty: object.default '
+                        f'{", ".join(sorted(config.objects))}); empty: object.default '
                         f'({config.object.name})',
             read_only=True)).value)
     return config.with_object(name)

@@ -379,7 +379,7 @@ def episode_lines(episode: Episode) -> list[str]:
     s = episode.summary
     lines = [f'episode:    {s.outcome_name} ({s.message})',
              f'  goal id {s.goal_id}, grasp {s.duration_s:.3f} s, pre-roll {s.pre_roll_s:g} s, '
-             f'post-roll {s.post_roll_s:g} s',
+             f'post-roll {s.post_roll_s:g} s, object {s.object or "not recorded"}',
              f'  k_theta [N*m/rad] {format_floats(s.k_theta)}   delta_theta_p [deg] '
              f'{format_floats(s.delta_theta_p, math.degrees(1.0))}   friction angle '
              f'{math.degrees(s.friction_angle):.4g} deg',

@@ -159,6 +159,8 @@ class GraspData:
                 pair = (f'asked k_theta = {format_floats(s.goal_k_theta)} N*m/rad, '
                         f'delta_theta_p = {format_floats(s.goal_delta_theta_p, math.degrees(1.0))}'
                         ' deg')
+            if s.object:
+                pair = f'{s.object}, {pair}'
         else:
             pair = 'k_theta and delta_theta_p unknown (no episode metadata)'
         return f'{self.bag.name}: {self.outcome}, {pair}'

@@ -115,6 +115,9 @@ class EpisodeSummary:
         From goal acceptance to the end [s].
     pre_roll_s, post_roll_s : float
         Recorded before acceptance and after the end [s].
+    object : str
+        The column object of the configuration's library the grasp was for (empty in a bag
+        of a version that did not record it).
     """
 
     goal_id: str
@@ -132,6 +135,7 @@ class EpisodeSummary:
     duration_s: float
     pre_roll_s: float
     post_roll_s: float
+    object: str = ''
 
 
 @dataclass(frozen=True)
@@ -307,6 +311,7 @@ def parse_summary(text: str) -> EpisodeSummary:
         duration_s=_float(*key('duration_s')),
         pre_roll_s=_float(*key('pre_roll_s')),
         post_roll_s=_float(*key('post_roll_s')),
+        object=_str(data['object'], f'{where}.object') if 'object' in data else '',
     )
 
 

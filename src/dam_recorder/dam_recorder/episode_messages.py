@@ -45,6 +45,7 @@ def summary_from_event(msg: Any) -> dict[str, Any]:
         'goal_id': msg.goal_id, 'ended_ns': stamp_ns(msg.header.stamp),
         'goal': {'k_theta': [float(v) for v in msg.goal_k_theta],
                  'delta_theta_p': [float(v) for v in msg.goal_delta_theta_p]},
+        'object': msg.object,
         'k_theta': [float(v) for v in msg.k_theta],
         'delta_theta_p': [float(v) for v in msg.delta_theta_p],
         'friction_angle': check_lift['friction_angle'] if check_lift else math.nan,

@@ -618,8 +618,9 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
         reasons.append(f'{names[j]} at {math.degrees(q[j]):.4g} deg is at its limit')
     if not loaded.all():
         j = 3 * int(np.flatnonzero(~loaded)[0])
-        reasons.append(f'{names[j]} torque {tau[j]:.3g} N*m shows no load (below '
-                       f'{s.load_torque_threshold:g} N*m)')
+        pulling = ' (it pulls away from the object)' if tau[j] < 0.0 else ''
+        reasons.append(f'{names[j]} torque {tau[j]:.3g} N*m{pulling} shows no load (a held '
+                       f'object needs at least +{s.load_torque_threshold:g} N*m of flexion)')
     if est.found and not lifted:
         reasons.append(f'object raised only {lift * 1e3:.3g} mm (estimated from the joints)')
     if contact and lifted and not enveloped:

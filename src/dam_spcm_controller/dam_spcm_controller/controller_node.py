@@ -215,7 +215,7 @@ class SpcmControllerNode(Node):
         self._command_pub = self.create_publisher(HandCommand, '/hand/command',
                                                   STREAM_HISTORY_DEPTH)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
-        self._episodes = EpisodeEvents(self, str(self._config.source))
+        self._episodes = EpisodeEvents(self, str(self._config.source), self._config.object.name)
         # /joint_states (500 Hz) has a thread and a wait set of its own: through this node's
         # executor, with its action server, services and timers, each message would cost
         # about a millisecond of interpreter time.

@@ -69,10 +69,13 @@ class EpisodeEvents:
     config_source : str
         Path of the configuration file the controller loaded; its content goes into every
         STARTED event (read once, here: the file as it was when the controller started).
+    object_name : str
+        The library object the controller grasps (its ``object`` parameter), in every event.
     """
 
-    def __init__(self, node: Node, config_source: str) -> None:
+    def __init__(self, node: Node, config_source: str, object_name: str = '') -> None:
         self._node = node
+        self._object = str(object_name)
         self._pub = node.create_publisher(GraspEpisode, EPISODE_TOPIC, EPISODE_QOS)
         self._config_source = str(config_source)
         try:
@@ -89,6 +92,7 @@ class EpisodeEvents:
         msg.goal_id = goal_id
         msg.goal_k_theta = [float(v) for v in goal.k_theta]
         msg.goal_delta_theta_p = [float(v) for v in goal.delta_theta_p]
+        msg.object = self._object
         return msg
 
     def started(self, goal_id: Sequence[int], goal: DamGrasp.Goal) -> None:
