@@ -137,6 +137,22 @@ def test_random_requests_then_a_valid_one(client: RosClient, server,
     _same(_call(client), _expected(planner))
 
 
+def test_a_plan_for_a_named_object(client: RosClient) -> None:
+    """``object`` selects a column of the library; the plan is that object's, and a name
+    outside the library is refused by name."""
+    response = _call(client, object='square_bar')
+    assert response.ok, response.message
+    assert response.object == 'square_bar'
+    _same(response, _expected(LiftPlanner(CONFIG.with_object('square_bar'))))
+    default = _call(client)
+    assert default.object == 'cylinder' and 'object = cylinder]' in default.message
+    assert (response.csm_k_theta, response.csm_delta_theta_p) != (
+        default.csm_k_theta, default.csm_delta_theta_p)
+    unknown = _call(client, object='pencil')
+    assert not unknown.ok and "'pencil'" in unknown.message and unknown.object == ''
+    assert _call(client).ok
+
+
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([str(CLIENT), *args], capture_output=True, text=True, timeout=120)
 
@@ -227,19 +243,3 @@ def test_check_lift_answers_while_a_first_plan_builds_its_nodes() -> None:
         assert all(ok for _, ok, _ in answered)
         assert max(during) < 1.0, answered
         assert proc.alive(), proc.output()
-
-
-def test_a_plan_for_a_named_object(client: RosClient) -> None:
-    """``object`` selects a column of the library; the plan is that object's, and a name
-    outside the library is refused by name."""
-    response = _call(client, object='square_bar')
-    assert response.ok, response.message
-    assert response.object == 'square_bar'
-    _same(response, _expected(LiftPlanner(CONFIG.with_object('square_bar'))))
-    default = _call(client)
-    assert default.object == 'cylinder' and 'object = cylinder]' in default.message
-    assert (response.csm_k_theta, response.csm_delta_theta_p) != (
-        default.csm_k_theta, default.csm_delta_theta_p)
-    unknown = _call(client, object='pencil')
-    assert not unknown.ok and "'pencil'" in unknown.message and unknown.object == ''
-    assert _call(client).ok
