@@ -54,9 +54,13 @@ start() {  # start NAME PACKAGE EXECUTABLE [ARGS...]
 
 echo "==> Bringing up the DAM suite (ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}, backend $backend)"
 start check_lift_server dam_analysis check_lift_server
+# rcl refuses an empty override (-p object:=): the object only when one is named
+object_args=()
+[ -z "$object" ] || object_args=(-p "object:=$object")
 start hand_driver dam_hand_driver hand_driver --ros-args -p "backend:=$backend" -p "gui:=$gui" \
-  -p "object:=$object"
-start spcm_controller dam_spcm_controller spcm_controller --ros-args -p "object:=$object"
+  ${object_args[@]+"${object_args[@]}"}
+start spcm_controller dam_spcm_controller spcm_controller --ros-args \
+  ${object_args[@]+"${object_args[@]}"}
 echo "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}" >"$RUN_DIR/env"
 sleep 1
 for name in check_lift_server hand_driver spcm_controller; do

@@ -59,7 +59,11 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
   delta_theta_p=${delta_theta_p:-$cfg_dp}
 fi
 
-bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend" --object "$object"
+if [ -n "$object" ]; then
+  bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend" --object "$object"
+else
+  bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend"
+fi
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
 
 # The recorder, in episode mode: this grasp becomes one bag.

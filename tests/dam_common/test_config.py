@@ -201,7 +201,8 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
          r'object\.library\.cylinder\.radius_m: missing key'),
         ('object.default', _DELETE, r'object\.default: missing key'),
         ('hand.fingers[0].colour', 'red', r"hand\.fingers\[0\].*unknown key.*'colour'"),
-        ('format_version', 2, r'format_version.*unsupported.*2'),
+        ('format_version', 3, r'format_version.*unsupported.*3'),
+        ('format_version', 1, r'format_version.*version 1.*no longer read.*object\.library'),
     ],
 )
 def test_bad_values_are_named(raw: dict[str, Any], path: str, value: Any, expected: str) -> None:

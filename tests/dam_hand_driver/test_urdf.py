@@ -95,6 +95,6 @@ def test_the_cli_prints_it_and_refuses_a_bad_file(tmp_path) -> None:
     out = subprocess.run([exe], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and ET.fromstring(out.stdout).tag == 'robot'
     bad = tmp_path / 'bad.yaml'
-    bad.write_text('format_version: 1\n', encoding='utf-8')
+    bad.write_text('format_version: 2\n', encoding='utf-8')
     out = subprocess.run([exe, str(bad)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and 'hand' in out.stderr and 'Traceback' not in out.stderr

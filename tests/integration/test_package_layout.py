@@ -78,20 +78,21 @@ def test_interfaces_are_generated_for_python() -> None:
     request_fields = CheckLift.Request.get_fields_and_field_types()
     assert request_fields == {
         'k_theta': 'sequence<double>', 'delta_theta_p': 'sequence<double>',
-        'friction_angle': 'double'}
+        'friction_angle': 'double', 'object': 'string'}
     response_fields = CheckLift.Response.get_fields_and_field_types()
     assert response_fields == {
         'ok': 'boolean', 'message': 'string', 'lift_guaranteed': 'boolean',
         'worst_case_margin': 'double', 'csm_lift': 'boolean', 'csm_margin': 'double',
         'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>',
         'friction_angle': 'double', 'torque_limit': 'double', 'within_torque_limit': 'boolean',
-        'csm_penetration': 'sequence<double>', 'csm_in_domain': 'boolean'}
+        'csm_penetration': 'sequence<double>', 'csm_in_domain': 'boolean', 'object': 'string'}
     from dam_interfaces.srv import PlanLift
 
     assert PlanLift.Request.get_fields_and_field_types() == {
-        name: 'double' for name in ('friction_angle_min', 'friction_angle_max', 'mass_min',
-                                    'mass_max', 'position_tolerance', 'k_theta_max',
-                                    'delta_theta_p_min', 'delta_theta_p_max', 'min_margin')}
+        **{name: 'double' for name in ('friction_angle_min', 'friction_angle_max', 'mass_min',
+                                       'mass_max', 'position_tolerance', 'k_theta_max',
+                                       'delta_theta_p_min', 'delta_theta_p_max', 'min_margin')},
+        'object': 'string'}
     defaults = PlanLift.Request()
     assert defaults.position_tolerance == 0.0 and defaults.friction_angle_min == -1.0
     assert PlanLift.Response.get_fields_and_field_types()['method'] == 'string'
@@ -101,6 +102,7 @@ def test_interfaces_are_generated_for_python() -> None:
     assert answer_fields == response_fields  # the same answer, as a message of its own
     episode_fields = GraspEpisode.get_fields_and_field_types()
     assert episode_fields['check_lift'] == 'dam_interfaces/LiftAnswer'
+    assert episode_fields['object'] == 'string'
     assert (GraspEpisode.EVENT_STARTED, GraspEpisode.EVENT_ENDED) == (0, 1)
 
 

@@ -77,9 +77,9 @@ class CheckLiftServer(Node):
         self._config = load_config(config_file or None)
         #: one analysis per object, built on its first request (each executor thread keeps
         #: its own: /check_lift's analyzers and /plan_lift's planners share nothing)
-        self._analyzers: dict[str, LiftAnalyzer] = {
+        self._analyzers: dict[str, LiftAnalyzer | InputError] = {
             self._config.object.name: LiftAnalyzer(self._config)}
-        self._planners: dict[str, LiftPlanner] = {}
+        self._planners: dict[str, LiftPlanner | InputError] = {}
         self._default_friction_angle = self._config.contact.friction_angle_rad
         self.declare_parameter(
             'default_friction_angle', self._default_friction_angle,
@@ -186,8 +186,10 @@ class CheckLiftServer(Node):
         defaults.append(f'object = {self._config.object.name}')
         return self._config.object.name
 
-    def _cached(self, cache: dict[str, T], name: str, build: Callable[[DamConfig], T]) -> T:
-        """``cache[name]``, built from the configuration with that object on first use.
+    def _cached(self, cache: dict[str, T | InputError], name: str,
+                build: Callable[[DamConfig], T]) -> T:
+        """``cache[name]``, built from the configuration with that object on first use (an
+        object the fingers cannot reach is remembered too: no rebuild on every request).
 
         Raises
         ------
@@ -198,16 +200,21 @@ class CheckLiftServer(Node):
         if name not in cache:
             try:
                 config = self._config.with_object(name)
-            except ConfigError as exc:
-                raise InputError(f'object: {exc}') from exc
+            except ConfigError as exc:  # names the object and the library
+                raise InputError(str(exc)) from exc
             try:
                 cache[name] = build(config)
             except NoSolutionError as exc:
-                raise InputError(f'object: {name!r} ({config.object.section.describe()}) '
-                                 f'cannot be analysed with this hand: {exc}') from exc
-            self.get_logger().info(f'analysis of object {name!r} '
-                                   f'({config.object.section.describe()}) ready')
-        return cache[name]
+                cache[name] = InputError(
+                    f'object {name!r} ({config.object.section.describe()}) cannot be '
+                    f'analysed with this hand: {exc}')
+            else:
+                self.get_logger().info(f'analysis of object {name!r} '
+                                       f'({config.object.section.describe()}) ready')
+        answer = cache[name]
+        if isinstance(answer, InputError):
+            raise InputError(str(answer))
+        return answer
 
     def _computed(self, response: CheckLift.Response | PlanLift.Response, doing: str,
                   compute: Callable[[], T]) -> T | None:

@@ -15,8 +15,9 @@ radius and displacement where ``k* < k_torque``.
 
 A column of another cross-section (a polygon, an ellipse) is scaled the same way, uniformly
 about its centroid; its size is then its half height ``h``, the height of its centroid resting
-on the table (half the width across flats of a regular polygon lying on a face, the vertical
-semi-axis of an ellipse; a cylinder's ``h`` is its radius). The mass follows the size at the
+on the table (half the width across flats of a polygon lying on a face with a parallel one
+opposite, the vertical semi-axis of an ellipse, a third of a triangle's height; a cylinder's
+``h`` is its radius). The mass follows the size at the
 configured object's density (``m = m_0 (h / h_0)^2``, the same length) unless it is kept
 constant. A radius at which the fingers cannot make the first
 contact of the analysis (the hanging finger already overlaps the object, a proximal link

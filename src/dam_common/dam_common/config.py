@@ -40,7 +40,9 @@ JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
 #: Environment variable that overrides the default configuration file.
 CONFIG_ENV_VAR = 'DAM_CONFIG'
 
-_FORMAT_VERSION = 1
+#: 2: the object is a library of column objects (``object.library``, ``object.default``);
+#: version 1 described one cylinder (``object.shape``, ``object.radius_m``).
+_FORMAT_VERSION = 2
 #: Longest the device's slew-limited safe stop may take from the actuator limit to zero [s]
 #: (``device.torque_limit_nm / device.torque_rate_limit_nm_per_s``).
 _SAFE_STOP_RAMP_MAX_S = 0.2
@@ -337,6 +339,12 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
     root = _Node(data, '', source)
     root.require_mapping()
     version = root.child('format_version').integer(minimum=1)
+    if version == 1:
+        raise root.child('format_version').error(
+            'format version 1 (one cylinder under object:) is no longer read: the object is '
+            'now a library (object.default, object.position_m [x, y], object.axis, '
+            'object.library.NAME {shape: circle, radius_m, length_m, mass_kg}, as in the '
+            f'shipped config/dam.yaml); this code reads {_FORMAT_VERSION}')
     if version != _FORMAT_VERSION:
         raise root.child('format_version').error(
             f'unsupported format version {version} (this code reads {_FORMAT_VERSION})'

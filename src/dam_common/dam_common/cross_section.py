@@ -21,6 +21,7 @@ This module is pure Python (math and numpy); it does not import rclpy.
 from __future__ import annotations
 
 import math
+import numbers
 import operator
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
@@ -290,7 +291,8 @@ class Ellipse(CrossSection):
 
     Lying on its flat side means ``semi_axis_x >= semi_axis_z``; the closest point of a point
     is found as in D. Eberly, "Distance from a Point to an Ellipse, an Ellipsoid, or a
-    Hyperellipsoid" (Geometric Tools, 2013): bisection on the one root of a monotone function.
+    Hyperellipsoid" (Geometric Tools, 2013): the one root of a monotone convex function, here
+    by Newton's method from the left, finished by bisection.
     """
 
     semi_axis_x: float
@@ -438,6 +440,9 @@ class ConvexPolygon(CrossSection):
             if d < best:
                 best, best_q = d, (qu, qz)
         qu, qz = best_q
+        if best == 0.0:  # on an edge, to rounding: the least violated face's normal
+            nu, nz = self._normals[face]
+            return 0.0, qu, qz, nu, nz
         return best, qu, qz, (pu - qu) / best, (pz - qz) / best
 
     def support(self, du: float, dz: float) -> tuple[float, float]:
@@ -605,7 +610,7 @@ def polygon_centroid(vertices: np.ndarray) -> np.ndarray:
 
 
 def _check_length(name: str, value: float, unit: str = ' of metres') -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
             or not math.isfinite(value) or value <= 0.0:
         raise ValueError(f'{name}: expected a positive number{unit}, got {value!r}')
 

@@ -122,7 +122,7 @@ from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigErro
 from dam_sim_bridge.pybullet_import import bullet_client, pybullet
 
 if TYPE_CHECKING:
-    from dam_common.config import DamConfig
+    from dam_common.config import DamConfig, ObjectConfig
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
@@ -297,47 +297,79 @@ def _toward(current: float, target: float, max_change: float) -> float:
     return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
 
 
-def _axis_quaternion(axis: np.ndarray) -> tuple[float, float, float, float]:
-    """Quaternion (x, y, z, w) that turns the local z axis onto the horizontal unit ``axis``."""
-    a = np.asarray(axis, dtype=float) / float(np.linalg.norm(axis))
-    rot = np.cross([0.0, 0.0, 1.0], a)  # (-a_y, a_x, 0), unit length for a horizontal axis
-    s = math.sin(math.pi / 4.0)
-    return (float(rot[0] * s), float(rot[1] * s), float(rot[2] * s), math.cos(math.pi / 4.0))
+def resting_quaternion(obj: ObjectConfig) -> tuple[float, float, float, float]:
+    """Quaternion (x, y, z, w) of the object's resting pose in the world: the body frame of
+    :func:`prism_vertices`. Before the turn to the section's principal axes (``beta`` of
+    :func:`prism_inertia`) that frame has its x axis along the section's ``x`` (``axis x
+    z``), its y axis straight down and its z axis along the column axis (right-handed for
+    every horizontal axis); the body frame is that frame turned by ``beta`` about its z axis.
+    """
+    _, beta = prism_inertia(obj.section, obj.mass_kg, obj.length_m)
+    # R_z(heading) R_x(-90 deg): local z onto the axis, local x onto axis x z, local y down
+    heading = math.atan2(-float(obj.axis[0]), float(obj.axis[1]))
+    down = (-math.sin(math.pi / 4.0), 0.0, 0.0, math.cos(math.pi / 4.0))
+    turn = (0.0, 0.0, math.sin(heading / 2.0), math.cos(heading / 2.0))
+    principal = (0.0, 0.0, math.sin(beta / 2.0), math.cos(beta / 2.0))
+    return _quaternion_product(_quaternion_product(turn, down), principal)
 
 
-def prism_vertices(section: CrossSection, length_m: float, faces: int) -> np.ndarray:
+def _quaternion_product(p: Sequence[float], q: Sequence[float]
+                        ) -> tuple[float, float, float, float]:
+    """Hamilton product ``p q`` of quaternions (x, y, z, w): the rotation ``q``, then ``p``."""
+    px, py, pz, pw = p
+    qx, qy, qz, qw = q
+    return (pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw,
+            pw * qw - px * qx - py * qy - pz * qz)
+
+
+def prism_vertices(section: CrossSection, length_m: float, faces: int, beta: float = 0.0
+                   ) -> np.ndarray:
     """Vertices (2m, 3) of the prism of ``section``'s outline in the object's body frame [m].
 
-    The body frame has its z axis along the column axis and, as :func:`_axis_quaternion` turns
-    it, its x axis along the section's ``x`` (``axis x z``) and its y axis straight down: a
-    section point ``(x, z)`` is the body point ``(x, -z, +-length/2)``. A circle or an ellipse
+    The body frame (:func:`resting_quaternion`) has its z axis along the column axis and its
+    x and y axes along the section's principal axes: before the turn by ``beta`` [rad] about
+    z (:func:`prism_inertia`; zero for a section symmetric about its vertical axis) the x axis
+    lies along the section's ``x`` (``axis x z``) and the y axis straight down, so that a
+    section point ``(x, z)`` is the point ``(x, -z, +-length/2)``. A circle or an ellipse
     becomes ``faces`` faces tangent to it, one of them on the table
     (:meth:`~dam_common.cross_section.CrossSection.outline`); a polygon keeps its vertices.
+    Vertex ``2k`` is outline point ``k`` at ``-length/2``, ``2k + 1`` the same at
+    ``+length/2``; the mirror ``z -> -z`` makes the counter-clockwise outline clockwise in the
+    body's xy plane (:func:`prism_triangles` winds its faces for that).
     """
     outline = section.outline(faces)
     half = length_m / 2.0
-    return np.array([[x, -z, w] for x, z in outline for w in (-half, half)], dtype=np.float64)
+    c, s = math.cos(beta), math.sin(beta)
+    # the point (x, -z) in the frame turned by beta: rotate it by -beta
+    return np.array([[c * x - s * z, -s * x - c * z, w] for x, z in outline
+                     for w in (-half, half)], dtype=np.float64)
 
 
 def prism_triangles(n_outline: int) -> list[int]:
-    """Triangle indices of the closed prism of :func:`prism_vertices` (outward winding)."""
+    """Triangle indices of the closed prism of :func:`prism_vertices`, wound so that every
+    face's normal (counter-clockwise order) points outwards; its outline runs clockwise in the
+    body's xy plane."""
     tris: list[int] = []
     for k in range(n_outline):
         a0, a1 = 2 * k, 2 * k + 1
         b0, b1 = 2 * ((k + 1) % n_outline), 2 * ((k + 1) % n_outline) + 1
-        tris += [a0, b0, b1, a0, b1, a1]
+        tris += [a0, b1, b0, a0, a1, b1]
     for k in range(1, n_outline - 1):
-        tris += [0, 2 * (k + 1), 2 * k]  # the end cap at -length/2
-        tris += [1, 2 * k + 1, 2 * (k + 1) + 1]  # the end cap at +length/2
+        tris += [0, 2 * k, 2 * (k + 1)]  # the end cap at -length/2, facing -z
+        tris += [1, 2 * (k + 1) + 1, 2 * k + 1]  # the end cap at +length/2, facing +z
     return tris
 
 
 def prism_inertia(section: CrossSection, mass_kg: float, length_m: float
-                  ) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+                  ) -> tuple[tuple[float, float, float], float]:
     """Principal inertia [kg*m^2] of the homogeneous prism of ``section`` about its centroid,
-    and the orientation (x, y, z, w) of its principal axes in the body frame of
-    :func:`prism_vertices` (a rotation about the body z axis; identity for a section symmetric
-    about its vertical axis).
+    and the angle ``beta`` [rad] about the column axis from the frame with x along the
+    section's ``x`` and y straight down to the principal axes (zero for a section symmetric
+    about its vertical axis). The body frame of :func:`prism_vertices` is the principal one,
+    so that PyBullet needs no inertial frame of its own (its base pose would then be that of
+    the inertial frame, not of the mesh).
 
     With ``S_xx = int x^2 dA``, ``S_zz = int z^2 dA``, ``S_xz = int x z dA`` of the section
     and the body point ``(x, -z, w)``: ``I_xx = m (S_zz / A + L^2 / 12)``,
@@ -354,13 +386,13 @@ def prism_inertia(section: CrossSection, mass_kg: float, length_m: float
     # the tensor's xy entry, -int x_b y_b dm with the body's y_b = -z
     i_xy = mass_kg * s_xz / area
     if abs(i_xy) <= 1e-12 * max(i_xx, i_yy):
-        return (i_xx, i_yy, i_zz), (0.0, 0.0, 0.0, 1.0)
+        return (i_xx, i_yy, i_zz), 0.0
     # principal axes: the frame turned about z by beta, tan(2 beta) = 2 I_xy / (I_xx - I_yy)
     beta = 0.5 * math.atan2(2.0 * i_xy, i_xx - i_yy)
     c, s = math.cos(beta), math.sin(beta)
     j_xx = c * c * i_xx + 2.0 * c * s * i_xy + s * s * i_yy
     j_yy = s * s * i_xx - 2.0 * c * s * i_xy + c * c * i_yy
-    return (j_xx, j_yy, i_zz), (0.0, 0.0, math.sin(beta / 2.0), math.cos(beta / 2.0))
+    return (j_xx, j_yy, i_zz), beta
 
 
 def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
@@ -526,8 +558,8 @@ class HandWorld:
         self.palm_id = self._build_palm()
         # Object: the column, local z along object.axis, a convex mesh of its cross-section.
         obj = self.config.object
-        vertices = prism_vertices(obj.section, obj.length_m, self.options.object_faces)
-        inertia, inertia_frame = prism_inertia(obj.section, obj.mass_kg, obj.length_m)
+        inertia, beta = prism_inertia(obj.section, obj.mass_kg, obj.length_m)
+        vertices = prism_vertices(obj.section, obj.length_m, self.options.object_faces, beta)
         hull = pb.createCollisionShape(pybullet.GEOM_MESH, vertices=vertices.tolist())
         if isinstance(obj.section, Circle):
             visual = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=obj.section.radius,
@@ -538,8 +570,7 @@ class HandWorld:
                                           rgbaColor=[0.2, 0.4, 0.8, 1.0])
         self.object_id = pb.createMultiBody(obj.mass_kg, hull, visual,
                                             basePosition=obj.position_m.tolist(),
-                                            baseOrientation=_axis_quaternion(obj.axis),
-                                            baseInertialFrameOrientation=inertia_frame)
+                                            baseOrientation=resting_quaternion(obj))
         for body in (self.table_id, self.object_id):
             pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
                               rollingFriction=0.0, spinningFriction=0.0)
@@ -696,7 +727,7 @@ class HandWorld:
         """
         obj = self.config.object
         pos = obj.position_m if object_position is None else np.asarray(object_position, float)
-        quat = (_axis_quaternion(obj.axis) if object_quaternion is None
+        quat = (resting_quaternion(obj) if object_quaternion is None
                 else np.asarray(object_quaternion, float))
         if np.shape(pos) != (3,) or not np.all(np.isfinite(pos)):
             raise WorldConfigError(f'object_position {object_position!r} must be 3 finite numbers')

@@ -9,7 +9,7 @@ The paper marks each trial as one of three outcomes:
 A real hand only measures joint angles (encoders) and joint torques (torque sensors), so
 :func:`classify_from_joints` infers the object from the final, settled posture:
 
-1. **Object estimate.** All fingers turn about axes parallel to the cylinder axis, so the
+1. **Object estimate.** All fingers turn about axes parallel to the object axis, so the
    problem is planar in the plane normal to that axis (coordinates ``u`` horizontal, ``z`` up).
    Every link is a capsule of radius ``r_l``; a cylinder of radius ``r`` touching link ``k`` has
    its centre at distance ``rho = r + r_l`` from that link's segment. The centre ``c`` is the
@@ -27,7 +27,9 @@ A real hand only measures joint angles (encoders) and joint torques (torque sens
    ``load_torque_threshold`` (flexion), and no compliant or position joint is within
    ``limit_margin`` of a joint limit (a finger closing on empty space ends at its limit).
 4. **Lifted** (``lifted``): the estimated centre is at least ``lift_height`` above its
-   initial height (object resting on the table).
+   initial height (object resting on the table); for a turned section, its lowest point is
+   at least ``lift_height`` above the table (a section that only tipped over onto another
+   face, its centre higher, is not lifted).
 5. **Enveloped** (``enveloped``): the object is caged by the fingers -- every fingertip lies
    at least ``cage_depth_ratio * r`` below the object's centre (``r`` the inradius), and the
    free gap between the innermost fingertips of the two opposing sides is smaller than the
@@ -69,7 +71,7 @@ class Outcome(enum.Enum):
 
 @dataclass(frozen=True)
 class HandGeometry:
-    """Planar geometry of the fingers and the object in the plane normal to the cylinder axis.
+    """Planar geometry of the fingers and the object in the plane normal to the object axis.
 
     Attributes
     ----------
@@ -90,9 +92,10 @@ class HandGeometry:
         Height of the table top [m].
     radius_spread
         Half the difference of the section's circumradius and inradius [m] (zero for a
-        cylinder): how far the section's boundary strays from the fitted circle. It widens
-        the contact tolerance, and the inradius ``object_radius - radius_spread`` is the
-        depth the cage is measured in and the lowest centre height admitted.
+        cylinder): how far the section's boundary strays from the fitted circle. The first,
+        circular fit of :func:`estimate_section` admits fingers this much inside that circle,
+        and the inradius ``object_radius - radius_spread`` is the depth the cage is measured
+        in and the lowest centre height admitted.
     object_width
         Narrowest width of the section [m] (the diameter of a cylinder; NaN: twice
         ``object_radius``): an opening narrower than it keeps the object caged.
@@ -147,17 +150,16 @@ class HandGeometry:
         Raises
         ------
         InputError
-            A finger does not close in the plane normal to the cylinder axis.
+            A finger does not close in the plane normal to the object axis.
         """
         axis = np.asarray(config.object.axis, dtype=np.float64)
-        e_u = np.cross(axis, [0.0, 0.0, 1.0])
-        e_u = e_u / np.linalg.norm(e_u)
+        e_u = config.object.section_x  # the section's x axis: axis x z
         base, sign = [], []
         for finger in config.hand.fingers:
             s = float(np.dot(finger.inward_direction, e_u))
             if abs(abs(s) - 1.0) > 1e-6:
                 raise InputError(f'{finger.name} closes along {finger.inward_direction.tolist()}'
-                                 f', not normal to the cylinder axis {axis.tolist()}')
+                                 f', not normal to the object axis {axis.tolist()}')
             base.append([float(np.dot(finger.base_position_m, e_u)),
                          float(finger.base_position_m[2])])
             sign.append(math.copysign(1.0, s))
@@ -273,7 +275,8 @@ class ObjectEstimate:
 
 
 def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
-                    grid_step: float = 1e-3, tolerance: float = 1e-7) -> ObjectEstimate:
+                    grid_step: float = 1e-3, tolerance: float = 1e-7,
+                    penetration_tolerance: float | None = None) -> ObjectEstimate:
     """Fit the object centre to the finger posture (step 1 of the module's criteria).
 
     Parameters
@@ -286,6 +289,8 @@ def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
         Spacing of the initial grid search [m].
     tolerance
         Final step of the pattern-search refinement [m].
+    penetration_tolerance
+        How far a finger may sit inside the circle [m]; default 2 % of ``rho``.
     """
     pts = finger_points(geometry, positions)
     normals = _link_inner_normals(geometry, positions)
@@ -299,7 +304,7 @@ def estimate_object(geometry: HandGeometry, positions: np.ndarray, *,
     us = np.arange(lo[0], hi[0] + grid_step, grid_step)
     zs = np.arange(lo[1], hi[1] + grid_step, grid_step)
     grid = np.stack(np.meshgrid(us, zs, indexing='ij'), axis=-1).reshape(-1, 2)
-    pen_tol = 0.02 * rho
+    pen_tol = 0.02 * rho if penetration_tolerance is None else penetration_tolerance
 
     def cost(centres: np.ndarray) -> np.ndarray:
         d, inner = _distances(pts, normals, centres)
@@ -386,8 +391,9 @@ def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
     finger penetrates by more than ``contact_tolerance`` (a simulated or soft contact sinks
     in), every finger on the inner side of its nearest link, the section above the table).
     Of the poses whose residuals are all within
-    ``contact_tolerance`` [m] the lowest is taken -- "lifted" then holds only when every pose
-    the joints allow is lifted; without such a pose, the best fit.
+    ``contact_tolerance`` [m] the one nearest the table (:func:`section_clearance`) is taken
+    -- "lifted" then holds only when every pose the joints allow is off the table; without
+    such a pose, the best fit.
 
     Parameters
     ----------
@@ -409,7 +415,9 @@ def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
     """
     if geometry.section is None:
         raise InputError('estimate_section needs a geometry with a section')
-    first = estimate_object(geometry, positions)
+    # a finger on a face sits up to radius_spread inside the circle of the mean radius
+    first = estimate_object(geometry, positions, penetration_tolerance=0.02 * (
+        geometry.contact_distance) + geometry.radius_spread)
     n = geometry.n_fingers
     if not first.found:
         return first
@@ -465,13 +473,30 @@ def estimate_section(geometry: HandGeometry, positions: np.ndarray, *,
             centre, value = fit(start.copy(), psi)
             if math.isfinite(value):
                 d, _ = _section_distances(geometry, pts, normals, centre, psi)
-                poses.append((float(np.max(np.abs(d - r_l))), float(centre[1]), value,
+                poses.append((float(np.max(np.abs(d - r_l))),
+                              section_clearance(geometry, centre, psi), value,
                               centre.copy(), psi, d - r_l))
     if not poses:
         return ObjectEstimate(np.full(2, np.nan), np.full(n, np.nan))
     fitting = [p for p in poses if p[0] <= contact_tolerance]
     chosen = min(fitting, key=lambda p: p[1]) if fitting else min(poses, key=lambda p: p[2])
     return ObjectEstimate(chosen[3], chosen[5], chosen[4])
+
+
+def section_clearance(geometry: HandGeometry, centre: np.ndarray, psi: float) -> float:
+    """Height of the lowest point of the section, turned by ``psi`` [rad] about ``centre``,
+    above the table [m]: how far the object is off the table.
+
+    Raises
+    ------
+    InputError
+        ``geometry`` has no section.
+    """
+    if geometry.section is None:
+        raise InputError('section_clearance needs a geometry with a section')
+    s, c = math.sin(psi), math.cos(psi)
+    low_u, low_z = geometry.section.support(-s, -c)  # world (0, -1) turned by -psi
+    return float(centre[1]) + s * low_u + c * low_z - geometry.table_z
 
 
 @dataclass(frozen=True)
@@ -600,7 +625,12 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     at_limit = moving & ((q <= lo + s.limit_margin) | (q >= hi - s.limit_margin))
     loaded = tau[0::3] >= s.load_torque_threshold
     load_held = bool(loaded.all() and not at_limit.any())
-    lift = float(est.centre[1] - geometry.object_z0) if est.found else math.nan
+    if not est.found:
+        lift = math.nan
+    elif geometry.section is None:
+        lift = float(est.centre[1] - geometry.object_z0)
+    else:  # a turned section: how far its lowest point is off the table
+        lift = section_clearance(geometry, est.centre, est.orientation)
     lifted = bool(est.found and lift >= s.lift_height)
     enveloped = bool(contact and _enveloped(geometry, pts, est.centre,
                                             s.cage_depth_ratio * geometry.inradius))
