@@ -8,7 +8,21 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from ros_testing import RosClient, installed_executable, node_process
+import yaml
+
+from ros_testing import RosClient, free_udp_ports, installed_executable, node_process
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def config_with_free_ports(directory: Path) -> Path:
+    """The shipped configuration written to ``directory/dam.yaml`` with device ports that no
+    other run on the machine uses."""
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
+    path = directory / 'dam.yaml'
+    path.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return path
 
 
 class Grasper:

@@ -9,9 +9,9 @@ import subprocess
 from pathlib import Path
 
 import pytest
-import yaml
+from grasp_testing import config_with_free_ports
 
-from ros_testing import RosClient, free_udp_ports
+from ros_testing import RosClient
 
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
@@ -20,10 +20,7 @@ SCRIPTS = REPO_ROOT / 'scripts'
 
 
 def _env(tmp_path: Path) -> dict[str, str]:
-    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
-    config = tmp_path / 'dam.yaml'
-    config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    config = config_with_free_ports(tmp_path)
     return dict(os.environ, DAM_CONFIG=str(config), DAM_RUN_DIR=str(tmp_path / 'run'))
 
 

@@ -19,11 +19,8 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import yaml
 from grasp_testing import Grasper as _Grasper
-from grasp_testing import grasp_stack
-
-from ros_testing import free_udp_ports
+from grasp_testing import config_with_free_ports, grasp_stack
 
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
@@ -35,11 +32,7 @@ DELTA_THETA_P = math.radians(40.0)
 
 @pytest.fixture(scope='module')
 def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
-    path = tmp_path_factory.mktemp('column_grasp') / 'dam.yaml'
-    path.write_text(yaml.safe_dump(data), encoding='utf-8')
-    return path
+    return config_with_free_ports(tmp_path_factory.mktemp('column_grasp'))
 
 
 @pytest.fixture(scope='module')

@@ -30,12 +30,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import yaml
 from grasp_testing import Grasper as _Grasper
-from grasp_testing import grasp_stack
+from grasp_testing import config_with_free_ports, grasp_stack
 from std_srvs.srv import Trigger
 
-from ros_testing import free_udp_ports, installed_executable
+from ros_testing import installed_executable
 
 # Real-time runs on a shared 2-core machine: a test that fails is run once more (the rerun is
 # reported as R in pytest's summary); a deterministic failure fails twice.
@@ -48,11 +47,7 @@ LIFT_M = 0.005
 
 @pytest.fixture(scope='module')
 def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
-    data['device']['state_port'], data['device']['command_port'] = free_udp_ports(2)
-    path = tmp_path_factory.mktemp('dam_grasp') / 'dam.yaml'
-    path.write_text(yaml.safe_dump(data), encoding='utf-8')
-    return path
+    return config_with_free_ports(tmp_path_factory.mktemp('dam_grasp'))
 
 
 @pytest.fixture(scope='module')
