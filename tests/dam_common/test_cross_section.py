@@ -16,14 +16,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq, minimize_scalar
 
-from dam_common.cross_section import (
-    Circle,
-    ConvexPolygon,
-    Ellipse,
-    SegmentDistance,
-    check_convex_polygon,
-    regular_polygon,
-)
+from dam_common.cross_section import Circle, Ellipse, SegmentDistance
+from dam_common.polygon_section import ConvexPolygon, check_convex_polygon, regular_polygon
 
 #: An asymmetric convex pentagon resting on its face z = 0 [m] (not centred on purpose).
 ASYMMETRIC = [(0.0, 0.0), (0.024, 0.0), (0.019, 0.011), (0.006, 0.015), (-0.004, 0.007)]

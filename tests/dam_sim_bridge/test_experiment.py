@@ -165,7 +165,7 @@ def test_column_objects_are_classified_no_better_than_the_ground_truth(
 def test_the_section_fit_over_one_symmetry_period_equals_the_full_turn(cfg: DamConfig) -> None:
     """A hexagon repeats every 60 deg: the fit over one period finds the pose of the fit over
     the whole turn; and a stop request ends the fit."""
-    from dam_common.cross_section import ConvexPolygon
+    from dam_common.polygon_section import ConvexPolygon
     from dam_spcm_controller.classification import FitInterrupted, estimate_section
 
     config = cfg.with_object('hex_bar')

@@ -757,7 +757,7 @@ def test_the_prism_inertia_against_a_quadrature() -> None:
     down (section point (x, z) at (x, -z)), integrated on a fine grid of the triangle, equals
     the returned principal moments turned by the returned angle about z (the product of
     inertia is not zero here)."""
-    from dam_common.cross_section import ConvexPolygon
+    from dam_common.polygon_section import ConvexPolygon
     from dam_sim_bridge.world import prism_inertia
 
     section = ConvexPolygon(WEDGE['vertices_m'])

@@ -23,15 +23,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from dam_common.cross_section import (
-    Circle,
-    ConvexPolygon,
-    CrossSection,
-    Ellipse,
-    check_convex_polygon,
-    regular_polygon,
-)
+from dam_common.cross_section import Circle, CrossSection, Ellipse
 from dam_common.errors import ConfigError
+from dam_common.polygon_section import ConvexPolygon, check_convex_polygon, regular_polygon
 from dam_common.strict_yaml import safe_load_unique
 
 #: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).

@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from dam_common.cross_section import ConvexPolygon
+from dam_common.polygon_section import ConvexPolygon
 from dam_sim_bridge.errors import SweepError
 
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
