@@ -166,7 +166,7 @@ def test_the_section_fit_over_one_symmetry_period_equals_the_full_turn(cfg: DamC
     """A hexagon repeats every 60 deg: the fit over one period finds the pose of the fit over
     the whole turn; and a stop request ends the fit."""
     from dam_common.polygon_section import ConvexPolygon
-    from dam_spcm_controller.classification import FitInterrupted, estimate_section
+    from dam_spcm_controller.object_estimate import FitInterrupted, estimate_section
 
     config = cfg.with_object('hex_bar')
     world = HandWorld(config)

@@ -78,7 +78,6 @@ from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
 from dam_spcm_controller.classification import (
     ClassifierSettings,
-    FitInterrupted,
     HandGeometry,
     Outcome,
     classify_from_joints,
@@ -86,6 +85,7 @@ from dam_spcm_controller.classification import (
 from dam_spcm_controller.commands import JointCommand, JointMode
 from dam_spcm_controller.episode import EpisodeEvents
 from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.object_estimate import FitInterrupted
 from dam_spcm_controller.release import ReleaseMotion
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 
