@@ -29,8 +29,8 @@ Model
   Its collision shape is the convex mesh of a prism of its cross-section (zero collision
   margin): a polygon's own vertices, a circle or an ellipse as
   :attr:`WorldOptions.object_faces` faces tangent to it, with the homogeneous column's mass and
-  inertia (:func:`prism_inertia`). Bullet's primitive cylinder creeps and rolls away on a flat
-  table by itself (about 0.17 m in 5 s), the prism rests.
+  inertia (:mod:`dam_sim_bridge.column_body`). Bullet's primitive cylinder creeps and rolls
+  away on a flat table by itself (about 0.17 m in 5 s), the prism rests.
 * Friction. Bullet combines the lateral friction of two bodies by multiplying them. The finger
   links get ``tan(alpha)``, the object ``1.0`` and the table
   ``contact.table_friction_coefficient``, so finger-object = ``tan(alpha)`` and table-object =
@@ -115,14 +115,20 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from dam_common.cross_section import Circle, CrossSection
+from dam_common.cross_section import Circle
 from dam_common.scalars import clip
 from dam_hand_driver.protocol import JointFault, JointMode
+from dam_sim_bridge.column_body import (
+    prism_inertia,
+    prism_triangles,
+    prism_vertices,
+    resting_quaternion,
+)
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 from dam_sim_bridge.pybullet_import import bullet_client, pybullet
 
 if TYPE_CHECKING:
-    from dam_common.config import DamConfig, ObjectConfig
+    from dam_common.config import DamConfig
 
 _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
@@ -295,104 +301,6 @@ def _toward(current: float, target: float, max_change: float) -> float:
     exactly, when it is that close)."""
     gap = target - current
     return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
-
-
-def resting_quaternion(obj: ObjectConfig) -> tuple[float, float, float, float]:
-    """Quaternion (x, y, z, w) of the object's resting pose in the world: the body frame of
-    :func:`prism_vertices`. Before the turn to the section's principal axes (``beta`` of
-    :func:`prism_inertia`) that frame has its x axis along the section's ``x`` (``axis x
-    z``), its y axis straight down and its z axis along the column axis (right-handed for
-    every horizontal axis); the body frame is that frame turned by ``beta`` about its z axis.
-    """
-    _, beta = prism_inertia(obj.section, obj.mass_kg, obj.length_m)
-    # R_z(heading) R_x(-90 deg): local z onto the axis, local x onto axis x z, local y down
-    heading = math.atan2(-float(obj.axis[0]), float(obj.axis[1]))
-    down = (-math.sin(math.pi / 4.0), 0.0, 0.0, math.cos(math.pi / 4.0))
-    turn = (0.0, 0.0, math.sin(heading / 2.0), math.cos(heading / 2.0))
-    principal = (0.0, 0.0, math.sin(beta / 2.0), math.cos(beta / 2.0))
-    return _quaternion_product(_quaternion_product(turn, down), principal)
-
-
-def _quaternion_product(p: Sequence[float], q: Sequence[float]
-                        ) -> tuple[float, float, float, float]:
-    """Hamilton product ``p q`` of quaternions (x, y, z, w): the rotation ``q``, then ``p``."""
-    px, py, pz, pw = p
-    qx, qy, qz, qw = q
-    return (pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz)
-
-
-def prism_vertices(section: CrossSection, length_m: float, faces: int, beta: float = 0.0
-                   ) -> np.ndarray:
-    """Vertices (2m, 3) of the prism of ``section``'s outline in the object's body frame [m].
-
-    The body frame (:func:`resting_quaternion`) has its z axis along the column axis and its
-    x and y axes along the section's principal axes: before the turn by ``beta`` [rad] about
-    z (:func:`prism_inertia`; zero for a section symmetric about its vertical axis) the x axis
-    lies along the section's ``x`` (``axis x z``) and the y axis straight down, so that a
-    section point ``(x, z)`` is the point ``(x, -z, +-length/2)``. A circle or an ellipse
-    becomes ``faces`` faces tangent to it, one of them on the table
-    (:meth:`~dam_common.cross_section.CrossSection.outline`); a polygon keeps its vertices.
-    Vertex ``2k`` is outline point ``k`` at ``-length/2``, ``2k + 1`` the same at
-    ``+length/2``; the mirror ``z -> -z`` makes the counter-clockwise outline clockwise in the
-    body's xy plane (:func:`prism_triangles` winds its faces for that).
-    """
-    outline = section.outline(faces)
-    half = length_m / 2.0
-    c, s = math.cos(beta), math.sin(beta)
-    # the point (x, -z) in the frame turned by beta: rotate it by -beta
-    return np.array([[c * x - s * z, -s * x - c * z, w] for x, z in outline
-                     for w in (-half, half)], dtype=np.float64)
-
-
-def prism_triangles(n_outline: int) -> list[int]:
-    """Triangle indices of the closed prism of :func:`prism_vertices`, wound so that every
-    face's normal (counter-clockwise order) points outwards; its outline runs clockwise in the
-    body's xy plane."""
-    tris: list[int] = []
-    for k in range(n_outline):
-        a0, a1 = 2 * k, 2 * k + 1
-        b0, b1 = 2 * ((k + 1) % n_outline), 2 * ((k + 1) % n_outline) + 1
-        tris += [a0, b1, b0, a0, a1, b1]
-    for k in range(1, n_outline - 1):
-        tris += [0, 2 * k, 2 * (k + 1)]  # the end cap at -length/2, facing -z
-        tris += [1, 2 * (k + 1) + 1, 2 * k + 1]  # the end cap at +length/2, facing +z
-    return tris
-
-
-def prism_inertia(section: CrossSection, mass_kg: float, length_m: float
-                  ) -> tuple[tuple[float, float, float], float]:
-    """Principal inertia [kg*m^2] of the homogeneous prism of ``section`` about its centroid,
-    and the angle ``beta`` [rad] about the column axis from the frame with x along the
-    section's ``x`` and y straight down to the principal axes (zero for a section symmetric
-    about its vertical axis). The body frame of :func:`prism_vertices` is the principal one,
-    so that PyBullet needs no inertial frame of its own (its base pose would then be that of
-    the inertial frame, not of the mesh).
-
-    With ``S_xx = int x^2 dA``, ``S_zz = int z^2 dA``, ``S_xz = int x z dA`` of the section
-    and the body point ``(x, -z, w)``: ``I_xx = m (S_zz / A + L^2 / 12)``,
-    ``I_yy = m (S_xx / A + L^2 / 12)``, ``I_zz = m (S_xx + S_zz) / A`` and the tensor's
-    ``xy`` entry ``m S_xz / A``.
-    """
-    area = section.area
-    s_xx, s_zz = section.second_moments
-    s_xz = section.product_moment
-    axial = length_m ** 2 / 12.0
-    i_xx = mass_kg * (s_zz / area + axial)
-    i_yy = mass_kg * (s_xx / area + axial)
-    i_zz = mass_kg * (s_xx + s_zz) / area
-    # the tensor's xy entry, -int x_b y_b dm with the body's y_b = -z
-    i_xy = mass_kg * s_xz / area
-    if abs(i_xy) <= 1e-12 * max(i_xx, i_yy):
-        return (i_xx, i_yy, i_zz), 0.0
-    # principal axes: the frame turned about z by beta, tan(2 beta) = 2 I_xy / (I_xx - I_yy)
-    beta = 0.5 * math.atan2(2.0 * i_xy, i_xx - i_yy)
-    c, s = math.cos(beta), math.sin(beta)
-    j_xx = c * c * i_xx + 2.0 * c * s * i_xy + s * s * i_yy
-    j_yy = s * s * i_xx - 2.0 * c * s * i_xy + c * c * i_yy
-    return (j_xx, j_yy, i_zz), beta
 
 
 def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
@@ -568,9 +476,10 @@ class HandWorld:
             visual = pb.createVisualShape(pybullet.GEOM_MESH, vertices=vertices.tolist(),
                                           indices=prism_triangles(len(vertices) // 2),
                                           rgbaColor=[0.2, 0.4, 0.8, 1.0])
+        self._resting_quaternion = resting_quaternion(obj)
         self.object_id = pb.createMultiBody(obj.mass_kg, hull, visual,
                                             basePosition=obj.position_m.tolist(),
-                                            baseOrientation=resting_quaternion(obj))
+                                            baseOrientation=self._resting_quaternion)
         for body in (self.table_id, self.object_id):
             pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0, restitution=0.0,
                               rollingFriction=0.0, spinningFriction=0.0)
@@ -727,7 +636,7 @@ class HandWorld:
         """
         obj = self.config.object
         pos = obj.position_m if object_position is None else np.asarray(object_position, float)
-        quat = (resting_quaternion(obj) if object_quaternion is None
+        quat = (self._resting_quaternion if object_quaternion is None
                 else np.asarray(object_quaternion, float))
         if np.shape(pos) != (3,) or not np.all(np.isfinite(pos)):
             raise WorldConfigError(f'object_position {object_position!r} must be 3 finite numbers')
