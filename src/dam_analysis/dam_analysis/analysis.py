@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dam_analysis.errors import InputError
+from dam_analysis.errors import InputError, NoSolutionError
 from dam_analysis.hand_limits import HandLimits, csm_penetration
 from dam_analysis.lift import STATUS_BOUNDED, STATUS_NO_SPCM, worst_case_cone
 from dam_analysis.model import HandModel, build_hand_model
@@ -100,6 +100,14 @@ def _world(frame: tuple[list[float], list[float]], u: float, z: float, point: bo
         else [u * w for w in inward]
     out[2] += z  # the plane z axis is the world z axis
     return out
+
+
+def unreachable_object(config: DamConfig, error: NoSolutionError) -> str:
+    """Why the configuration's object cannot be analysed: the fingers make no first contact
+    with it (``error``, from building the :class:`LiftAnalyzer`), naming the object."""
+    obj = config.object
+    return (f'object {obj.name!r} ({obj.section.describe()}) cannot be analysed with this '
+            f'hand: {error}')
 
 
 def check_k_theta(k_theta: ArrayLike, stiffness_ratios: np.ndarray) -> np.ndarray:

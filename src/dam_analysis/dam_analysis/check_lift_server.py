@@ -54,7 +54,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from dam_analysis.analysis import LiftAnalyzer
+from dam_analysis.analysis import LiftAnalyzer, unreachable_object
 from dam_analysis.errors import DamAnalysisError, InputError, NoSolutionError
 from dam_analysis.hand_limits import limit_notes
 from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_from_request
@@ -205,9 +205,7 @@ class CheckLiftServer(Node):
             try:
                 cache[name] = build(config)
             except NoSolutionError as exc:
-                cache[name] = InputError(
-                    f'object {name!r} ({config.object.section.describe()}) cannot be '
-                    f'analysed with this hand: {exc}')
+                cache[name] = InputError(unreachable_object(config, exc))
             else:
                 self.get_logger().info(f'analysis of object {name!r} '
                                        f'({config.object.section.describe()}) ready')

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dam_analysis.analysis import LiftAnalyzer
+from dam_analysis.analysis import LiftAnalyzer, unreachable_object
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.regions import Boundaries
 from dam_common.config import load_config
@@ -207,8 +207,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         analyzer = LiftAnalyzer(config)
     except NoSolutionError as exc:
-        print(f'lift_map: object {config.object.name!r} ({config.object.section.describe()}) '
-              f'cannot be analysed with this hand: {exc}', file=sys.stderr)
+        print(f'lift_map: {unreachable_object(config, exc)}', file=sys.stderr)
         return 2
     print(f'lift_map: SPCM paths cached in {time.perf_counter() - start:.2f} s',
           file=sys.stderr, flush=True)

@@ -110,7 +110,6 @@ class ObjectConfig:
     """
 
     name: str
-    shape: str  # 'circle', 'ellipse', 'regular_polygon' or 'convex_polygon' (the YAML's)
     section: CrossSection
     length_m: float
     mass_kg: float
@@ -483,7 +482,7 @@ def _library_object(node: _Node, name: str, axis: np.ndarray, place: np.ndarray
     else:
         section = _convex_polygon(node.child('vertices_m'), name)
     position = np.array([float(place[0]), float(place[1]), section.rest_height])
-    return ObjectConfig(name=name, shape=shape, section=section,
+    return ObjectConfig(name=name, section=section,
                         length_m=node.child('length_m').number(positive=True),
                         mass_kg=node.child('mass_kg').number(positive=True),
                         position_m=position, axis=axis)
