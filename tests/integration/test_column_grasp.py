@@ -90,3 +90,24 @@ def test_a_hexagonal_bar_is_lifted_and_enveloped(stack: _Grasper) -> None:
         result.message, stack.controller.output()[-3000:])
     log = stack.controller.output()
     assert OBJECT in log, log[-3000:]
+
+
+def test_the_object_parameter_is_read_only_as_ros2_param_shows_it(stack: _Grasper) -> None:
+    """What ``ros2 param get /spcm_controller object`` and ``ros2 param set ... object
+    square_bar`` do: the value is the object started with, and a change is refused while the
+    node keeps serving."""
+    from rcl_interfaces.srv import GetParameters, SetParameters
+    from rclpy.parameter import Parameter
+
+    got = stack.client.call(GetParameters, '/spcm_controller/get_parameters',
+                            GetParameters.Request(names=['object']))
+    assert [v.string_value for v in got.values] == [OBJECT]
+    request = SetParameters.Request(
+        parameters=[Parameter('object', value='square_bar').to_parameter_msg()])
+    result = stack.client.call(SetParameters, '/spcm_controller/set_parameters',
+                               request).results[0]
+    assert not result.successful and 'read-only' in result.reason, result.reason
+    again = stack.client.call(GetParameters, '/spcm_controller/get_parameters',
+                              GetParameters.Request(names=['object']))
+    assert [v.string_value for v in again.values] == [OBJECT]
+    assert stack.controller.alive()
