@@ -129,8 +129,7 @@ class CheckLiftServer(Node):
         response.friction_angle = math.nan  # until an answer is computed
         response.torque_limit = math.nan
         defaults: list[str] = []
-        object_default: list[str] = []  # last in the message's list
-        name = self._object_name(request.object, object_default)
+        name = request.object or self._config.object.name
         analyzer = self._computed(response, 'preparing the object',
                                   lambda: self._cached(self._analyzers, name, LiftAnalyzer))
         if analyzer is None:
@@ -173,18 +172,16 @@ class CheckLiftServer(Node):
                             response.csm_lift)
         if notes:
             message += '; ' + '; '.join(notes)
-        defaults += object_default
+        defaults += self._object_note(request.object)
         if defaults:
             message += f' [from the configuration: {", ".join(defaults)}]'
         response.message = message
         return response
 
-    def _object_name(self, requested: str, defaults: list[str]) -> str:
-        """The object a request names; an empty name is the default, noted in ``defaults``."""
-        if requested:
-            return requested
-        defaults.append(f'object = {self._config.object.name}')
-        return self._config.object.name
+    def _object_note(self, requested: str) -> list[str]:
+        """The note for the message's values from the configuration: the default object when
+        the request names none (last in the list)."""
+        return [] if requested else [f'object = {self._config.object.name}']
 
     def _cached(self, cache: dict[str, T | InputError], name: str,
                 build: Callable[[DamConfig], T]) -> T:
@@ -235,8 +232,7 @@ class CheckLiftServer(Node):
                  ) -> PlanLift.Response:
         for name in _PLAN_NUMBERS:  # NaN until a plan says otherwise
             setattr(response, name, math.nan)
-        taken: list[str] = []
-        object_name = self._object_name(request.object, taken)
+        object_name = request.object or self._config.object.name
 
         def compute() -> tuple[PlanResult, list[str]]:
             planner = self._cached(self._planners, object_name, LiftPlanner)
@@ -252,7 +248,7 @@ class CheckLiftServer(Node):
         if answer is None:
             return response
         plan, from_config = answer
-        taken = from_config + taken
+        taken = from_config + self._object_note(request.object)
         response.ok = True
         response.object = object_name
         _fill_plan(response, plan)
