@@ -202,6 +202,13 @@ class SimConfig:
     object_faces: int
     compliant_rotor_inertia_kg_m2: float
     palm_thickness_m: float
+    #: Simulated time: the longest wall-clock time [s] the simulated clock may stand still
+    #: (no state frame, no joint state) before a node calls the stand-in or its peer dead.
+    stall_timeout_s: float = 5.0
+    #: Simulated time: the longest wall-clock time [s] the driver waits, before answering a
+    #: state frame, for the command that answers the previous joint state while a commander
+    #: streams (see ``docs/simulation_grasp.md``, "Simulated time").
+    command_wait_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -603,7 +610,7 @@ def _classification(node: _Node) -> ClassificationConfig:
 def _sim(node: _Node, hand: HandConfig) -> SimConfig:
     node.only_keys({'time_step_s', 'solver_iterations', 'initial_compliant_angle_deg',
                     'servo_force_limit_nm', 'object_faces', 'compliant_rotor_inertia_kg_m2',
-                    'palm_thickness_m'})
+                    'palm_thickness_m', 'stall_timeout_s', 'command_wait_s'})
     step = node.child('time_step_s')
     step_s = step.number(positive=True)
     if step_s > 0.01:
@@ -620,7 +627,17 @@ def _sim(node: _Node, hand: HandConfig) -> SimConfig:
         compliant_rotor_inertia_kg_m2=node.child('compliant_rotor_inertia_kg_m2').number(
             nonnegative=True),
         palm_thickness_m=node.child('palm_thickness_m').number(nonnegative=True),
+        stall_timeout_s=_wall_bound(node.child('stall_timeout_s')),
+        command_wait_s=_wall_bound(node.child('command_wait_s')),
     )
+
+
+def _wall_bound(node: _Node) -> float:
+    """A wall-clock bound of simulated time [s]: positive, at most a minute."""
+    value = node.number(positive=True)
+    if value > 60.0:
+        raise node.error(f'{value!r} s is longer than a minute: a dead peer would go unnoticed')
+    return value
 
 
 def _device(node: _Node) -> DeviceConfig:

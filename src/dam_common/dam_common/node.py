@@ -32,6 +32,7 @@ from dam_common.config import DamConfig
 from dam_common.errors import DamCommonError
 from dam_common.parameter_services import harden_parameter_services
 from dam_common.shutdown import ShutdownRequest, StartupInterrupted, catch_signals
+from dam_common.sim_time import fix_use_sim_time
 
 CONFIG_FILE_DESCRIPTION = ('DAM configuration file (YAML); empty: DAM_CONFIG or the installed '
                            'config/dam.yaml')
@@ -224,8 +225,9 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
       logger ``name`` and ends the process with ``startup_exit_code``.
     - Once built, the node's services are guarded (:func:`guard_service_callbacks`), its
       set-parameter services check every request
-      (:func:`~dam_common.parameter_services.harden_parameter_services`), and overrides that
-      match no parameter are warned about.
+      (:func:`~dam_common.parameter_services.harden_parameter_services`), ``use_sim_time``
+      is fixed (:func:`~dam_common.sim_time.fix_use_sim_time`), and overrides that match no
+      parameter are warned about.
     - Every object that exists then is moved out of the garbage collector's sight
       (``gc.freeze``), so later collections scan only what the running node allocates: no
       pause of several milliseconds in the middle of a control cycle. A node with a timed
@@ -263,6 +265,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
                 raise
             harden_parameter_services(node)
             guard_service_callbacks(node)
+            fix_use_sim_time(node)
             for override in unmatched_overrides(node):
                 node.get_logger().warning(
                     f'parameter override {override!r} matches no parameter of this node: '

@@ -51,14 +51,25 @@ object : string, read-only
     The column object of the configuration's ``object.library`` a stand-in this driver starts
     puts on the table (empty: ``object.default``); a real hand ignores it.
 thread_priority : int, read-only, in [0, 99], default 50
-    ``SCHED_FIFO`` priority of the device-link thread, also passed to a stand-in it starts
-    (0: normal scheduling); the node's other threads (executor, middleware) run one below it.
-    Without the permission the node warns once and runs on.
+    ``SCHED_FIFO`` priority of the device-link thread when the device is a real hand (0:
+    normal scheduling). Only that thread asks for it: the executor, the middleware's threads
+    and a stand-in keep the normal policy, and with a simulated device nothing of the driver
+    runs real-time (a simulation has no physical deadline). Without the permission the node
+    warns once and runs on.
+use_sim_time : bool, fixed at start-up
+    Run on the stand-in's simulated time (``docs/simulation_grasp.md``, "Simulated time"):
+    a stand-in this driver starts gets it too; ``/joint_states`` are stamped with the device's
+    simulated time; before answering a state frame the driver waits (at most
+    ``sim.command_wait_s`` of wall time) for the command that answers the previous joint state
+    while a commander streams; the state timeout becomes ``sim.stall_timeout_s`` of wall time,
+    and a stand-in child that exits is an ERROR at once. Refused with ``backend:=hardware``
+    and when a real hand answers.
 
 States
 ------
 WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, every joint
-HOLDs, the command slew starts afresh) -> ERROR (no state frame for ``device.state_timeout_s``:
+HOLDs, the command slew starts afresh) -> ERROR (no state frame for ``device.state_timeout_s``,
+with ``use_sim_time`` ``sim.stall_timeout_s`` of wall time or the stand-in child exited:
 no more /joint_states, no more command frames, so the device's watchdog takes it to its safe
 state) -> ACTIVE only through ``~/reset``.
 """
@@ -100,7 +111,6 @@ from dam_common.node import (
 from dam_common.realtime import (
     SWITCH_INTERVAL_S,
     die_with_parent,
-    set_process_priority,
     set_thread_priority,
 )
 from dam_common.shutdown import SHUTDOWN
@@ -277,6 +287,12 @@ class HandDriverNode(Node):
                 description='open the PyBullet window of a stand-in this driver starts (needs '
                             'a display)', read_only=True)).value)
         self._scheduling = 'not started'
+        self._sim_time = bool(self.get_parameter('use_sim_time').value)
+        if self._sim_time and self.backend == 'hardware':
+            raise HandDriverError('use_sim_time:=true runs on the stand-in\'s clock; '
+                                  'backend:=hardware drives a real hand in real time')
+        #: The device is the simulated stand-in (started here, or it said so when probed).
+        self._simulated_device = self.backend == 'sim'
         self.config = declare_object(self, load_config(config_file or None))
         dev = self.config.device
         hand = self.config.hand
@@ -289,6 +305,10 @@ class HandDriverNode(Node):
         self.calibration = Calibration.from_config(self.config)
         self.period_s = 1.0 / float(dev.rate_hz)
         self.state_timeout_s = float(dev.state_timeout_s)
+        #: The silence of the device that is an ERROR [s of wall time].
+        self._silence_timeout_s = (float(self.config.sim.stall_timeout_s) if self._sim_time
+                                   else self.state_timeout_s)
+        self._command_wait_s = float(self.config.sim.command_wait_s)
         self.torque_limit_nm = float(dev.torque_limit_nm)
         self.slew = CommandSlew(self.n, self.torque_limit_nm,
                                 float(dev.torque_rate_limit_nm_per_s), self.period_s)
@@ -304,12 +324,20 @@ class HandDriverNode(Node):
         self.state = DriverState.WAITING
         self._error_reason = ''
         self._last_frame: StateFrame | None = None
+        self._startup_frame: StateFrame | None = None  # the newest frame of the probe
         self._rejected_commands = 0
         self._last_reject_reason = ''
         #: (joint states published, header stamp of the last one [ns])
         self._published_last: tuple[int, int] = (0, 0)
         self._latencies_s: deque[float] = deque(maxlen=2000)
-        self._diag_prev = (time.monotonic(), 0, 0)
+        self._diag_prev = (time.monotonic(), 0, 0, 0)
+        #: Header stamp [ns] of the joint state the newest /hand/command answers (its own
+        #: stamp), and the condition the device-link thread waits on for it.
+        self._command_ref_ns: int | None = None
+        self._command_arrived = threading.Condition()
+        self._command_waits_timed_out = 0
+        #: Stamps [ns] of the last three joint states published, oldest first (simulated time).
+        self._stamps_ns = (0, 0, 0)
         self._child: subprocess.Popen[bytes] | None = None
         self._running = True
 
@@ -337,14 +365,8 @@ class HandDriverNode(Node):
         except BaseException:
             self.destroy_node()  # a stand-in already started goes with it
             raise
-        # The executor thread shares the interpreter lock with the timed thread, and the
-        # middleware's threads deliver /hand/command to it: all of them one priority below the
-        # timed thread, so that no ordinary process delays a command or holds the lock (the
-        # timed thread warns if real-time scheduling is refused). Before the timed thread
-        # starts: it raises itself above them.
         try:
             self._intake.start()
-            set_process_priority(max(0, self.thread_priority - 1))
             self._thread = threading.Thread(target=self._loop, name='device_link', daemon=True)
             self._thread.start()
         except BaseException:  # e.g. a stop request: the node is not handed out to stop it
@@ -362,7 +384,12 @@ class HandDriverNode(Node):
             return
         probe = self._receive_at_start(float(dev.probe_timeout_s))
         if probe is not None:
-            kind = 'simulated' if probe.status & DeviceStatus.SIMULATED else 'hardware'
+            self._simulated_device = bool(probe.status & DeviceStatus.SIMULATED)
+            kind = 'simulated' if self._simulated_device else 'hardware'
+            if self._sim_time and not self._simulated_device:
+                raise HandDriverError(
+                    f'a real hand answered at {addr}, and use_sim_time:=true runs on the '
+                    f'stand-in\'s clock: start the driver without use_sim_time')
             self.get_logger().info(f'device answered at {addr}: backend {self.backend}, '
                                    f'{kind} device')
             return
@@ -383,9 +410,10 @@ class HandDriverNode(Node):
             raise HandDriverError(f'{why}, and dam_sim_bridge is not installed: {exc}') from exc
         if not exe.is_file():
             raise HandDriverError(f'{why}, and the stand-in {str(exe)!r} does not exist')
+        self._simulated_device = True
         cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim', '-p',
-               f'thread_priority:={self.thread_priority}', '-p',
-               f'gui:={str(self._gui).lower()}']
+               f'gui:={str(self._gui).lower()}', '-p',
+               f'use_sim_time:={str(self._sim_time).lower()}']
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
         cmd += ['-p', f'object:={self.config.object.name}']
@@ -416,6 +444,10 @@ class HandDriverNode(Node):
             SHUTDOWN.raise_if_requested()
             left = deadline - time.monotonic()
             frame = self.link.receive(min(0.05, max(left, 0.0)))
+            if frame is not None:
+                # The device link answers it: a stand-in on simulated time sends no newer
+                # frame before this one is answered.
+                self._startup_frame = frame
             if frame is not None or left <= 0.05:
                 return frame
 
@@ -469,7 +501,11 @@ class HandDriverNode(Node):
         self.get_logger().error(f'ERROR: {reason}; /joint_states and torque commands stopped, '
                                 f'call ~/reset to recover')
 
-    def _loop(self) -> None:
+    def _schedule_link_thread(self) -> None:
+        """SCHED_FIFO for this (the device-link) thread only, and only for a real hand."""
+        if self._simulated_device:
+            self._scheduling = 'normal (simulated device: no physical deadline)'
+            return
         refused = set_thread_priority(self.thread_priority)
         self._scheduling = (f'normal ({refused})' if refused else
                             f'SCHED_FIFO {self.thread_priority}' if self.thread_priority else
@@ -478,19 +514,41 @@ class HandDriverNode(Node):
             self.get_logger().warning(
                 f'{refused}: the device link runs with normal scheduling, /joint_states may '
                 f'jitter on a busy machine (thread_priority:=0 silences this)')
+
+    def _silence(self, now: float) -> str | None:
+        """Why the device counts as gone (``None``: it does not), no frame having come."""
+        child = self._child
+        if self._sim_time and child is not None and child.poll() is not None:
+            return f'the stand-in (PID {child.pid}) exited with code {child.returncode}'
+        last = self.link.last_state_time
+        if last is None or now - last <= self._silence_timeout_s:
+            return None
+        what = ('sim.stall_timeout_s, wall time: the simulated clock stands still'
+                if self._sim_time else 'device.state_timeout_s')
+        return f'no state frame for {now - last:.3f} s ({what}, {self._silence_timeout_s} s)'
+
+    def _loop(self) -> None:
+        self._schedule_link_thread()
+        resend_after_s = 2.0 * 0.1  # twice the stand-in's own resend period
         while self._running:
-            frame = self.link.receive(min(0.01, self.state_timeout_s / 4.0))
+            frame, self._startup_frame = self._startup_frame, None
+            if frame is None:
+                frame = self.link.receive(min(0.01, self.state_timeout_s / 4.0))
             now = time.monotonic()
             if frame is None:
-                last = self.link.last_state_time
-                if self.state is DriverState.ACTIVE and last is not None \
-                        and now - last > self.state_timeout_s:
+                if self.state is not DriverState.ACTIVE:
+                    continue
+                why = self._silence(now)
+                if why is not None:
                     # This thread may itself have been held up (interpreter lock, CPU):
                     # frames that arrived meanwhile are waiting in the socket.
                     frame = self.link.receive(0.0)
                     if frame is None:
-                        self._enter_error(f'no state frame for {now - last:.3f} s (timeout '
-                                          f'{self.state_timeout_s} s)')
+                        self._enter_error(why)
+                elif self._sim_time and now - (self.link.last_state_time or now) \
+                        > resend_after_s:
+                    # The stand-in waits for this answer: it may have been lost.
+                    self.link.resend()
                 if frame is None:
                     continue
                 now = time.monotonic()
@@ -500,21 +558,58 @@ class HandDriverNode(Node):
             if self.state is not DriverState.ACTIVE:
                 continue
             state_si = self.calibration.state_si(frame)
-            try:
-                self._send_command(frame, state_si)
-            except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
-                self.get_logger().error(f'command not sent: {exc!r}',
-                                        throttle_duration_sec=_LOG_THROTTLE_S)
-            self._latencies_s.append(time.monotonic() - now)
-            if not self.context.ok():
-                return  # shutting down: the publishers are gone
-            try:
-                self._publish_joint_states(state_si)
-            except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
-                if not self.context.ok():
+            if self._sim_time:
+                # Simulated time: the joint state first, so that the commander computes its
+                # answer while the stand-in steps; then the answer to the previous one.
+                if not self._publish_or_stop(state_si, frame):
                     return
-                self.get_logger().error(f'/joint_states not published: {exc!r}',
-                                        throttle_duration_sec=_LOG_THROTTLE_S)
+                self._await_command()
+                self._answer(frame, state_si, now)
+                continue
+            self._answer(frame, state_si, now)
+            if not self._publish_or_stop(state_si, frame):
+                return
+
+    def _answer(self, frame: StateFrame,
+                state_si: tuple[np.ndarray, np.ndarray, np.ndarray], received: float) -> None:
+        try:
+            self._send_command(frame, state_si)
+        except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
+            self.get_logger().error(f'command not sent: {exc!r}',
+                                    throttle_duration_sec=_LOG_THROTTLE_S)
+        self._latencies_s.append(time.monotonic() - received)
+
+    def _publish_or_stop(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray],
+                         frame: StateFrame) -> bool:
+        """Publish the joint state; ``False`` when the node is shutting down."""
+        if not self.context.ok():
+            return False  # shutting down: the publishers are gone
+        try:
+            self._publish_joint_states(state_si, frame)
+        except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
+            if not self.context.ok():
+                return False
+            self.get_logger().error(f'/joint_states not published: {exc!r}',
+                                    throttle_duration_sec=_LOG_THROTTLE_S)
+        return True
+
+    def _await_command(self) -> None:
+        """Simulated time: wait for the command that answers the previous joint state, if
+        the commander streams (its newest command answered the one before), at most
+        ``sim.command_wait_s`` of wall time. A commander that stops streaming costs one such
+        wait; one that never streamed (none, or a script at its own rate) costs none."""
+        before_previous, previous, _newest = self._stamps_ns
+        with self._command_arrived:
+            ref = self._command_ref_ns
+            if ref is None or ref < before_previous or ref >= previous:
+                return
+            deadline = time.monotonic() + self._command_wait_s
+            while self._running and (self._command_ref_ns or 0) < previous:
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    self._command_waits_timed_out += 1
+                    return
+                self._command_arrived.wait(min(left, 0.05))
 
     def _send_command(self, frame: StateFrame,
                       state_si: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
@@ -530,11 +625,16 @@ class HandDriverNode(Node):
         k_raw, d_raw = self.calibration.gains_raw(modes, stiffness, damping)
         self.link.send(modes, raw, frame.seq, k_raw, d_raw)
 
-    def _publish_joint_states(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray]
-                              ) -> None:
+    def _publish_joint_states(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray],
+                              frame: StateFrame) -> None:
         q, dq, tau = state_si
         msg = self._js_msg  # one message, refilled: publish() serialises it at once
-        msg.header.stamp = self.get_clock().now().to_msg()
+        if self._sim_time:  # the device's clock is the simulated time: the state's own
+            stamp_ns = int(frame.timestamp_ns)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+            self._stamps_ns = (self._stamps_ns[1], self._stamps_ns[2], stamp_ns)
+        else:
+            msg.header.stamp = self.get_clock().now().to_msg()
         # array.array('d') is taken as is by the generated setters (no per-element checks).
         msg.position = array.array('d', q.tobytes())
         msg.velocity = array.array('d', dq.tobytes())
@@ -564,6 +664,11 @@ class HandDriverNode(Node):
                 self._setpoints[j] = sp if mode is not JointMode.HOLD else 0.0
                 self._stiffness[j] = k
                 self._damping[j] = d
+        if self._sim_time:
+            stamp = msg.header.stamp
+            with self._command_arrived:
+                self._command_ref_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+                self._command_arrived.notify()
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
@@ -592,14 +697,18 @@ class HandDriverNode(Node):
 
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
-        t0, accepted0, published0 = self._diag_prev
+        t0, accepted0, published0, device_ns0 = self._diag_prev
         counters = self.link.decoder.counters
         dt = max(now - t0, 1e-9)
         state_rate = (counters.accepted - accepted0) / dt
         published, last_stamp_ns = self._published_last
         js_rate = (published - published0) / dt
-        self._diag_prev = (now, counters.accepted, published)
         frame = self._last_frame
+        device_ns = int(frame.timestamp_ns) if frame is not None else 0
+        # Device time per wall time over the last period: the real-time factor of a stand-in
+        # on simulated time (1.0 on an idle machine, lower when the machine holds it up).
+        rtf = (device_ns - device_ns0) * 1e-9 / dt if device_ns0 and device_ns else math.nan
+        self._diag_prev = (now, counters.accepted, published, device_ns)
         tripped = bool(frame is not None and frame.status & DeviceStatus.WATCHDOG_TRIPPED)
         simulated = bool(frame is not None and frame.status & DeviceStatus.SIMULATED)
         lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
@@ -614,7 +723,7 @@ class HandDriverNode(Node):
         elif state is DriverState.WAITING:
             status.level = DiagnosticStatus.ERROR
             status.message = 'waiting for the device'
-        elif state_rate < 0.8 * self.config.device.rate_hz or tripped:
+        elif (state_rate < 0.8 * self.config.device.rate_hz and not self._sim_time) or tripped:
             status.level = DiagnosticStatus.WARN
             status.message = ('device watchdog tripped' if tripped else
                               f'state rate {state_rate:.0f} Hz below target')
@@ -632,6 +741,9 @@ class HandDriverNode(Node):
             'joint_states_published': str(published),
             'joint_states_last_stamp_ns': str(last_stamp_ns),
             'target_rate_hz': f'{self.config.device.rate_hz:g}',
+            'use_sim_time': str(self._sim_time),
+            'real_time_factor': f'{rtf:.3f}',
+            'command_waits_timed_out': str(self._command_waits_timed_out),
             # The scheduled garbage collections (dam_common.collector): how long the longest
             # held the interpreter lock, i.e. stopped the device-link thread.
             'gc_collections': str(collector.collections if collector is not None else 0),
@@ -657,6 +769,9 @@ class HandDriverNode(Node):
         """Stop the link thread, the stand-in (by PID) and close the socket."""
         self._signal_standin()  # first: both shut down at the same time
         self._running = False
+        if hasattr(self, '_command_arrived'):
+            with self._command_arrived:
+                self._command_arrived.notify_all()
         intake = getattr(self, '_intake', None)
         if intake is not None:
             intake.stop()

@@ -81,6 +81,7 @@ class DeviceLink:
         self.stats = LinkStats()
         self._command_addr = (device_host, int(command_port))
         self._seq = 0
+        self._last_frame: bytes | None = None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind((bind_host or _default_bind_host(device_host), int(state_port)))
@@ -142,6 +143,15 @@ class DeviceLink:
         self._seq = seq_next(self._seq)
         frame = encode_command(self._seq, ref_state_seq, modes, setpoints_raw, stiffness_raw,
                                damping_raw)
+        self._last_frame = frame
+        return self._send_frame(frame)
+
+    def resend(self) -> bool:
+        """Send the newest command frame again (same content and sequence number: a device
+        takes it once); ``False`` if there is none or the socket refused it."""
+        return self._last_frame is not None and self._send_frame(self._last_frame)
+
+    def _send_frame(self, frame: bytes) -> bool:
         try:
             self.sock.sendto(frame, self._command_addr)
         except OSError:

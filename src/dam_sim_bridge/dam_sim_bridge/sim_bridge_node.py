@@ -1,17 +1,25 @@
 """``sim_bridge``: the PyBullet stand-in of the DAM hand, served over the device link.
 
 Run it with ``ros2 run dam_sim_bridge sim_bridge [--gui] [--ros-args -p ...]``. A
-:class:`~dam_sim_bridge.sim_device.SimDevice` runs the world in real time in its own thread and
-speaks the UDP device link (``docs/device_protocol.md``) on ``device.host`` /
-``device.command_port`` / ``device.state_port``; the driver (``dam_hand_driver hand_driver``)
-is its client. The node adds what only a simulator has:
+:class:`~dam_sim_bridge.sim_device.SimDevice` runs the world in its own thread and speaks the
+UDP device link (``docs/device_protocol.md``) on ``device.host`` / ``device.command_port`` /
+``device.state_port``; the driver (``dam_hand_driver hand_driver``) is its client.
+
+With ``use_sim_time:=true`` (what the scripts and a driver started with it give the stand-in)
+the stand-in is the suite's clock: it publishes ``/clock``, its device clock is the simulated
+time, and it steps the physics one device period only once the driver has answered the newest
+state frame, paced to at most real time; a loaded machine slows the grasp down and changes
+nothing else (``docs/simulation_grasp.md``, "Simulated time"). Without it the device runs in
+real time, as a hand with a hardware clock does, and misses no deadline of its own: a driver
+that is late misses them. The node adds what only a simulator has:
 
 Topics
 ------
 /sim/object_pose : geometry_msgs/PoseStamped
     Ground-truth pose of the object (its centroid), frame ``world``, at ``pose_rate_hz``.
 /clock : rosgraph_msgs/Clock
-    Simulated time, at ``pose_rate_hz``, when ``publish_clock`` is true.
+    Simulated time, at ``pose_rate_hz`` of wall time, with ``use_sim_time`` or
+    ``publish_clock``.
 
 Services
 --------
@@ -32,14 +40,17 @@ object : string, read-only
     ``object.default``); its convex mesh is a prism of the cross-section.
 gui : bool, read-only
     Open the PyBullet window (also ``--gui`` on the command line); refused without a display.
+use_sim_time : bool, fixed at start-up
+    Run in simulated time (above) and publish ``/clock``.
 publish_clock : bool, read-only
-    Publish ``/clock`` from the simulated time.
+    Publish ``/clock`` from the simulated time also in real-time mode.
 pose_rate_hz : double [Hz], in [1, 1000]
     Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
-thread_priority : int, read-only, in [0, 99], default 50
-    ``SCHED_FIFO`` priority of the simulated device's thread (0: normal scheduling); the
-    node's other threads (executor, middleware) run one below it. Without the permission the
-    node warns once and runs on with normal scheduling.
+thread_priority : int, read-only, in [0, 99], default 0
+    ``SCHED_FIFO`` priority of the simulated device's thread only (0: normal scheduling, the
+    default: a simulation has no physical deadline, and real-time threads of a physics that
+    fills a core use up the kernel's real-time budget, which then stops every real-time thread
+    of the machine). Without the permission the node warns once and runs on.
 """
 
 from __future__ import annotations
@@ -66,7 +77,7 @@ from dam_common.node import (
     declare_thread_priority,
     run_node,
 )
-from dam_common.realtime import SWITCH_INTERVAL_S, set_process_priority, set_thread_priority
+from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_common.ros_args import strip_ros_args
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
@@ -105,23 +116,26 @@ class SimBridgeNode(Node):
             'gui', False, ParameterDescriptor(
                 description='open the PyBullet window (needs a display)',
                 read_only=True)).value) or gui_flag
+        self._sim_time = bool(self.get_parameter('use_sim_time').value)
         self._publish_clock = bool(self.declare_parameter(
             'publish_clock', False, ParameterDescriptor(
-                description='publish /clock from the simulated time', read_only=True)).value)
+                description='publish /clock from the simulated time (always on with '
+                            'use_sim_time)', read_only=True)).value) or self._sim_time
         self._pose_rate_hz = float(self.declare_parameter(
             'pose_rate_hz', 100.0, ParameterDescriptor(
                 description='rate of /sim/object_pose and /clock [Hz]',
                 floating_point_range=[FloatingPointRange(
                     from_value=_POSE_RATE_RANGE[0], to_value=_POSE_RATE_RANGE[1],
                     step=0.0)])).value)
-        self._thread_priority = declare_thread_priority(self)
+        self._thread_priority = declare_thread_priority(
+            self, default=0, what='the simulated device thread')
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._config = declare_object(self, load_config(config_file or None))
         with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
             world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
             try:
-                self._device = SimDevice(self._config, world)
+                self._device = SimDevice(self._config, world, sim_time=self._sim_time)
             except BaseException:
                 world.close()
                 raise
@@ -137,18 +151,13 @@ class SimBridgeNode(Node):
         self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self._friction_srv = self.create_service(
             SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
-        # The executor thread shares the interpreter lock with the timed thread, and it holds
-        # the lock while it publishes, which may wait for the middleware's threads: all of them
-        # one priority below the timed thread, so that no ordinary process holds up the lock
-        # (no priority inversion; the timed thread warns if real-time scheduling is refused).
-        # Before the timed thread starts: it raises itself above them.
-        set_process_priority(max(0, self._thread_priority - 1))
         self._thread.start()
         dev = self._config.device
         self.get_logger().info(
             f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '
             f'states to port {dev.state_port} at {dev.rate_hz:g} Hz '
-            f'({self._device.steps_per_cycle} physics steps per cycle), object '
+            f'({self._device.steps_per_cycle} physics steps per cycle, '
+            f'{"simulated time: publishing /clock" if self._sim_time else "real time"}), object '
             f'{self._config.object.name} ({self._config.object.section.describe()}), config '
             f'{self._config.source}{", GUI" if gui else ""}')
 
@@ -184,7 +193,9 @@ class SimBridgeNode(Node):
     def _on_timer(self) -> None:
         with self._device.lock:
             pose = self._device.world.object_pose()
-        stamp = _sim_stamp(pose.sim_time) if self._publish_clock \
+            # The device clock runs on across resets of the world; /clock must never go back.
+            clock_s = self._device.now() if self._sim_time else pose.sim_time
+        stamp = _sim_stamp(clock_s) if self._publish_clock \
             else self.get_clock().now().to_msg()
         msg = PoseStamped()
         msg.header.stamp = stamp
@@ -196,7 +207,7 @@ class SimBridgeNode(Node):
          msg.pose.orientation.w) = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         self._pose_pub.publish(msg)
         if self._clock_pub is not None:
-            self._clock_pub.publish(Clock(clock=_sim_stamp(pose.sim_time)))
+            self._clock_pub.publish(Clock(clock=stamp))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:

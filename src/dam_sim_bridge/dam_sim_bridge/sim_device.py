@@ -16,15 +16,26 @@ period (``1 / device.rate_hz``) it
 4. encodes the joint state in raw units, with fault and status bits, and sends it to the
    driver's ``device.state_port``.
 
-:meth:`SimDevice.run` paces the cycles in real time (sleeping to absolute deadlines, skipping
-missed ones); :meth:`SimDevice.cycle` runs one cycle at once, for lockstep use. In lockstep
-mode the device clock (watchdog, timestamps) is the simulated time, so a test is independent of
-the machine's speed.
+:meth:`SimDevice.run` runs the cycles in one of three ways:
+
+* **real time** (the default): paced to absolute deadlines, missed ones skipped, the device
+  clock is the machine's monotonic clock: a device with a hardware clock, whose deadlines a
+  stalled driver misses;
+* **simulated time** (``sim_time=True``, the stand-in of a suite run with
+  ``use_sim_time:=true``): the device clock is the simulated time, and the world is stepped to
+  the next period only once the driver has answered the newest state frame (a command frame
+  whose ``ref_state_seq`` is that frame's). Cycles are paced to at most real time (a real-time
+  factor of 1 on an idle machine); a stall of the machine, of the driver or of this process
+  stretches wall time and changes nothing else. A state frame that stays unanswered is sent
+  again every :data:`RESEND_S` (a driver that starts later, or a lost datagram);
+* **lockstep** (:meth:`SimDevice.cycle`, or ``lockstep=True``): as fast as possible, the
+  device clock is the simulated time, for tests.
 """
 
 from __future__ import annotations
 
 import math
+import select
 import socket
 import threading
 import time
@@ -37,12 +48,14 @@ import numpy as np
 from dam_common.realtime import reduce_timer_slack
 from dam_hand_driver.protocol import (
     Calibration,
+    CommandFrame,
     DeviceStatus,
     DeviceWatchdog,
     FrameDecoder,
     FrameKind,
     JointFault,
     encode_state,
+    seq_newer,
 )
 from dam_sim_bridge.errors import WorldConfigError
 from dam_sim_bridge.pacing import sleep_until
@@ -55,6 +68,8 @@ _MAX_DATAGRAM = 2048
 #: In real time, the physics of the next cycle starts this fraction of a period after a state
 #: frame is sent (see :meth:`SimDevice.run`).
 STEP_OFFSET_FRACTION = 0.3
+#: Simulated time: an unanswered state frame is sent again after this long [s of wall time].
+RESEND_S = 0.1
 
 
 @dataclass
@@ -66,7 +81,8 @@ class DeviceStats:
     send_errors: int = 0  #: state frames that could not be sent (socket error)
     encode_errors: int = 0  #: states that did not fit the raw fields
     command_errors: int = 0  #: accepted commands the world refused (should stay 0)
-    missed_deadlines: int = 0  #: real-time cycles that started more than a period late
+    missed_deadlines: int = 0  #: cycles that started more than a period late
+    states_resent: int = 0  #: simulated time: unanswered state frames sent again
     latency_cycles: int = -1  #: state seq - ref_state_seq of the newest command (-1: none yet)
 
 
@@ -84,9 +100,12 @@ class SimDevice:
         ``device.state_port`` (state frames are sent there). ``command_port = 0`` binds a free
         port (see :attr:`command_address`).
     lockstep
-        Device clock = simulated time (for tests); otherwise ``clock``.
+        :meth:`run` as fast as possible, device clock = simulated time (for tests).
+    sim_time
+        :meth:`run` in simulated time: device clock = simulated time, each cycle waits for
+        the driver's answer to the previous state frame, paced to at most real time.
     clock
-        Monotonic clock [s] for real-time operation.
+        Monotonic clock [s] for real-time operation and pacing.
 
     Raises
     ------
@@ -99,6 +118,7 @@ class SimDevice:
     def __init__(self, config: DamConfig, world: HandWorld | None = None, *,
                  host: str | None = None, command_port: int | None = None,
                  state_port: int | None = None, lockstep: bool = False,
+                 sim_time: bool = False,
                  clock: Callable[[], float] = time.monotonic) -> None:
         dev = config.device
         rate = float(dev.rate_hz)
@@ -114,6 +134,7 @@ class SimDevice:
         #: Physics steps per device cycle.
         self.steps_per_cycle = int(steps)
         self.lockstep = bool(lockstep)
+        self.sim_time = bool(sim_time)
         self._rt_clock = clock
         self._sim_clock_s = 0.0
         n = self.world.n_joints
@@ -123,6 +144,8 @@ class SimDevice:
         self.stats = DeviceStats()
         self.lock = threading.RLock()  #: guards the world between the loop and other threads
         self._seq = 0
+        #: ``ref_state_seq`` of the newest command frame accepted (None: none yet).
+        self._newest_ref: int | None = None
         self._host = host if host is not None else dev.host
         self._state_addr = (self._host, int(state_port if state_port is not None
                                             else dev.state_port))
@@ -147,8 +170,9 @@ class SimDevice:
         return str(host), int(port)
 
     def now(self) -> float:
-        """Device clock [s]: simulated time in lockstep mode, else the real-time clock."""
-        return self._sim_clock_s if self.lockstep else self._rt_clock()
+        """Device clock [s]: simulated time in lockstep and simulated-time mode, else the
+        real-time clock."""
+        return self._sim_clock_s if (self.lockstep or self.sim_time) else self._rt_clock()
 
     def _drain_commands(self) -> None:
         while True:
@@ -159,8 +183,9 @@ class SimDevice:
             except OSError:  # e.g. ICMP port unreachable reported on a later call
                 continue
             frame = self.decoder.decode(data)
-            if frame is not None:
+            if isinstance(frame, CommandFrame):
                 self.watchdog.feed_frame(frame)
+                self._newest_ref = frame.ref_state_seq
                 self.stats.latency_cycles = (self._seq - frame.ref_state_seq) % 2**32
 
     def cycle(self) -> bytes | None:
@@ -247,6 +272,9 @@ class SimDevice:
             while not (stop_event.is_set() or self._stop.is_set()):
                 self.cycle()
             return
+        if self.sim_time:
+            self._run_sim_time(stop_event)
+            return
         reduce_timer_slack()
         next_deadline = self._rt_clock() + self.period_s
         frame = self._compute_cycle(next_deadline)
@@ -264,6 +292,55 @@ class SimDevice:
             time.sleep(STEP_OFFSET_FRACTION * self.period_s)
             next_deadline += self.period_s
             frame = self._compute_cycle(next_deadline, drain=False)
+
+    def _stopped(self, stop_event: threading.Event) -> bool:
+        return stop_event.is_set() or self._stop.is_set()
+
+    def _run_sim_time(self, stop_event: threading.Event) -> None:
+        """Simulated time: send state k, wait for the driver's answer to it, step to k + 1.
+
+        The command that answers state k was computed from the joint state before it (the
+        driver answers with the newest command it has), so a command reaches the world two
+        periods after the state it was computed from, as in the lockstep trial
+        (:func:`dam_sim_bridge.experiment.run_experiment`, ``latency_cycles=2``).
+        """
+        frame = self._compute_cycle(None)
+        next_deadline = self._rt_clock()
+        while not self._stopped(stop_event):
+            now = self._rt_clock()
+            if now > next_deadline + self.period_s:  # stalled: stretch, never catch up
+                self.stats.missed_deadlines += 1
+                next_deadline = now
+            elif now < next_deadline:
+                time.sleep(next_deadline - now)
+            if frame is not None:
+                seq = (self._seq - 1) % 2**32  # the frame's own number
+                self._send_state(frame)
+                if not self._await_answer(frame, seq, stop_event):
+                    return
+            next_deadline += self.period_s
+            frame = self._compute_cycle(None, drain=False)
+
+    def _await_answer(self, frame: bytes, seq: int, stop_event: threading.Event) -> bool:
+        """Take command frames until one answers state ``seq``; send ``frame`` again every
+        :data:`RESEND_S`. ``False`` if stopped meanwhile."""
+        resend_at = self._rt_clock() + RESEND_S
+        while not self._stopped(stop_event):
+            with self.lock:
+                self._drain_commands()
+                ref = self._newest_ref
+            if ref is not None and not seq_newer(seq, ref):
+                return True
+            now = self._rt_clock()
+            if now >= resend_at:
+                self._send_state(frame)
+                self.stats.states_resent += 1
+                resend_at = now + RESEND_S
+            try:
+                select.select([self.sock], [], [], min(0.01, max(0.0, resend_at - now)))
+            except (OSError, ValueError):  # the socket was closed: stopping
+                return False
+        return False
 
     def stop(self) -> None:
         """Ask :meth:`run` to return after the current cycle."""

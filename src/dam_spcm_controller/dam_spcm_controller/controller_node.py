@@ -35,10 +35,26 @@ its physics rate; false: this node computes the torque every joint state and sen
 MODE_TORQUE; ``envelope_constant_torque`` (bool, default false): ENVELOPE applies the constant
 ``envelope_torque`` to the compliant joints as in the paper's Fig. 6(d) instead of keeping the
 SPCM impedance (in simulation the constant torque pushes the lifted object out of the hand:
-``docs/simulation_grasp.md``); ``thread_priority`` (int, read-only, default 45, 0: off): every
-thread of the node (middleware and executor) runs under ``SCHED_FIFO`` at that priority where
-permitted, below the driver's device thread. All but ``config_file``, ``object`` and
-``thread_priority`` may be changed while no grasp runs.
+``docs/simulation_grasp.md``). All but ``config_file`` and ``object`` may be changed while no
+grasp runs. The controller never asks for real-time scheduling: on a real hand the deadline
+is the driver's device-link thread's, and the impedance law runs on the device.
+
+Time
+----
+With ``use_sim_time:=false`` the grasp's timing (trajectory, phase timeouts, ramps,
+``state_timeout``) runs on the steady clock. With ``use_sim_time:=true`` (the stand-in's
+simulated time, fixed at start-up) it runs on the stamps of ``/joint_states`` (the stand-in's
+simulated time): a machine that holds the suite up slows the grasp down and changes nothing
+else. ``state_timeout`` is then simulated time (``/clock`` against the newest joint state's
+stamp), and a silence of ``sim.stall_timeout_s`` of wall time (a stand-in or driver that
+died stops the simulated clock) fails the grasp all the same.
+
+Diagnostics
+-----------
+/diagnostics : diagnostic_msgs/DiagnosticArray, 1 Hz: status ``dam_spcm_controller: commands``
+with ``hand_commands_published`` (commands published since start) and
+``hand_commands_last_stamp_ns`` (the header stamp of the last one [ns]), so that a recording
+can be checked for completeness.
 """
 
 from __future__ import annotations
@@ -49,6 +65,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.action.server import ServerGoalHandle
@@ -68,10 +85,8 @@ from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
     declare_object,
-    declare_thread_priority,
     run_node,
 )
-from dam_common.realtime import set_process_priority
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
@@ -125,8 +140,6 @@ _DOUBLE_PARAMETERS: dict[str, tuple[str | None, str, float, float]] = {
     'status_rate': (None, '/dam/status and feedback rate [Hz] (read at start-up)', 0.1, 1000.0),
 }
 _READ_ONLY = {'status_rate'}
-#: Default SCHED_FIFO priority of the controller's threads (the driver's device thread: 50).
-_THREAD_PRIORITY = 45
 #: The bool parameters (declared with their descriptions in the node).
 _BOOL_PARAMETERS = ('require_lift_guarantee', 'impedance_on_device', 'envelope_constant_torque')
 
@@ -145,8 +158,8 @@ class SpcmControllerNode(Node):
     def __init__(self) -> None:
         super().__init__('spcm_controller')
         config_file = declare_config_file(self)
-        self._thread_priority = declare_thread_priority(
-            self, default=_THREAD_PRIORITY, what='every thread of the controller')
+        #: Simulated time: the grasp runs on the stamps of /joint_states (fixed at start-up).
+        self._sim_time = bool(self.get_parameter('use_sim_time').value)
         self._config = declare_object(self, load_config(config_file or None))
         self._base_params = SequenceParams.from_config(self._config)
         self._layout = self._base_params.layout
@@ -194,7 +207,10 @@ class SpcmControllerNode(Node):
         self._busy = False  # a goal is accepted and not finished
         self._publishing = False  # commands follow each joint state
         self._hold_sent = False
-        self._last_state_time: float | None = None
+        self._last_state_time: float | None = None  # steady clock [s]
+        self._last_control_time = 0.0  # the grasp's time of the newest joint state [s]
+        self._stall_timeout_s = float(self._config.sim.stall_timeout_s)
+        self._commands_published = (0, 0)  # (count, header stamp of the last one [ns])
         self._silence_suspected = False
         self._last_pos = np.zeros(self._layout.n_joints)
         self._last_eff = np.zeros(self._layout.n_joints)
@@ -215,6 +231,9 @@ class SpcmControllerNode(Node):
         self._command_pub = self.create_publisher(HandCommand, '/hand/command',
                                                   STREAM_HISTORY_DEPTH)
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._diag_timer = create_steady_timer(self, 1.0, self._publish_diagnostics)
+        self._pre_phase = ''  # CHECK_LIFT while a goal waits for its /check_lift answer
         self._episodes = EpisodeEvents(self, str(self._config.source), self._config.object.name)
         # /joint_states (500 Hz) has a thread and a wait set of its own: through this node's
         # executor, with its action server, services and timers, each message would cost
@@ -236,17 +255,11 @@ class SpcmControllerNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         try:
             self._intake.start()
-            # The control loop is this process's middleware threads, its intake thread and
-            # its executor: all real-time where permitted, below the driver's device thread.
-            refused = set_process_priority(self._thread_priority)
-            if refused:
-                self.get_logger().warning(
-                    f'{refused}: the controller runs with normal scheduling; on a busy machine '
-                    f'/joint_states may reach it late (thread_priority:=0 silences this)')
             obj = self._config.object
             self.get_logger().info(f'spcm_controller ready ({self._config.source}); object '
                                    f'{obj.name} ({obj.section.describe()}); joints '
-                                   f'{list(self._layout.joint_names)}')
+                                   f'{list(self._layout.joint_names)}; '
+                                   f'{"simulated" if self._sim_time else "steady"} time')
         except BaseException:  # e.g. a stop request: the node is not handed out to stop it
             self._intake.stop()
             raise
@@ -299,8 +312,32 @@ class SpcmControllerNode(Node):
     # ------------------------------------------------------------------------------------
     # Joint states and commands
 
+    def _control_time(self, msg: JointState, wall: float) -> float:
+        """The grasp's time of ``msg`` [s]: its stamp on simulated time, else ``wall``."""
+        if self._sim_time:
+            stamp = msg.header.stamp
+            return stamp.sec + stamp.nanosec * 1e-9
+        return wall
+
+    def _silence(self) -> tuple[float, str] | None:
+        """How long /joint_states have been silent and on which clock, when longer than
+        allowed (``state_timeout``; on simulated time also ``sim.stall_timeout_s`` of wall
+        time); ``None`` while they are fresh."""
+        last = self._last_state_time
+        if last is None:
+            return math.inf, 'never received'
+        wall = time.monotonic() - last
+        timeout = self._values['state_timeout']
+        if not self._sim_time:
+            return (wall, 's') if wall > timeout else None
+        if wall > self._stall_timeout_s:
+            return wall, f's of wall time (sim.stall_timeout_s {self._stall_timeout_s:g} s)'
+        sim = self.get_clock().now().nanoseconds * 1e-9 - self._last_control_time
+        return (sim, 's of simulated time') if sim > timeout else None
+
     def _on_joint_state(self, msg: JointState) -> None:
-        now = time.monotonic()
+        wall = time.monotonic()
+        now = self._control_time(msg, wall)
         try:
             index = self._layout.index_of(list(msg.name))
             n = len(msg.name)
@@ -323,7 +360,8 @@ class SpcmControllerNode(Node):
                 throttle_duration_sec=1.0)
             return
         with self._lock:
-            self._last_state_time = now
+            self._last_state_time = wall
+            self._last_control_time = now
             self._last_pos = pos
             self._last_eff = eff
             if self._release is not None:
@@ -395,22 +433,22 @@ class SpcmControllerNode(Node):
         with self._lock:
             held = self._last_cmd if self._publishing or self._seq.phase is Phase.DONE \
                 else None
-            self._release = ReleaseMotion(self._params, held, time.monotonic(),
+            self._release = ReleaseMotion(self._params, held, self._last_control_time,
                                           self._last_pos)
+            release_start = self._last_control_time
             self._release_done = Future()
             self._publishing = True
             self._state_timed_out = False
             done = self._release_done
         self.get_logger().info('releasing: torques to zero, then opening the hand')
         self._publish_status()
-        deadline = time.monotonic() + self._release_timeout()
+        timeout = self._release_timeout()
 
         def poll() -> None:
             if done.done():
                 return
-            last_state = self._last_state_time or 0.0
-            if time.monotonic() > deadline or \
-                    time.monotonic() - last_state > self._values['state_timeout']:
+            if self._last_control_time - release_start > timeout or \
+                    self._silence() is not None:
                 self._end_release(False)
 
         timer = create_steady_timer(self, 0.01, poll)
@@ -471,23 +509,40 @@ class SpcmControllerNode(Node):
             msg.stiffness = [float(v) for v in cmd.stiffness]
             msg.damping = [float(v) for v in cmd.damping]
         self._command_pub.publish(msg)
+        self._commands_published = (self._commands_published[0] + 1,
+                                    msg.header.stamp.sec * 1_000_000_000
+                                    + msg.header.stamp.nanosec)
+
+    def _publish_diagnostics(self) -> None:
+        count, stamp_ns = self._commands_published  # one read: the pair belongs together
+        status = DiagnosticStatus()
+        status.name = 'dam_spcm_controller: commands'
+        status.level = DiagnosticStatus.OK
+        status.message = f'phase {_phase_name(self._seq.phase)}'
+        status.values = [KeyValue(key='hand_commands_published', value=str(count)),
+                         KeyValue(key='hand_commands_last_stamp_ns', value=str(stamp_ns)),
+                         KeyValue(key='use_sim_time', value=str(self._sim_time))]
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [status]
+        self._diag_pub.publish(msg)
 
     def _on_watchdog(self) -> None:
         with self._lock:
             if not self._seq.phase.active or self._state_timed_out:
                 return
             timeout = self._values['state_timeout']
-            last = self._last_state_time
-            silent = math.inf if last is None else time.monotonic() - last
-            if silent <= timeout:
+            silence = self._silence()
+            if silence is None:
                 self._silence_suspected = False
                 return
+            silent, unit = silence
             if not self._silence_suspected:
                 # After a stall of this process the timer runs before the joint states that
                 # queued meanwhile: confirm the silence on the next tick, once they are taken.
                 self._silence_suspected = True
                 return
-            reason = (f'/joint_states silent for {silent:.3f} s (state_timeout '
+            reason = (f'/joint_states silent for {silent:.3f} {unit} (state_timeout '
                       f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}')
             self._seq.fail(reason)
             self._state_timed_out = True
@@ -548,7 +603,8 @@ class SpcmControllerNode(Node):
             seq = self._seq
             msg = DamStatus()
             msg.header.stamp = self.get_clock().now().to_msg()
-            msg.phase = 'RELEASING' if self._release is not None else _phase_name(seq.phase)
+            msg.phase = ('RELEASING' if self._release is not None else
+                         self._pre_phase or _phase_name(seq.phase))
             msg.progress = float(seq.progress)
             msg.finger_names = [self._layout.finger_name(i)
                                 for i in range(self._layout.n_fingers)]
@@ -653,9 +709,8 @@ class SpcmControllerNode(Node):
         def poll() -> None:
             if fresh.done():
                 return
-            last = self._last_state_time
             now = time.monotonic()
-            if last is not None and now - last <= self._values['state_timeout']:
+            if self._silence() is None:
                 fresh.set_result(True)
             elif now >= deadline or (goal_handle is not None
                                      and goal_handle.is_cancel_requested):
@@ -669,15 +724,18 @@ class SpcmControllerNode(Node):
             self.destroy_timer(timer)
 
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
-                t0: float, owns_run: bool = True) -> DamGrasp.Result:
+                t0: float, owns_run: bool = True, object_rise: float = math.nan
+                ) -> DamGrasp.Result:
         result = DamGrasp.Result()
         result.outcome = outcome
         result.outcome_name = _OUTCOME_NAME[outcome]
         result.message = message
         result.duration = time.monotonic() - t0
+        result.object_rise = float(object_rise)
         with self._lock:
             self._status_message = message
             if owns_run:
+                self._pre_phase = ''
                 self._outcome = outcome
                 self._busy = False
         if status == 'succeed':
@@ -731,9 +789,15 @@ class SpcmControllerNode(Node):
                         ) -> DamGrasp.Result:
         aborted = DamGrasp.Result.OUTCOME_ABORTED
         with self._lock:
+            # The previous grasp's end (DONE, FAILED, ABORTED) is over: a fresh sequence, and
+            # the status says what this goal does now.
+            self._seq = DamSequence(self._params)
+            self._last_phase = self._seq.phase
+            self._pre_phase = 'CHECK_LIFT'
             self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN
             self._status_message = (f'grasp k_theta {k:g} N*m/rad, delta_theta_p '
                                     f'{math.degrees(dp):.4g} deg')
+        self._publish_status()
         feedback = DamGrasp.Feedback()
         feedback.phase = 'CHECK_LIFT'
         answer = await self._ask_check_lift(k, dp, goal_handle)
@@ -789,6 +853,7 @@ class SpcmControllerNode(Node):
             except (InputError, StateError) as exc:
                 return self._finish(goal_handle, 'abort', aborted, str(exc), t0)
             self._publishing = True
+            self._pre_phase = ''
             self._feedback = feedback
             self._cancel_sent = False
             self._run_done = Future()
@@ -825,7 +890,8 @@ class SpcmControllerNode(Node):
         outcome = _OUTCOME[c.outcome]
         # Goal status SUCCEEDED means the outcome SUCCESS, for every generic action client.
         status = 'succeed' if outcome == DamGrasp.Result.OUTCOME_SUCCESS else 'abort'
-        return self._finish(goal_handle, status, outcome, f'grasp done: {c.reason}', t0)
+        return self._finish(goal_handle, status, outcome, f'grasp done: {c.reason}', t0,
+                            object_rise=c.lift_m)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -186,6 +186,9 @@ def run(args: argparse.Namespace) -> int:
         print(f'result: {result.outcome_name} ({result.message}); status '
               f'{_STATUS.get(wrapped.status, wrapped.status)}; duration '
               f'{result.duration:.2f} s', flush=True)
+        if math.isfinite(result.object_rise):
+            print(f'object rise: {result.object_rise * 1e3:.1f} mm (estimated from the joint '
+                  'angles)', flush=True)
         ok = result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
         return EXIT_SUCCESS if ok else EXIT_OTHER_OUTCOME
     finally:
