@@ -96,28 +96,49 @@ class Grasper:
                                  f'{handle.status}); controller log:\n{log}')
         return future.result()
 
+    def reset_world(self) -> None:
+        """Let go (the controller's ~/release: every joint ends in HOLD and the controller
+        stops commanding), put the object back on the table and open the hand; the driver's
+        ~/reset brings it back should it be in ERROR (it answers 'already ACTIVE' otherwise)."""
+        from std_srvs.srv import Trigger
+
+        assert self.client.call(Trigger, '/hand_driver/reset', Trigger.Request()).success
+        self.client.spin_until(lambda: False, 0.2)
+        released = self.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
+                                    timeout=30.0)
+        assert released.success, released.message
+        reset = self.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
+        assert reset.success, reset.message
+        self.client.spin_until(lambda: False, 0.3)
+        driver = self.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
+        assert driver.success, driver.message
+        self.client.spin_until(lambda: False, 0.3)
+
     def close(self) -> None:
         self.action.destroy()
         self.client.close()
 
 
 @contextlib.contextmanager
-def grasp_stack(config_file: Path, object_name: str = '') -> Iterator[Grasper]:
+def grasp_stack(config_file: Path, object_name: str = '', sim_time: bool = True
+                ) -> Iterator[Grasper]:
     """The stand-in (started by the driver, ``backend:=sim``), the driver, the analysis
     server and the controller as separate processes with ``config_file``, the driver and the
-    controller given ``object:=object_name``; a :class:`Grasper` once joint states and the
-    object pose flow and the action server is up. Every process must still be alive at the
-    end."""
+    controller given ``object:=object_name``, every node ``use_sim_time:=sim_time`` (as the
+    scripts start them on the stand-in); a :class:`Grasper` once joint states and the object
+    pose flow and the action server is up. Every process must still be alive at the end."""
     from std_srvs.srv import Trigger
 
     env = {'DAM_CONFIG': str(config_file)}
     selected = ['-p', f'object:={object_name}'] if object_name else []
+    clock = ['-p', f'use_sim_time:={str(sim_time).lower()}']
     with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
-                       '--ros-args', '-p', 'backend:=sim', *selected], env=env) as driver, \
-            node_process([installed_executable('dam_analysis', 'check_lift_server')],
-                         env=env) as analysis, \
+                       '--ros-args', '-p', 'backend:=sim', *selected, *clock],
+                      env=env) as driver, \
+            node_process([installed_executable('dam_analysis', 'check_lift_server'),
+                          '--ros-args', *clock], env=env) as analysis, \
             node_process([installed_executable('dam_spcm_controller', 'spcm_controller'),
-                          '--ros-args', *selected], env=env) as controller:
+                          '--ros-args', *selected, *clock], env=env) as controller:
         grasper = Grasper()
         try:
             ready = False
@@ -132,6 +153,7 @@ def grasp_stack(config_file: Path, object_name: str = '') -> Iterator[Grasper]:
             assert grasper.action.wait_for_server(timeout_sec=30.0), controller.output()
             grasper.controller = controller
             grasper.analysis = analysis
+            grasper.driver = driver
             yield grasper
         finally:
             grasper.close()

@@ -153,23 +153,7 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper, lockstep,
 
 
 def _reset_world(stack: _Grasper) -> None:
-    """Let go (the controller's ~/release: every joint ends in HOLD and the controller stops
-    commanding), put the object back on the table and open the hand. The reset can stall the
-    stand-in for longer than the driver's state timeout; then the driver is in ERROR and is
-    brought back by its ~/reset (it answers 'already ACTIVE' otherwise)."""
-
-    # joint states flowing (a previous reset may have left the driver in ERROR)
-    assert stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request()).success
-    stack.client.spin_until(lambda: False, 0.2)
-    released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
-                                 timeout=30.0)
-    assert released.success, released.message
-    reset = stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
-    assert reset.success, reset.message
-    stack.client.spin_until(lambda: False, 0.3)
-    driver = stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
-    assert driver.success, driver.message
-    stack.client.spin_until(lambda: False, 0.3)
+    stack.reset_world()
 
 
 def test_cancel_mid_grasp_zeroes_the_torque(stack: _Grasper) -> None:

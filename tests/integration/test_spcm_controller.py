@@ -336,13 +336,11 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
 
 
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
-def test_controller_threads_are_real_time_where_permitted(stack) -> None:
+def test_controller_threads_never_run_real_time(stack) -> None:
+    """The controller is no real-time loop (the device runs the impedance law): every thread
+    keeps the normal policy, so that it never uses up the kernel's real-time budget."""
     _h, ctl, _plant = stack
-    policies = set(thread_policies(ctl.pid))
-    if 'refused' in ctl.output():  # no permission on this machine
-        assert policies == {(0, 0)}
-        pytest.skip('SCHED_FIFO not permitted here')
-    assert policies == {(1, 45)}  # SCHED_FIFO at the default thread_priority, every thread
+    assert set(thread_policies(ctl.pid)) == {(0, 0)}
 
 
 def _grasp_until(h: Harness, phase: str, timeout: float, refused: tuple[str, object]):

@@ -136,7 +136,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                    object_position: Sequence[float] | None = None,
                    table_friction: float | None = None,
                    latency_cycles: int = 2, max_time: float = 20.0, settle_after: float = 0.0,
-                   record: bool = False, record_every: int = 5,
+                   hold_before: float = 0.0, record: bool = False, record_every: int = 5,
                    **param_overrides: float) -> ExperimentResult:
     """Run one DAM grasp ``SPCM{k_theta, delta_theta_p}`` in lockstep.
 
@@ -163,6 +163,11 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         Longest simulated time [s].
     settle_after
         Keep running this long after DONE (the object must stay up) [s].
+    hold_before
+        Let the reset world run this long with every joint in HOLD before the goal [s], as a
+        live grasp's world runs between a reset and the goal's arrival. The final seat of the
+        object in the hand can depend on it even where the outcome does not
+        (``docs/simulation_grasp.md``, "Simulated time").
     record
         Record ``t`` [s], ``positions`` [rad], ``velocities`` [rad/s], ``efforts`` [N*m],
         ``object_position`` [m], ``phase`` (codes of :data:`PHASE_CODES`) every
@@ -174,7 +179,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
     Raises
     ------
     ValueError
-        ``latency_cycles`` < 1, or a bad ``max_time``.
+        ``latency_cycles`` < 1, or a bad ``max_time`` or ``hold_before``.
     dam_spcm_controller.errors.InputError
         A bad ``k_theta``, ``delta_theta_p`` or parameter override.
     """
@@ -182,6 +187,8 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         raise ValueError(f'latency_cycles must be >= 1, got {latency_cycles!r}')
     if not (math.isfinite(max_time) and max_time > 0.0):
         raise ValueError(f'max_time must be positive, got {max_time!r} s')
+    if not (math.isfinite(hold_before) and hold_before >= 0.0):
+        raise ValueError(f'hold_before must be >= 0, got {hold_before!r} s')
     wall0 = time.monotonic()
     own_world = world is None
     w = world if world is not None else HandWorld(config)
@@ -192,6 +199,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                     else float(table_friction))
         w.reset(object_position=object_position, friction_angle_rad=alpha,
                 table_friction_coefficient=table_mu)
+        w.step(round(hold_before / w.time_step_s))
         params = SequenceParams.from_config(config, **param_overrides)
         seq = DamSequence(params)
         geometry = HandGeometry.from_config(config)
