@@ -66,13 +66,13 @@ def _first_driver_state(client: RosClient, timeout: float = 3.0) -> str:
     return seen[0]
 
 
-def _parameter(client: RosClient, node: str, name: str) -> object:
+def _parameter(client: RosClient, node: str, name: str, wait: float = 5.0) -> object:
     """A parameter's value read through the node's parameter service (``ros2 param get``)."""
     from rcl_interfaces.msg import ParameterType
     from rcl_interfaces.srv import GetParameters
 
     got = client.call(GetParameters, f'/{node}/get_parameters',
-                      GetParameters.Request(names=[name]), timeout=10.0, wait=5.0)
+                      GetParameters.Request(names=[name]), timeout=10.0, wait=wait)
     value = got.values[0]
     fields = {ParameterType.PARAMETER_BOOL: 'bool_value',
               ParameterType.PARAMETER_INTEGER: 'integer_value',
@@ -192,3 +192,23 @@ def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
     assert refused.returncode == 2, refused.stdout + refused.stderr
     assert "run.sh: --object: object 'pencil' is not in the object library" in refused.stderr
     assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
+
+
+@pytest.mark.parametrize('sim_time', [True, False])
+def test_record_sh_follows_the_clock_the_bring_up_chose(tmp_path: Path, sim_time: bool) -> None:
+    from ros_testing import node_process
+
+    env = _env(tmp_path)
+    (tmp_path / 'run').mkdir()
+    (tmp_path / 'run' / 'env').write_text(
+        f'ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}\n'
+        f'DAM_SIM_TIME={str(sim_time).lower()}\n', encoding='utf-8')
+    with node_process(['bash', str(SCRIPTS / 'record.sh'), '-o', str(tmp_path / 'bag')],
+                      env=env) as recorder:
+        client = RosClient()
+        try:
+            taken = _parameter(client, 'recorder', 'use_sim_time', wait=30.0)
+        finally:
+            client.close()
+        assert recorder.stop() == 0, recorder.output()
+    assert taken is sim_time
