@@ -47,8 +47,10 @@ def _started_pids(stdout: str) -> dict[str, int]:
     return {m[1]: int(m[2]) for m in re.finditer(r'^ {4}(\w+): PID (\d+), log ', stdout, re.M)}
 
 
-def _first_driver_state(client: RosClient, timeout: float = 3.0) -> str:
-    """The ``state`` of the first driver status on /diagnostics (published at 1 Hz)."""
+def _first_driver_state(client: RosClient, timeout: float = 10.0) -> str:
+    """The ``state`` of the first driver status on /diagnostics (published at 1 Hz) that this
+    client receives: one published after it subscribed (volatile), so after the script
+    returned. ``timeout`` [s] covers discovery on a busy machine."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     seen: list[str] = []
