@@ -1,34 +1,68 @@
 #!/usr/bin/env bash
 # Bring the DAM suite up in the background (plain shell, no launch files):
 #   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers)
-#   and spcm_controller.
+#   and spcm_controller. Returns when every node serves, or fails (non-zero) with the fatal
+#   line of the node that died, after stopping what it started.
 #
 #   bash scripts/bringup.sh [--backend auto|sim|hardware] [--gui] [--object NAME]
-#   (NAME: an object of config/dam.yaml's object.library; the stand-in puts it on the table and
-#   the controller classifies and checks for it; default object.default)
+#                           [--timeout S] [--params-file FILE]... [--ros-args ARGS... [--]]
 #   bash scripts/stop.sh          # stops exactly the processes started here, by PID
+#
+#   --backend   auto (default): probe the device link for device.probe_timeout_s; a hand that
+#               answers is driven as hardware, else the stand-in runs (simulated time).
+#               sim: always the stand-in. hardware: a hand must answer within the probe time,
+#               else nothing starts (exit 1).
+#   --gui       open the stand-in's PyBullet window (needs a display)
+#   --object    an object of config/dam.yaml's object.library (default object.default)
+#   --timeout   how long the nodes may take to become ready [s] (default 60)
+#   --params-file FILE   a ROS 2 parameter file for every node started (keys: the node name,
+#               e.g. spcm_controller: or hand_driver:, or /**: for all nodes); repeatable
+#   --ros-args ARGS [--] ROS arguments for every node started, e.g.
+#               --ros-args -p spcm_controller:state_timeout:=0.2 -p hand_driver:thread_priority:=0
+#               (node:name:=value sets one node's parameter; name:=value every node's)
+#
+# Ready means: /check_lift answers, the /dam_grasp action server is up, /joint_states is
+# published and the driver reports ACTIVE on /diagnostics. With the stand-in every node gets
+# -p use_sim_time:=true (the stand-in is the clock); with a real hand none does. Parameters
+# given here come after the script's own, so they win.
 #
 # Logs and PIDs go to $DAM_RUN_DIR (default: .run/ in the repository). Discovery stays on this
 # machine unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; ROS_DOMAIN_ID is taken from the caller.
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
+NODES=(check_lift_server hand_driver spcm_controller)
 
+usage_error() { echo "bringup.sh: $1 (see --help)" >&2; exit 2; }
 backend=auto
 gui=false
 object=""
+timeout=60
+user_args=()  # --params-file and --ros-args of the caller, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
-    --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
+    --backend) [ $# -ge 2 ] || usage_error "--backend needs auto, sim or hardware"
+      backend=$2; shift 2 ;;
     --gui) gui=true; shift ;;
-    --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
+    --object) [ $# -ge 2 ] || usage_error "--object needs a name of object.library"
+      object=$2; shift 2 ;;
+    --timeout) [ $# -ge 2 ] || usage_error "--timeout needs a number of seconds"
+      timeout=$2; shift 2 ;;
+    --params-file) [ $# -ge 2 ] || usage_error "--params-file needs a file"
+      [ -f "$2" ] || usage_error "--params-file: no such file '$2'"
+      user_args+=(--params-file "$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"); shift 2 ;;
+    --ros-args) shift
+      while [ $# -gt 0 ] && [ "$1" != -- ]; do user_args+=("$1"); shift; done
+      [ $# -eq 0 ] || shift ;;
     -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
-    *) echo "bringup.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    *) usage_error "unknown argument '$1'" ;;
   esac
 done
 case "$backend" in auto|sim|hardware) ;; *)
-  echo "bringup.sh: --backend must be auto, sim or hardware, got '$backend'" >&2; exit 2 ;;
+  usage_error "--backend must be auto, sim or hardware, got '$backend'" ;;
 esac
+[[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] ||
+  usage_error "--timeout must be a positive number of seconds, got '$timeout'"
 
 bash "$REPO_ROOT/scripts/setup.sh" >/dev/null
 set +u
@@ -37,38 +71,77 @@ source "$REPO_ROOT/scripts/env.sh"
 set -u
 mkdir -p "$RUN_DIR"
 
-start() {  # start NAME PACKAGE EXECUTABLE [ARGS...]
-  local name=$1 pkg=$2 exe=$3
-  shift 3
-  local pid_file="$RUN_DIR/$name.pid"
-  if [ -f "$pid_file" ] && kill -0 "$(cat "$pid_file")" 2>/dev/null; then
-    echo "    $name already running (PID $(cat "$pid_file"))"
-    return 0
-  fi
-  local path="$REPO_ROOT/ros2_ws/install/$pkg/lib/$pkg/$exe"
-  [ -x "$path" ] || { echo "bringup.sh: $pkg/$exe is not installed" >&2; exit 1; }
-  PYTHONUNBUFFERED=1 nohup "$path" "$@" >"$RUN_DIR/$name.log" 2>&1 </dev/null &
-  echo $! >"$pid_file"
-  echo "    $name: PID $!, log $RUN_DIR/$name.log"
+running() {  # running NAME: the PID of NAME started by an earlier bring-up, if it still runs
+  local pid_file="$RUN_DIR/$1.pid" pid
+  [ -f "$pid_file" ] || return 1
+  pid=$(cat "$pid_file")
+  kill -0 "$pid" 2>/dev/null && tr '\0' ' ' <"/proc/$pid/cmdline" 2>/dev/null | grep -q "/$1" &&
+    echo "$pid"
 }
-
-echo "==> Bringing up the DAM suite (ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}, backend $backend)"
-start check_lift_server dam_analysis check_lift_server
-# rcl refuses an empty override (-p object:=): the object only when one is named
-object_args=()
-[ -z "$object" ] || object_args=(-p "object:=$object")
-start hand_driver dam_hand_driver hand_driver --ros-args -p "backend:=$backend" -p "gui:=$gui" \
-  ${object_args[@]+"${object_args[@]}"}
-start spcm_controller dam_spcm_controller spcm_controller --ros-args \
-  ${object_args[@]+"${object_args[@]}"}
-echo "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}" >"$RUN_DIR/env"
-sleep 1
-for name in check_lift_server hand_driver spcm_controller; do
-  if ! kill -0 "$(cat "$RUN_DIR/$name.pid")" 2>/dev/null; then
-    echo "bringup.sh: $name exited at once; its log:" >&2
-    tail -n 20 "$RUN_DIR/$name.log" >&2
-    bash "$REPO_ROOT/scripts/stop.sh" >/dev/null || true
+for name in "${NODES[@]}"; do
+  if pid=$(running "$name"); then
+    echo "bringup.sh: $name is already running (PID $pid, log $RUN_DIR/$name.log);" \
+      "stop it first: bash scripts/stop.sh" >&2
     exit 1
   fi
 done
+
+echo "==> Bringing up the DAM suite (ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}, backend $backend)"
+# Which device answers decides the driver's backend and whose clock the nodes follow: the
+# probe binds the state port and closes it before the driver binds it.
+driver_backend=$backend
+sim_time=true
+if [ "$backend" != sim ]; then
+  probe=$(python "$REPO_ROOT/scripts/lib/probe_device.py") || {
+    echo "bringup.sh: the device probe failed; nothing started" >&2; exit 1; }
+  kind=${probe%%$'\t'*}
+  echo "    probe: ${probe#*$'\t'}"
+  case "$backend:$kind" in
+    *:hardware) driver_backend=hardware; sim_time=false ;;
+    auto:simulated) driver_backend=auto ;;
+    auto:nothing) driver_backend=sim ;;
+    hardware:simulated)
+      echo "bringup.sh: --backend hardware: ${probe#*$'\t'}, not a hand; nothing started" \
+        "(--backend auto drives it)" >&2
+      exit 1 ;;
+    hardware:nothing)
+      echo "bringup.sh: --backend hardware: ${probe#*$'\t'} (device.probe_timeout_s);" \
+        "nothing started" >&2
+      exit 1 ;;
+    *) echo "bringup.sh: the device probe said '$probe'" >&2; exit 1 ;;
+  esac
+fi
+common=()
+[ "$sim_time" = false ] || common=(-p use_sim_time:=true)
+echo "    driver backend $driver_backend, $([ "$sim_time" = true ] &&
+  echo "simulated time (use_sim_time:=true)" || echo "wall-clock time")"
+printf 'ROS_DOMAIN_ID=%s\nDAM_SIM_TIME=%s\n' "${ROS_DOMAIN_ID:-0}" "$sim_time" >"$RUN_DIR/env"
+
+start() {  # start NAME PACKAGE EXECUTABLE [ROS ARGS...]: in the background, PID to NAME.pid
+  local name=$1 pkg=$2 exe=$3
+  shift 3
+  local path="$REPO_ROOT/ros2_ws/install/$pkg/lib/$pkg/$exe"
+  [ -x "$path" ] || { echo "bringup.sh: $pkg/$exe is not installed" >&2; exit 1; }
+  PYTHONUNBUFFERED=1 nohup "$path" --ros-args ${common[@]+"${common[@]}"} "$@" \
+    ${user_args[@]+"${user_args[@]}"} >"$RUN_DIR/$name.log" 2>&1 </dev/null &
+  echo $! >"$RUN_DIR/$name.pid"
+  echo "    $name: PID $!, log $RUN_DIR/$name.log"
+}
+# From here on a failure stops what was started.
+trap 'echo "bringup.sh: stopping what it started" >&2;
+      bash "$REPO_ROOT/scripts/stop.sh" >&2 || true' EXIT
+# rcl refuses an empty override (-p object:=): the object only when one is named
+object_args=()
+[ -z "$object" ] || object_args=(-p "object:=$object")
+start check_lift_server dam_analysis check_lift_server
+start hand_driver dam_hand_driver hand_driver -p "backend:=$driver_backend" -p "gui:=$gui" \
+  ${object_args[@]+"${object_args[@]}"}
+start spcm_controller dam_spcm_controller spcm_controller ${object_args[@]+"${object_args[@]}"}
+
+watch=()
+for name in "${NODES[@]}"; do watch+=("$name=$(cat "$RUN_DIR/$name.pid"):$RUN_DIR/$name.log"); done
+echo "==> Waiting until every node serves (up to $timeout s)"
+python "$REPO_ROOT/scripts/lib/wait_ready.py" --who bringup.sh --timeout "$timeout" \
+  "${watch[@]}" || exit 1
+trap - EXIT
 echo "==> Up. Stop with: bash scripts/stop.sh"

@@ -6,8 +6,10 @@
 #   bash scripts/record.sh -o DIR [recorder options and topics]   # see: recorder --help
 #
 # Without -o the bag goes under $DAM_BAG_DIR (default: bags/ in the repository). The
-# ROS_DOMAIN_ID is the caller's, else the one bringup.sh used. The recorder runs in the
-# foreground (exec): its exit status is this script's.
+# ROS_DOMAIN_ID is the caller's, else the one bringup.sh used. When that bring-up runs on the
+# stand-in, the recorder gets -p use_sim_time:=true (the stand-in's /clock), before any
+# --ros-args of the caller (which win). The recorder runs in the foreground (exec): its exit
+# status is this script's.
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
@@ -17,7 +19,7 @@ episodes=false
 output_given=false
 for arg in "$@"; do
   case "$arg" in
-    -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
     --episodes) episodes=true ;;
     -o|--output|--output=*) output_given=true ;;
   esac
@@ -35,6 +37,9 @@ if [ -z "${ROS_DOMAIN_ID:-}" ] && [ -f "$RUN_DIR/env" ]; then
 fi
 
 args=("$@")
+if [ -f "$RUN_DIR/env" ] && [ "$(sed -n 's/^DAM_SIM_TIME=//p' "$RUN_DIR/env")" = true ]; then
+  args=(--ros-args -p use_sim_time:=true -- "${args[@]}")
+fi
 if [ "$output_given" = false ]; then
   mkdir -p "$BAG_DIR"
   if [ "$episodes" = true ]; then

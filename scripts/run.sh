@@ -3,14 +3,24 @@
 # /check_lift about the (k_theta, delta_theta_p) pair, grasp the object by Detaching Assist
 # Motion through the /dam_grasp action, print the outcome, and stop everything it started.
 # The grasp is recorded as an episode bag (bags/episodes/<time>_<outcome>, or under
-# $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed.
+# $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed, with where the
+# number comes from, and an episode bag the recorder marks incomplete is said to be so.
 #
 #   bash scripts/run.sh                                   # the pair configured in config/dam.yaml
 #   bash scripts/run.sh --k-theta 0.5 --delta-theta-p 10deg   # any other pair
 #   bash scripts/run.sh --backend hardware --keep         # a real hand; leave the suite running
 #   bash scripts/run.sh --object square_bar               # another object of object.library
+#   bash scripts/run.sh --params-file my_params.yaml      # parameters for the nodes
+#   bash scripts/run.sh --ros-args -p spcm_controller:state_timeout:=0.2 --
 #
-# Exit status: that of the grasp client (0 success, 3 another outcome, 2 rejected, 1 no answer).
+# --params-file FILE (repeatable) and --ros-args ARGS [--] go to every node started here (the
+# recorder included), as with scripts/bringup.sh: a parameter file keyed by node name
+# (check_lift_server, hand_driver, spcm_controller, recorder; /**: for all), and
+# node:name:=value for one node's parameter. --backend hardware with no hand answering fails
+# within device.probe_timeout_s: no recorder, no goal, no bag.
+#
+# Exit status: that of the grasp client (0 success, 3 another outcome, 2 rejected, 1 no answer);
+# 1 when the bring-up failed (nothing is left running).
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
@@ -21,8 +31,17 @@ delta_theta_p=""
 backend=auto
 keep=false
 object=""
+params=()    # the caller's --params-file FILE pairs, for every node
+ros_args=()  # the caller's --ros-args, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
+    --params-file)
+      [ $# -ge 2 ] || { echo "run.sh: --params-file needs a file (see --help)" >&2; exit 2; }
+      [ -f "$2" ] || { echo "run.sh: --params-file: no such file '$2'" >&2; exit 2; }
+      params+=(--params-file "$(cd "$(dirname "$2")" && pwd)/$(basename "$2")"); shift 2 ;;
+    --ros-args) shift
+      while [ $# -gt 0 ] && [ "$1" != -- ]; do ros_args+=("$1"); shift; done
+      [ $# -eq 0 ] || shift ;;
     --k-theta) k_theta=${2:?--k-theta needs a value}; shift 2 ;;
     --delta-theta-p) delta_theta_p=${2:?--delta-theta-p needs a value}; shift 2 ;;
     --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
@@ -59,17 +78,22 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
   delta_theta_p=${delta_theta_p:-$cfg_dp}
 fi
 
-if [ -n "$object" ]; then
-  bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend" --object "$object"
-else
-  bash "$REPO_ROOT/scripts/bringup.sh" --backend "$backend"
-fi
+bringup_args=(--backend "$backend" ${params[@]+"${params[@]}"})
+[ -z "$object" ] || bringup_args+=(--object "$object")
+[ ${#ros_args[@]} -eq 0 ] || bringup_args+=(--ros-args "${ros_args[@]}" --)
+# bringup.sh returns when every node serves; when it fails it has stopped what it started.
+bash "$REPO_ROOT/scripts/bringup.sh" "${bringup_args[@]}" || exit 1
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
 
 # The recorder, in episode mode: this grasp becomes one bag.
 recorder_log="$RUN_DIR/recorder.log"
+recorder_ros=(--ros-args)  # the clock bringup.sh chose, then the caller's parameters
+if [ "$(sed -n 's/^DAM_SIM_TIME=//p' "$RUN_DIR/env")" = true ]; then
+  recorder_ros+=(-p use_sim_time:=true)
+fi
+recorder_ros+=(${params[@]+"${params[@]}"} ${ros_args[@]+"${ros_args[@]}"} --)
 PYTHONUNBUFFERED=1 "$(exe dam_recorder recorder)" --episodes -o "$BAG_DIR/episodes" \
-  >"$recorder_log" 2>&1 </dev/null &
+  "${recorder_ros[@]}" >"$recorder_log" 2>&1 </dev/null &
 recorder_pid=$!
 echo "$recorder_pid" >"$RUN_DIR/recorder.pid"
 stop_recorder() {
@@ -111,11 +135,16 @@ echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_the
 "$(exe dam_analysis check_lift)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
   --object "$object" --timeout 30 || true
 echo "==> DAM grasp"
+grasp_log="$RUN_DIR/dam_grasp.log"
 set +e
 "$(exe dam_spcm_controller dam_grasp)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --server-timeout 30
-status=$?
+  --server-timeout 30 2>&1 | tee "$grasp_log"
+status=${PIPESTATUS[0]}
 set -e
+# The controller's own estimate of the rise (from the joint angles), when its client prints it.
+rise_from_result=false
+grep -q 'object rise: .*(estimated from the joint angles)' "$grasp_log" &&
+  rise_from_result=true
 
 # The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
 episode=""
@@ -132,7 +161,20 @@ else
   picture="$REPO_ROOT/out/$(basename "$episode").png"
   echo "==> Recorded"
   echo "    bag:     $episode"
-  "$(exe dam_recorder bag)" plot "$episode" -o "$picture" | sed 's/^/    /'
+  if [ "$(python "$REPO_ROOT/scripts/lib/episode_complete.py" "$episode")" = false ]; then
+    echo "    INCOMPLETE: the recorder marked this episode bag incomplete (messages of the" \
+      "grasp are missing; see $recorder_log)"
+  fi
+  plot=$("$(exe dam_recorder bag)" plot "$episode" -o "$picture") ||
+    echo "run.sh: bag plot $episode failed" >&2
+  if [ "$rise_from_result" = true ]; then
+    # The controller's result says the rise; the bag's ground truth would be a second number.
+    plot=$(grep -v 'object rise' <<<"$plot" || true)
+  elif grep -q 'object rise' <<<"$plot"; then
+    plot+=$'\n'"  (that rise is the stand-in's ground truth recorded in the bag,"
+    plot+=" /sim/object_pose; the controller does not report its own estimate yet)"
+  fi
+  [ -z "$plot" ] || sed 's/^/    /' <<<"$plot"
   echo "    picture: $picture"
 fi
 exit "$status"

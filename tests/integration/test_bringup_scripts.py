@@ -1,27 +1,40 @@
-"""scripts/bringup.sh and scripts/stop.sh as a user runs them: the suite comes up (with the
-default object and with ``--object``), answers, and is stopped by PID; a name outside the
-library is refused before anything starts."""
+"""scripts/bringup.sh, scripts/run.sh and scripts/stop.sh as a user runs them: the suite comes
+up (with the default object and with ``--object``) and serves the moment bring-up returns, a
+node that dies while starting fails the bring-up with its fatal line, a hardware backend
+without a hand fails within the probe time, parameters given to the scripts reach the nodes,
+and everything is stopped by PID; a name outside the library is refused before anything
+starts."""
 
 from __future__ import annotations
 
 import os
+import re
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
+import yaml
 from grasp_testing import config_with_free_ports
 
-from ros_testing import RosClient
+from ros_testing import RosClient, process_gone
 
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = REPO_ROOT / 'scripts'
+DRIVER_STATUS = 'dam_hand_driver: device link'
+NODES = ('check_lift_server', 'hand_driver', 'spcm_controller')
 
 
-def _env(tmp_path: Path) -> dict[str, str]:
+def _env(tmp_path: Path, **device: float) -> dict[str, str]:
     config = config_with_free_ports(tmp_path)
-    return dict(os.environ, DAM_CONFIG=str(config), DAM_RUN_DIR=str(tmp_path / 'run'))
+    if device:
+        data = yaml.safe_load(config.read_text(encoding='utf-8'))
+        data['device'].update(device)
+        config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    return dict(os.environ, DAM_CONFIG=str(config), DAM_RUN_DIR=str(tmp_path / 'run'),
+                DAM_BAG_DIR=str(tmp_path / 'bags'))
 
 
 def _script(name: str, *args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
@@ -29,30 +42,150 @@ def _script(name: str, *args: str, env: dict[str, str]) -> subprocess.CompletedP
                           text=True, timeout=120, env=env, stdin=subprocess.DEVNULL)
 
 
+def _started_pids(stdout: str) -> dict[str, int]:
+    """The PIDs bringup.sh says it started, by node name."""
+    return {m[1]: int(m[2]) for m in re.finditer(r'^ {4}(\w+): PID (\d+), log ', stdout, re.M)}
+
+
+def _first_driver_state(client: RosClient, timeout: float = 10.0) -> str:
+    """The ``state`` of the first driver status on /diagnostics (published at 1 Hz) that this
+    client receives: one published after it subscribed (volatile), so after the script
+    returned. ``timeout`` [s] covers discovery on a busy machine."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    seen: list[str] = []
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name == DRIVER_STATUS:
+                seen.append({kv.key: kv.value for kv in status.values}.get('state', ''))
+
+    sub = client.node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    try:
+        assert client.spin_until(lambda: bool(seen), timeout), 'no driver diagnostics'
+    finally:
+        client.node.destroy_subscription(sub)
+    return seen[0]
+
+
+def _parameter(client: RosClient, node: str, name: str, wait: float = 5.0) -> object:
+    """A parameter's value read through the node's parameter service (``ros2 param get``)."""
+    from rcl_interfaces.msg import ParameterType
+    from rcl_interfaces.srv import GetParameters
+
+    got = client.call(GetParameters, f'/{node}/get_parameters',
+                      GetParameters.Request(names=[name]), timeout=10.0, wait=wait)
+    value = got.values[0]
+    fields = {ParameterType.PARAMETER_BOOL: 'bool_value',
+              ParameterType.PARAMETER_INTEGER: 'integer_value',
+              ParameterType.PARAMETER_DOUBLE: 'double_value',
+              ParameterType.PARAMETER_STRING: 'string_value'}
+    assert value.type in fields, f'{node} {name}: parameter type {value.type}'
+    return getattr(value, fields[value.type])
+
+
+def _assert_all_stopped(tmp_path: Path, pids: dict[str, int]) -> None:
+    assert not list((tmp_path / 'run').glob('*.pid')), list((tmp_path / 'run').iterdir())
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline and not all(map(process_gone, pids.values())):
+        time.sleep(0.1)
+    assert all(map(process_gone, pids.values())), pids
+
+
 @pytest.mark.parametrize('object_args', [(), ('--object', 'hex_bar')])
-def test_bringup_serves_the_object_and_stop_stops_it(tmp_path: Path,
-                                                     object_args: tuple[str, ...]) -> None:
+def test_bringup_returns_serving_the_object_and_stop_stops_it(
+        tmp_path: Path, object_args: tuple[str, ...]) -> None:
     from dam_interfaces.srv import CheckLift
 
     env = _env(tmp_path)
     up = _script('bringup.sh', '--backend', 'sim', *object_args, env=env)
     try:
         assert up.returncode == 0, up.stdout + up.stderr
+        # Right after the script returns: the service is there and the driver ACTIVE.
         client = RosClient()
         try:
-            answer = client.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=30.0)
+            answer = client.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=10.0,
+                                 wait=2.0)
+            state = _first_driver_state(client)
         finally:
             client.close()
         assert answer.ok and answer.object == 'cylinder', answer.message
-        run_dir = tmp_path / 'run'
-        controller_log = (run_dir / 'spcm_controller.log').read_text(encoding='utf-8')
+        assert state == 'ACTIVE', up.stdout
+        controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')
         expected = object_args[1] if object_args else 'cylinder'
         assert f'object {expected} (' in controller_log, controller_log
     finally:
         down = _script('stop.sh', env=env)
     assert down.returncode == 0, down.stdout + down.stderr
     assert 'stopped 3 process(es)' in down.stdout, down.stdout
-    assert not list((tmp_path / 'run').glob('*.pid')), list((tmp_path / 'run').iterdir())
+    _assert_all_stopped(tmp_path, _started_pids(up.stdout))
+
+
+def test_bringup_fails_with_the_fatal_line_of_a_node_that_dies_while_starting(
+        tmp_path: Path) -> None:
+    # The stand-in refuses a window without a display, about two seconds in (its imports);
+    # the driver that started it then dies with a fatal line of its own.
+    env = {k: v for k, v in _env(tmp_path).items() if k not in ('DISPLAY', 'WAYLAND_DISPLAY')}
+    up = _script('bringup.sh', '--backend', 'sim', '--gui', env=env)
+    output = up.stdout + up.stderr
+    assert up.returncode == 1, output
+    assert 'Up.' not in up.stdout, output
+    assert 'bringup.sh: hand_driver (PID ' in up.stderr, output
+    assert re.search(r'\[FATAL\] .*\[hand_driver\]: cannot start: the stand-in exited',
+                     up.stderr), output
+    assert 'neither DISPLAY nor WAYLAND_DISPLAY is set' in up.stderr, output
+    pids = _started_pids(up.stdout)
+    assert set(pids) == set(NODES), up.stdout
+    _assert_all_stopped(tmp_path, pids)
+
+
+def test_run_sh_with_backend_hardware_and_no_hand_fails_within_the_probe_time(
+        tmp_path: Path) -> None:
+    probe_s = 1.0
+    env = _env(tmp_path, probe_timeout_s=probe_s)
+    t0 = time.monotonic()
+    run = _script('run.sh', '--backend', 'hardware', env=env)
+    took = time.monotonic() - t0
+    output = run.stdout + run.stderr
+    assert run.returncode == 1, output
+    # The probe's wait plus the start of a few Python programs on a busy machine.
+    assert probe_s <= took < probe_s + 6.0, f'{took:.1f} s: {output}'
+    lines = [ln for ln in run.stderr.splitlines() if ln.startswith('bringup.sh:')]
+    assert len(lines) == 1, output
+    assert '--backend hardware: no device answered at 127.0.0.1:' in lines[0], output
+    assert f'within {probe_s:g} s' in lines[0] and 'nothing started' in lines[0], output
+    assert 'DAM grasp' not in run.stdout and 'recorder' not in run.stdout, output
+    assert not (tmp_path / 'bags').exists(), list((tmp_path / 'bags').rglob('*'))
+    run_dir = tmp_path / 'run'
+    assert not list(run_dir.glob('*.pid')) and not (run_dir / 'recorder.log').exists()
+
+
+def test_params_file_and_ros_args_reach_the_nodes(tmp_path: Path) -> None:
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump({
+        '/**': {'ros__parameters': {'require_lift_guarantee': True}},
+        'spcm_controller': {'ros__parameters': {'state_timeout': 0.25}},
+    }), encoding='utf-8')
+    env = _env(tmp_path)
+    up = _script('bringup.sh', '--backend', 'sim', '--params-file', str(params),
+                 '--ros-args', '-p', 'hand_driver:thread_priority:=0', '--', env=env)
+    try:
+        assert up.returncode == 0, up.stdout + up.stderr
+        client = RosClient()
+        try:
+            timeout = _parameter(client, 'spcm_controller', 'state_timeout')
+            guarantee = _parameter(client, 'spcm_controller', 'require_lift_guarantee')
+            priority = _parameter(client, 'hand_driver', 'thread_priority')
+            sim_time = {node: _parameter(client, node, 'use_sim_time') for node in NODES}
+        finally:
+            client.close()
+    finally:
+        down = _script('stop.sh', env=env)
+    assert timeout == pytest.approx(0.25)  # by node name in the file
+    assert guarantee is True  # /** in the file
+    assert priority == 0  # node:name:=value after --ros-args
+    assert sim_time == dict.fromkeys(NODES, True)  # the stand-in is the clock
+    assert 'stopped 3 process(es)' in down.stdout, down.stdout
 
 
 def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
@@ -61,3 +194,23 @@ def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
     assert refused.returncode == 2, refused.stdout + refused.stderr
     assert "run.sh: --object: object 'pencil' is not in the object library" in refused.stderr
     assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
+
+
+@pytest.mark.parametrize('sim_time', [True, False])
+def test_record_sh_follows_the_clock_the_bring_up_chose(tmp_path: Path, sim_time: bool) -> None:
+    from ros_testing import node_process
+
+    env = _env(tmp_path)
+    (tmp_path / 'run').mkdir()
+    (tmp_path / 'run' / 'env').write_text(
+        f'ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}\n'
+        f'DAM_SIM_TIME={str(sim_time).lower()}\n', encoding='utf-8')
+    with node_process(['bash', str(SCRIPTS / 'record.sh'), '-o', str(tmp_path / 'bag')],
+                      env=env) as recorder:
+        client = RosClient()
+        try:
+            taken = _parameter(client, 'recorder', 'use_sim_time', wait=30.0)
+        finally:
+            client.close()
+        assert recorder.stop() == 0, recorder.output()
+    assert taken is sim_time
