@@ -132,6 +132,41 @@ def _diagnostics(client: RosClient, key: str = 'real_time_factor') -> dict[str, 
     return got[-1]
 
 
+# The two tests that bring up a stack of their own come first: the module's stack (the
+# fixture `stack`) would hold the device ports and answer /diagnostics beside theirs.
+
+def test_a_hex_bar_lift_equals_the_lockstep_trial_under_load(config_file: Path) -> None:
+    """k 5, 10 deg: inside hex_bar's sufficient region; the bar rises about 8 mm."""
+    expected = _lockstep_rise(config_file, 5.0, 'hex_bar')
+    assert expected[0] == 'SUCCESS' and min(expected[1]) > 5e-3, expected
+    with grasp_stack(config_file, 'hex_bar', sim_time=True) as grasper, cpu_burners(2):
+        result, rise = _grasp(grasper, 5.0)
+    _assert_as_in_lockstep(result, rise, expected, 'hex_bar k_theta 5')
+
+
+def test_the_same_stall_on_the_real_time_link_is_an_error(config_file: Path) -> None:
+    """Without simulated time the stand-in is a device with a clock of its own: a 0.5 s stall
+    is five times the driver's state timeout, and the driver goes to ERROR, as a real hand's
+    driver must."""
+    client = RosClient()
+    env = {'DAM_CONFIG': str(config_file)}
+    try:
+        with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                           '--ros-args', '-p', 'backend:=sim'], env=env) as driver:
+            assert _diagnostics(client)['state'] == 'ACTIVE', driver.output()
+            children = child_pids(driver.pid)
+            assert len(children) == 1
+            os.kill(children[0], signal.SIGSTOP)
+            try:
+                time.sleep(0.5)
+            finally:
+                os.kill(children[0], signal.SIGCONT)
+            client.spin_until(lambda: 'ERROR: no state frame' in driver.output(), 5.0)
+            assert 'ERROR: no state frame' in driver.output(), driver.output()[-2000:]
+    finally:
+        client.close()
+
+
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
 def test_no_thread_of_any_node_runs_sched_fifo(stack: Grasper) -> None:
     pids = {'driver': stack.driver.pid, 'stand-in': _standin_pid(stack),
@@ -222,35 +257,3 @@ def test_a_dead_stand_in_is_noticed_within_a_bounded_wall_time(stack: Grasper) -
     assert 'silent' in result.message and 'wall time' in result.message, result.message
     assert took < STALL_TIMEOUT_S + 3.0, took
     assert 'exited with code' in stack.driver.output(), stack.driver.output()[-2000:]
-
-
-def test_a_hex_bar_lift_equals_the_lockstep_trial_under_load(config_file: Path) -> None:
-    """k 5, 10 deg: inside hex_bar's sufficient region; the bar rises about 8 mm."""
-    expected = _lockstep_rise(config_file, 5.0, 'hex_bar')
-    assert expected[0] == 'SUCCESS' and min(expected[1]) > 5e-3, expected
-    with grasp_stack(config_file, 'hex_bar', sim_time=True) as grasper, cpu_burners(2):
-        result, rise = _grasp(grasper, 5.0)
-    _assert_as_in_lockstep(result, rise, expected, 'hex_bar k_theta 5')
-
-
-def test_the_same_stall_on_the_real_time_link_is_an_error(config_file: Path) -> None:
-    """Without simulated time the stand-in is a device with a clock of its own: a 0.5 s stall
-    is five times the driver's state timeout, and the driver goes to ERROR, as a real hand's
-    driver must."""
-    client = RosClient()
-    env = {'DAM_CONFIG': str(config_file)}
-    try:
-        with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
-                           '--ros-args', '-p', 'backend:=sim'], env=env) as driver:
-            assert _diagnostics(client)['state'] == 'ACTIVE', driver.output()
-            children = child_pids(driver.pid)
-            assert len(children) == 1
-            os.kill(children[0], signal.SIGSTOP)
-            try:
-                time.sleep(0.5)
-            finally:
-                os.kill(children[0], signal.SIGCONT)
-            client.spin_until(lambda: 'ERROR: no state frame' in driver.output(), 5.0)
-            assert 'ERROR: no state frame' in driver.output(), driver.output()[-2000:]
-    finally:
-        client.close()
