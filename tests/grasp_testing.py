@@ -25,6 +25,50 @@ def config_with_free_ports(directory: Path) -> Path:
     return path
 
 
+#: How far the live grasp's ground-truth rise may lie from the lockstep trial's [m]: the
+#: controller's commands reach the world at the same device cycle on both paths; what differs
+#: is the driver's torque slew (it runs on the state the command answers, one cycle later
+#: than in the lockstep trial) and the moment the rise is read (the result's arrival).
+RISE_TOLERANCE_M = 0.5e-3
+#: Times the reset world runs before the goal in the lockstep references [s]: a live goal
+#: arrives at any moment after the world's reset, and the final seat of a lifted cylinder in
+#: the hand has two configurations (about 8.1 and 9.8 mm) that this moment selects even in
+#: lockstep (one physics step of difference is enough), while the outcome stays the same.
+HOLDS_BEFORE_S = (0.0, 0.001, 0.05, 0.25, 0.5, 1.0)
+
+
+def lockstep_reference(config_file: Path, k_theta: float, delta_theta_p: float,
+                       object_name: str = '') -> tuple[str, list[float]]:
+    """(outcome name, rises of the object when the controller is done [m]) of the lockstep
+    trials started after each of :data:`HOLDS_BEFORE_S`; their outcomes agree."""
+    from dam_common.config import load_config
+    from dam_sim_bridge.experiment import run_experiment
+    from dam_sim_bridge.world import HandWorld
+
+    config = load_config(config_file).with_object(object_name)
+    outcomes, rises = set(), []
+    with HandWorld(config) as world:
+        for hold in HOLDS_BEFORE_S:
+            result = run_experiment(config, k_theta, delta_theta_p, world=world,
+                                    latency_cycles=2, hold_before=hold)
+            outcomes.add(result.outcome.name)
+            rises.append(float(result.lift_final))
+    assert len(outcomes) == 1, f'k_theta {k_theta:g} is on an outcome boundary: {outcomes}'
+    return outcomes.pop(), rises
+
+
+def assert_as_in_lockstep(result, rise: float, expected: tuple[str, list[float]],
+                          what: str) -> None:
+    """The live ``result``'s outcome is the lockstep trials' and its ground-truth ``rise``
+    [m] lies within :data:`RISE_TOLERANCE_M` of one of theirs (see :data:`HOLDS_BEFORE_S`)."""
+    outcome, lockstep_rises = expected
+    assert result.outcome_name == outcome, f'{what}: {result.outcome_name} ({result.message})'
+    nearest = min(lockstep_rises, key=lambda r: abs(r - rise))
+    assert abs(rise - nearest) < RISE_TOLERANCE_M, (
+        f'{what}: rise {rise * 1e3:.3f} mm live, in lockstep '
+        f'{[round(r * 1e3, 3) for r in lockstep_rises]} mm')
+
+
 class Grasper:
     """Action client of /dam_grasp plus observers of the ground truth and the commands."""
 

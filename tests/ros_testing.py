@@ -13,6 +13,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -235,3 +236,36 @@ class RosClient:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+class FakeStateDevice:
+    """A device that sends valid state frames (every joint HOLD at 0, status bits ``status``:
+    0 a hand, 2 the SIMULATED bit) to the configured state port every 2 ms for 6 s, or until
+    :meth:`close`; it ignores commands."""
+
+    def __init__(self, config: Path, status: int) -> None:
+        import yaml
+
+        from dam_hand_driver.protocol import JointMode, encode_state
+
+        data = yaml.safe_load(config.read_text(encoding='utf-8'))
+        n = 3 * len(data['hand']['joint_roles'])
+        self._port = int(data['device']['state_port'])
+        hold = [int(JointMode.HOLD)] * n
+        self._frames = [encode_state(seq, seq * 2_000_000, [0] * n, [0] * n, [0] * n, hold,
+                                     status=status) for seq in range(1, 3001)]
+        self._stop = threading.Event()
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        for frame in self._frames:
+            if self._stop.wait(0.002):
+                return
+            self._sock.sendto(frame, ('127.0.0.1', self._port))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._sock.close()

@@ -9,13 +9,14 @@ import os
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 import yaml
 from grasp_testing import config_with_free_ports
+
+from ros_testing import FakeStateDevice as _Device
 
 pytestmark = pytest.mark.integration
 
@@ -27,35 +28,6 @@ def _probe(config: Path, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, str(PROBE), *args], capture_output=True, text=True,
                           timeout=60, env=dict(os.environ, DAM_CONFIG=str(config)),
                           stdin=subprocess.DEVNULL)
-
-
-class _Device:
-    """Sends valid state frames to the driver's state port every 2 ms until stopped."""
-
-    def __init__(self, config: Path, status: int) -> None:
-        from dam_hand_driver.protocol import JointMode, encode_state
-
-        data = yaml.safe_load(config.read_text(encoding='utf-8'))
-        n = 3 * len(data['hand']['joint_roles'])
-        self._port = int(data['device']['state_port'])
-        hold = [int(JointMode.HOLD)] * n
-        self._frames = [encode_state(seq, seq * 2_000_000, [0] * n, [0] * n, [0] * n, hold,
-                                     status=status) for seq in range(1, 3001)]
-        self._stop = threading.Event()
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        for frame in self._frames:
-            if self._stop.wait(0.002):
-                return
-            self._sock.sendto(frame, ('127.0.0.1', self._port))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join()
-        self._sock.close()
 
 
 @pytest.mark.parametrize(('status', 'kind'), [(0, 'hardware'), (2, 'simulated')])

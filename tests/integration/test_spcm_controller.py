@@ -426,6 +426,13 @@ def test_plant_silence_aborts_with_zero_torque(stack, request) -> None:
     assert last_t > t_stop  # the zero-torque command came after the plant went silent
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
     assert any(s.phase == 'FAILED' for s in h.statuses)
+    # The next goal ends the FAILED status at once (it cannot run: the plant is silent).
+    seen = len(h.statuses)
+    again = h.result(h.send([INSIDE[0]], [INSIDE[1]]), bound + 10.0)
+    assert again.status == GoalStatus.STATUS_ABORTED
+    h.ros.spin_until(lambda: False, 0.2)
+    later = [st.phase for st in h.statuses[seen:]]
+    assert 'CHECK_LIFT' in later and later[-1] != 'FAILED', later
 
 
 def test_default_goal_grasps_with_the_configured_pair(stack) -> None:
