@@ -93,6 +93,20 @@ def node_process(command: Sequence[str | os.PathLike[str]],
         proc.cleanup()
 
 
+@contextmanager
+def cpu_burners(n: int = 2) -> Iterator[list[subprocess.Popen[bytes]]]:
+    """``n`` processes that each keep a core busy (what a browser or another CI job does to
+    the suite), for the duration of a ``with`` block; stopped by their PID."""
+    procs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                              stdin=subprocess.DEVNULL) for _ in range(n)]
+    try:
+        yield procs
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait(timeout=10.0)
+
+
 def free_udp_ports(n: int) -> list[int]:
     """``n`` distinct UDP ports on 127.0.0.1 that were free a moment ago (for device links)."""
     socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(n)]
