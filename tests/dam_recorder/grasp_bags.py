@@ -10,8 +10,8 @@ without asking the code under test:
 - ``/dam/status`` at 10 Hz through the phases in :data:`PHASES`, ``DONE`` with outcome 1;
 - ``/sim/object_pose`` at 50 Hz, the object rising from 0.0125 m after 1.2 s;
 - ``/dam_grasp/_action/feedback``, three messages, the last two with the margins;
-- ``custom_data``: the recorder's lost, paused and trimmed counts and (optionally) the
-  episode metadata.
+- ``custom_data``: the recorder's lost, dropped, paused and trimmed counts, its backlog and
+  (optionally) the episode metadata, complete unless ``custom`` says otherwise.
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ FEEDBACK_TIMES_NS = (300_000_000, 400_000_000, 500_000_000)
 LOST = {'/joint_states': 3, '/tf': 4}
 PAUSED = {'/sim/object_pose': 2}
 TRIMMED = {'/dam/status': 1}
+DROPPED = {'/sim/object_pose': 5}
+BACKLOG = {'max_s': 0.0125, 'mean_s': 0.0031, 'messages': 400}
 GOAL_ID = '0123456789abcdef' * 2
 K_THETA = [10.0, 5.0, 5.0]
 DELTA_THETA_P = [0.17453292519943295] * 3
@@ -113,9 +115,13 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
     t = typestore.types
     data = {'dam_recorder.lost_messages': json.dumps(LOST),
             'dam_recorder.paused_messages': json.dumps(PAUSED),
-            'dam_recorder.trimmed_messages': json.dumps(TRIMMED)}
+            'dam_recorder.trimmed_messages': json.dumps(TRIMMED),
+            'dam_recorder.dropped_messages': json.dumps(DROPPED),
+            'dam_recorder.backlog': json.dumps(BACKLOG)}
     if episode is not None:
         data['dam_episode.summary'] = json.dumps(episode)
+        data['dam_episode.complete'] = 'true'
+        data['dam_episode.missing'] = '[]'
         data['dam_episode.config'] = 'task:\n  k_theta_nm_per_rad: 10.0\n'
         data['dam_episode.version'] = '0.1.0'
     data.update(custom or {})

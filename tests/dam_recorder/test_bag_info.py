@@ -84,16 +84,47 @@ def test_text_names_every_topic_with_its_figures(grasp_bag: gb.GraspBag) -> None
     rate = expected_rate(grasp_bag.times['/joint_states'])
     gap_at = (gb.GAP_FROM - 1) * gb.JS_STEP_NS / 1e9
     assert line.split() == ['/joint_states', 'sensor_msgs/msg/JointState', str(count),
-                            f'{rate:.2f}', '0.070', 'at', f'{gap_at:.3f}', '3', '0', '0']
+                            f'{rate:.2f}', '0.070', 'at', f'{gap_at:.3f}', '3', '0', '0', '0']
+    pose = next(x for x in text.splitlines() if x.startswith('/sim/object_pose '))
+    assert pose.split()[-4:] == ['0', '5', '2', '0']  # lost, dropped, paused, trimmed
     assert '(not in the bag) /tf: lost 4' in text
     assert 'episode:    SUCCESS (grasp done: enveloped)' in text
     assert 'k_theta [N*m/rad] [10, 5, 5]   delta_theta_p [deg] [10, 10, 10]' in text
     assert 'worst-case margin +0.04001 N' in text and 'margin +1.337 N' in text
     assert '1: 0.305 s to 1.705 s: DONE, outcome SUCCESS (grasp done: enveloped)' in text
+    assert 'complete:   yes' in text
+    assert 'backlog:    max 0.013 s, mean 0.003 s over 400 messages' in text
     data = json.loads(json.dumps(bag_info_json(bag_info(grasp_bag.path))))
     assert data['duration_ns'] == grasp_bag.end_ns - gb.T0
-    assert data['lost'] == gb.LOST
+    assert data['lost'] == gb.LOST and data['dropped'] == gb.DROPPED
+    assert data['completeness'] == {'complete': True, 'missing': []}
+    assert data['backlog'] == gb.BACKLOG
     assert data['episode']['summary']['check_lift']['csm_margin'] == 1.337
+
+
+def test_an_incomplete_episode_is_marked_with_what_it_lacks(tmp_path: Path, typestore,
+                                                           prefixes) -> None:
+    bag = gb.write_grasp_bag(tmp_path / 'cut', typestore, prefixes, topics=('/dam/status',),
+                             episode=gb.summary(),
+                             custom={'dam_episode.complete': 'false',
+                                     'dam_episode.missing': json.dumps(INCOMPLETE)})
+    info = bag_info(bag.path)
+    assert info.completeness.complete is False
+    assert [m.kind for m in info.completeness.missing] == ['end_event', 'stopped']
+    text = format_bag_info(info).splitlines()
+    at = text.index('complete:   NO, INCOMPLETE: the bag lacks')
+    assert text[at + 1:at + 3] == ['  /dam/episode: no EVENT_ENDED of the goal in the bag',
+                                   '  /joint_states: ' + INCOMPLETE[1]['detail']]
+    data = json.loads(json.dumps(bag_info_json(info)))
+    assert data['completeness']['complete'] is False
+    assert data['completeness']['missing'][1]['short'] == 2755
+    broken = tmp_path / 'broken'
+    shutil.copytree(bag.path, broken)
+    meta = (broken / 'metadata.yaml').read_text()
+    (broken / 'metadata.yaml').write_text(meta.replace("dam_episode.complete: 'false'",
+                                                       "dam_episode.complete: 'maybe'"))
+    with pytest.raises(BagReadError, match='broken: dam_episode.complete: expected "true"'):
+        bag_info(broken)
 
 
 def test_a_bag_without_status_or_episode(tmp_path: Path, typestore, prefixes) -> None:
@@ -136,8 +167,22 @@ def test_an_end_phase_entered_before_the_outcome_takes_the_outcome_reported_next
         (2, 'SUCCESS', 'lifted'), (6, 'UNKNOWN', '')]
 
 
+#: What the incomplete episode of make_episode_dir lacks.
+INCOMPLETE = [{'kind': 'end_event', 'topic': '/dam/episode',
+               'detail': 'no EVENT_ENDED of the goal in the bag'},
+              {'kind': 'stopped', 'topic': '/joint_states', 'detail': 'stops at 6.730 s of '
+               '12.240 s: about 2755 of 6120 messages missing at its rate of 500 Hz',
+               'expected': 6120, 'recorded': 3365, 'short': 2755, 'until_s': 6.73,
+               'end_s': 12.24, 'until_ns': gb.T0 + 6_730_000_000, 'basis': 'rate'}]
+
+
 def make_episode_dir(root: Path, typestore, prefixes) -> dict[str, dict]:
-    """Four episode bags (one with no summary) and a directory that is no bag."""
+    """Five episode bags (one with no summary, one incomplete) and a directory that is no
+    bag."""
+    gb.write_grasp_bag(root / '2026_11_29-18_10_05_success_incomplete', typestore, prefixes,
+                       topics=('/dam/status',), episode=gb.summary(),
+                       custom={'dam_episode.complete': 'false',
+                               'dam_episode.missing': json.dumps(INCOMPLETE)})
     runs = {
         '2026_11_29-18_05_12_success': gb.summary(),
         '2026_11_29-18_06_40_failure': gb.summary(
@@ -150,7 +195,7 @@ def make_episode_dir(root: Path, typestore, prefixes) -> dict[str, dict]:
         gb.write_grasp_bag(root / name, typestore, prefixes, topics=('/dam/status',),
                            episode=episode)
     (root / 'notes').mkdir()
-    return runs
+    return {**runs, '2026_11_29-18_10_05_success_incomplete': gb.summary()}
 
 
 def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefixes) -> None:
@@ -170,20 +215,35 @@ def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefi
     assert rows['2026_11_29-18_08_02_success'].lift_guaranteed is None
     bare = rows['2026_11_29-18_09_30_aborted']  # no summary: the outcome from the name
     assert (bare.outcome, bare.grasp_duration_s, bare.k_theta) == ('ABORTED', None, ())
-    assert info.totals == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1}
-    assert list(info.totals) == ['SUCCESS', 'FAILURE', 'ABORTED']
+    assert (ok.complete, bare.complete) == (True, None)  # the metadata says, or does not
+    cut = rows['2026_11_29-18_10_05_success_incomplete']
+    assert (cut.outcome, cut.complete) == ('SUCCESS', False)
+    assert cut.missing == ('/dam/episode: no EVENT_ENDED of the goal in the bag',
+                           '/joint_states: ' + INCOMPLETE[1]['detail'])
+    # An incomplete success is no success.
+    assert info.totals == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1, 'INCOMPLETE': 1}
+    assert list(info.totals) == ['SUCCESS', 'FAILURE', 'ABORTED', 'INCOMPLETE']
     assert info.errors == []
     text = format_episodes(info)
     lines = text.splitlines()
-    assert lines[0].endswith(': 4 episodes')
+    assert lines[0].endswith(': 5 episodes')
     row = next(x for x in lines if x.startswith('2026_11_29-18_06_40_failure'))
-    assert row.split()[3:] == ['1.900', '4.250', 'FAILURE', '[0.5,', '0.25,', '0.25]',
+    assert row.split()[3:] == ['1.900', '4.250', 'FAILURE', 'yes', '[0.5,', '0.25,', '0.25]',
                                '[10,', '10,', '10]', 'no']
-    assert lines[-3:] == ['  SUCCESS            2', '  FAILURE            1',
-                          '  ABORTED            1']
+    row = next(x for x in lines if x.startswith('2026_11_29-18_10_05_success_incomplete'))
+    assert row.split()[5:7] == ['SUCCESS', 'NO']
+    row = next(x for x in lines if x.startswith('2026_11_29-18_09_30_aborted'))
+    assert row.split()[5:7] == ['ABORTED', '-']
+    assert text.split('incomplete (the bag lacks part of the episode):\n')[1].splitlines()[:3] \
+        == ['  2026_11_29-18_10_05_success_incomplete:',
+            '    /dam/episode: no EVENT_ENDED of the goal in the bag',
+            '    /joint_states: ' + INCOMPLETE[1]['detail']]
+    assert lines[-4:] == ['  SUCCESS            2', '  FAILURE            1',
+                          '  ABORTED            1', '  INCOMPLETE         1']
     data = episodes_json(info)
-    assert data['totals'] == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1}
+    assert data['totals'] == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1, 'INCOMPLETE': 1}
     assert data['episodes'][1]['lift_guaranteed'] is False
+    assert data['episodes'][4]['complete'] is False
 
 
 def test_an_unreadable_episode_is_a_row_with_its_error(tmp_path: Path, typestore,

@@ -4,6 +4,7 @@ the margins and the title are written; missing topics are named, not fatal."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -144,6 +145,20 @@ def test_missing_topics_are_named_and_the_rest_is_plotted(tmp_path: Path, typest
     assert 'no /sim/object_pose in the bag' in text
     assert 'no finger1 joints in /joint_states' in text
     assert result.figure.get_suptitle().startswith('status_only: SUCCESS')
+
+
+def test_an_incomplete_episode_says_so_in_the_title_and_names_what_it_lacks(
+        tmp_path: Path, typestore, prefixes) -> None:
+    lacks = [{'kind': 'end_event', 'topic': '/dam/episode',
+              'detail': 'no EVENT_ENDED of the goal in the bag'}]
+    bag = gb.write_grasp_bag(tmp_path / 'cut', typestore, prefixes, episode=gb.summary(),
+                             custom={'dam_episode.complete': 'false',
+                                     'dam_episode.missing': json.dumps(lacks)})
+    result = plot_bag(bag.path)
+    assert result.figure.get_suptitle().startswith('cut: SUCCESS, INCOMPLETE episode, k_theta')
+    assert result.data.missing[-1] == 'episode: /dam/episode: no EVENT_ENDED of the goal in ' \
+        'the bag'
+    assert 'episode: /dam/episode: no EVENT_ENDED' in all_text(result.figure)
 
 
 def test_joints_without_effort_are_named(tmp_path: Path, typestore, prefixes) -> None:

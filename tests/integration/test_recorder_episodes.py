@@ -5,7 +5,7 @@ The stack is the one a researcher runs: the PyBullet stand-in behind the driver,
 server, the controller and the recorder with its defaults, as separate processes over DDS. Two
 goals: a grasp run to its end and a grasp cancelled on its way. The test does not judge the
 grasps (``test_dam_grasp.py`` does): whatever their outcome, each goal must be one bag named by
-its outcome and holding the goal's result as the action returned it, the /check_lift answer
+its outcome, marked complete, and holding the goal's result as the action returned it, the /check_lift answer
 (compared with a call of our own), the configuration file's text, the software version, the
 signals from the pre-roll before the goal to the post-roll after its end, the hand's URDF and
 both events; both independent readers read it, and the installed ``bag plot`` draws it.
@@ -170,7 +170,11 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
         custom = yaml.safe_load((bag / 'metadata.yaml').read_text())[
             'rosbag2_bagfile_information']['custom_data']
         summary = json.loads(custom['dam_episode.summary'])
+        # Labelled by its outcome, and complete: no false INCOMPLETE for a whole episode.
         assert bag.name.endswith('_' + result.outcome_name.lower()), bag.name
+        assert custom['dam_episode.complete'] == 'true', custom['dam_episode.missing']
+        assert json.loads(custom['dam_episode.missing']) == []
+        assert json.loads(custom['dam_recorder.dropped_messages']) == {}
         assert summary['outcome'] == result.outcome
         assert summary['message'] == result.message
         assert summary['duration_s'] == pytest.approx(result.duration)

@@ -2,13 +2,15 @@
 
 For one bag (:func:`bag_info`): its topics with types, message counts, mean rates [Hz], the
 largest gap between consecutive messages per topic and when it began, the recorder's counts of
-lost, paused and trimmed messages (``custom_data``), the episode metadata when it is an
-episode bag, and the grasps ``/dam/status`` shows (from the phase leaving ``IDLE`` to ``DONE``,
-``ABORTED`` or ``FAILED``, with the outcome it then reports).
+lost, dropped, paused and trimmed messages and its backlog (``custom_data``), the episode
+metadata when it is an episode bag with whether the bag holds the whole episode and what it
+lacks (:mod:`dam_recorder.completeness`), and the grasps ``/dam/status`` shows (from the phase
+leaving ``IDLE`` to ``DONE``, ``ABORTED`` or ``FAILED``, with the outcome it then reports).
 
 For a directory of episode bags (:func:`episodes_info`): one row per episode (name, start,
-durations, outcome, ``k_theta``, ``delta_theta_p``, whether the lift is guaranteed) read from
-the metadata only, and the number of episodes per outcome.
+durations, outcome, whether it is complete, ``k_theta``, ``delta_theta_p``, whether the lift
+is guaranteed) read from the metadata only, and the number of episodes per outcome, where an
+incomplete episode counts as ``INCOMPLETE`` whatever its outcome.
 
 Times are receive times; "s" columns are seconds since the bag's first message.
 """
@@ -27,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from dam_recorder.bag_reading import (
+    DROPPED_KEY,
     LOST_KEY,
     PAUSED_KEY,
     TRIMMED_KEY,
@@ -34,6 +37,7 @@ from dam_recorder.bag_reading import (
     locate,
     read_bag_metadata,
 )
+from dam_recorder.completeness import INCOMPLETE_SUFFIX, Completeness, describe
 from dam_recorder.episode import (
     OUTCOME_NAMES,
     OUTCOME_ORDER,
@@ -68,7 +72,7 @@ class TopicStats:
         Largest time between consecutive messages [ns]; ``None`` below two messages.
     max_gap_at_ns : int or None
         Receive time of the message before that gap [ns since the epoch].
-    lost, paused, trimmed : int
+    lost, dropped, paused, trimmed : int
         The recorder's counts (``custom_data``) for the topic.
     """
 
@@ -83,6 +87,7 @@ class TopicStats:
     lost: int = 0
     paused: int = 0
     trimmed: int = 0
+    dropped: int = 0
 
 
 @dataclass(frozen=True)
@@ -138,6 +143,12 @@ class BagInfo:
         The episode metadata.
     grasps : list of Grasp
         The grasps ``/dam/status`` shows, in time order.
+    dropped : dict
+        Messages that never reached the recorder, per topic (``custom_data``).
+    completeness : Completeness or None
+        Whether the episode bag holds its whole episode; ``None`` when not recorded.
+    backlog : dict or None
+        The recorder's backlog (``max_s``, ``mean_s``, ``messages``).
     """
 
     path: Path
@@ -152,6 +163,9 @@ class BagInfo:
     trimmed: dict[str, int]
     episode: Episode | None
     grasps: list[Grasp]
+    dropped: dict[str, int] = dataclasses.field(default_factory=dict)
+    completeness: Completeness | None = None
+    backlog: dict[str, float] | None = None
 
     @property
     def duration_ns(self) -> int:
@@ -186,6 +200,11 @@ class EpisodeRow:
         ``/check_lift``'s answer; ``None`` without one.
     error : str or None
         Why the bag could not be read.
+    complete : bool or None
+        Whether the bag holds the whole episode (``None``: the metadata does not say; then the
+        name's ``_incomplete`` suffix tells).
+    missing : list of str
+        What it lacks, one line per item.
     """
 
     name: str
@@ -197,6 +216,8 @@ class EpisodeRow:
     delta_theta_p: tuple[float, ...] = ()
     lift_guaranteed: bool | None = None
     error: str | None = None
+    complete: bool | None = None
+    missing: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -209,8 +230,9 @@ class EpisodesInfo:
 
     @property
     def totals(self) -> dict[str, int]:
-        """Episodes per outcome, in :data:`OUTCOME_ORDER` (other names after)."""
-        counts = Counter(r.outcome for r in self.rows)
+        """Episodes per outcome, in :data:`OUTCOME_ORDER` (other names after); an incomplete
+        episode counts as ``INCOMPLETE`` whatever outcome it names."""
+        counts = Counter('INCOMPLETE' if r.complete is False else r.outcome for r in self.rows)
         order = [o for o in OUTCOME_ORDER if o in counts]
         order += sorted(o for o in counts if o not in OUTCOME_ORDER)
         return {o: counts[o] for o in order}
@@ -279,8 +301,10 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
         malformed.
     """
     meta = read_bag_metadata(path)
-    lost, paused, trimmed = (meta.counts(k) for k in (LOST_KEY, PAUSED_KEY, TRIMMED_KEY))
+    lost, paused, trimmed, dropped = (meta.counts(k) for k in (LOST_KEY, PAUSED_KEY,
+                                                                TRIMMED_KEY, DROPPED_KEY))
     episode = meta.episode()
+    completeness = meta.completeness()
     with BagReader(meta.path) as bag:
         types = bag.topics
         for name, type_name in meta.topics.items():
@@ -295,14 +319,16 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
         stats = topic_stats(name, types[name], times.get(name, np.zeros(0, np.int64)))
         topics.append(dataclasses.replace(stats, lost=lost.get(name, 0),
                                           paused=paused.get(name, 0),
-                                          trimmed=trimmed.get(name, 0)))
+                                          trimmed=trimmed.get(name, 0),
+                                          dropped=dropped.get(name, 0)))
     firsts = [t.first_ns for t in topics if t.first_ns is not None]
     lasts = [t.last_ns for t in topics if t.last_ns is not None]
     return BagInfo(
         path=meta.path, storage=meta.storage, files=meta.files,
         start_ns=min(firsts) if firsts else None, end_ns=max(lasts) if lasts else None,
         message_count=sum(t.count for t in topics), topics=topics, lost=lost, paused=paused,
-        trimmed=trimmed, episode=episode, grasps=grasps_from_status(status))
+        trimmed=trimmed, episode=episode, grasps=grasps_from_status(status), dropped=dropped,
+        completeness=completeness, backlog=meta.backlog())
 
 
 def episode_row(bag_dir: Path) -> EpisodeRow:
@@ -311,22 +337,32 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
     try:
         meta = read_bag_metadata(bag_dir)
         episode = meta.episode()
+        completeness = meta.completeness()
     except BagReadError as exc:
         return EpisodeRow(bag_dir.name, None, None, None, 'ERROR', error=str(exc))
     has_messages = meta.message_count > 0
     start = meta.start_ns if has_messages else None
     duration = meta.duration_ns * 1e-9 if has_messages else None
+    name = bag_dir.name
+    if completeness is not None:
+        complete: bool | None = completeness.complete
+        missing = tuple(describe(completeness.missing))
+    else:  # a bag without the key: its name may still say
+        complete = False if name.endswith(INCOMPLETE_SUFFIX) else None
+        missing = ()
     if episode is None:
-        named = parse_episode_name(bag_dir.name)
+        named = parse_episode_name(name.removesuffix(INCOMPLETE_SUFFIX))
         outcome = named[1].upper() if named else 'UNKNOWN'
-        return EpisodeRow(bag_dir.name, start, duration, None, outcome)
+        return EpisodeRow(name, start, duration, None, outcome, complete=complete,
+                          missing=missing)
     summary = episode.summary
     check = summary.check_lift
     ran = bool(summary.k_theta or summary.delta_theta_p)  # else refused: what was asked
-    return EpisodeRow(bag_dir.name, start, duration, summary.duration_s, summary.outcome_name,
+    return EpisodeRow(name, start, duration, summary.duration_s, summary.outcome_name,
                       summary.k_theta if ran else summary.goal_k_theta,
                       summary.delta_theta_p if ran else summary.goal_delta_theta_p,
-                      check.lift_guaranteed if check is not None else None)
+                      check.lift_guaranteed if check is not None else None,
+                      complete=complete, missing=missing)
 
 
 def episodes_info(path: str | os.PathLike[str]) -> EpisodesInfo:
@@ -399,6 +435,16 @@ def episode_lines(episode: Episode) -> list[str]:
     return lines
 
 
+def completeness_lines(completeness: Completeness | None) -> list[str]:
+    """Whether the episode bag is complete, and what it lacks, as text lines."""
+    if completeness is None:
+        return []
+    if completeness.complete:
+        return ['complete:   yes']
+    return ['complete:   NO, INCOMPLETE: the bag lacks',
+            *(f'  {line}' for line in describe(completeness.missing))]
+
+
 def format_bag_info(info: BagInfo) -> str:
     """``info`` as the text ``bag info`` prints."""
     start = info.start_ns
@@ -413,16 +459,23 @@ def format_bag_info(info: BagInfo) -> str:
         gap = '-' if t.max_gap_ns is None or start is None or t.max_gap_at_ns is None else \
             f'{t.max_gap_ns * 1e-9:.3f} at {(t.max_gap_at_ns - start) * 1e-9:.3f}'
         rows.append([t.name, t.type, str(t.count), _num(t.rate_hz, '.2f'), gap,
-                     str(t.lost), str(t.paused), str(t.trimmed)])
+                     str(t.lost), str(t.dropped), str(t.paused), str(t.trimmed)])
     header = ['topic', 'type', 'count', 'rate [Hz]', 'largest gap [s] at [s]', 'lost',
-              'paused', 'trimmed']
-    lines += ['', *_table(header, rows, {2, 3, 4, 5, 6, 7})]
-    others = sorted({*info.lost, *info.paused, *info.trimmed} - {t.name for t in info.topics})
+              'dropped', 'paused', 'trimmed']
+    lines += ['', *_table(header, rows, {2, 3, 4, 5, 6, 7, 8})]
+    others = sorted({*info.lost, *info.dropped, *info.paused, *info.trimmed}
+                    - {t.name for t in info.topics})
     for name in others:
-        lines.append(f'(not in the bag) {name}: lost {info.lost.get(name, 0)}, paused '
-                     f'{info.paused.get(name, 0)}, trimmed {info.trimmed.get(name, 0)}')
+        lines.append(f'(not in the bag) {name}: lost {info.lost.get(name, 0)}, dropped '
+                     f'{info.dropped.get(name, 0)}, paused {info.paused.get(name, 0)}, '
+                     f'trimmed {info.trimmed.get(name, 0)}')
+    if info.backlog is not None:
+        lines.append(f'backlog:    max {info.backlog["max_s"]:.3f} s, mean '
+                     f'{info.backlog["mean_s"]:.3f} s over {info.backlog["messages"]} messages '
+                     '(from receipt to the bag)')
     lines.append('')
     lines += episode_lines(info.episode) if info.episode else ['episode:    none']
+    lines += completeness_lines(info.completeness)
     if info.grasps:
         lines.append(f'grasps on {STATUS_TOPIC}:')
         for i, g in enumerate(info.grasps, 1):
@@ -440,13 +493,21 @@ def format_episodes(info: EpisodesInfo) -> str:
     rows = []
     for r in info.rows:
         rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
-                     _num(r.grasp_duration_s, '.3f'), r.outcome, format_floats(r.k_theta),
-                     format_floats(r.delta_theta_p, math.degrees(1.0)),
+                     _num(r.grasp_duration_s, '.3f'), r.outcome,
+                     '-' if r.complete is None else ('yes' if r.complete else 'NO'),
+                     format_floats(r.k_theta), format_floats(r.delta_theta_p, math.degrees(1.0)),
                      _yes(r.lift_guaranteed)])
-    header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'k_theta [N*m/rad]',
-              'delta_theta_p [deg]', 'lift guaranteed']
+    header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'complete',
+              'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
     lines = [f'{info.path}: {len(info.rows)} episode{"" if len(info.rows) == 1 else "s"}', '',
-             *_table(header, rows, {2, 3}), '', 'totals:']
+             *_table(header, rows, {2, 3})]
+    incomplete = [r for r in info.rows if r.complete is False]
+    if incomplete:
+        lines += ['', 'incomplete (the bag lacks part of the episode):']
+        for r in incomplete:
+            lines.append(f'  {r.name}:')
+            lines += [f'    {line}' for line in r.missing] or ['    (not recorded)']
+    lines += ['', 'totals:']
     lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
     return '\n'.join(lines)
 

@@ -4,11 +4,13 @@ Per finger, the compliant and the position joint's angle [deg] and torque [N*m] 
 ``/joint_states``; the controller's phases from ``/dam/status`` shaded as labelled spans on
 every time axis; the object's rise above its first height [mm] from ``/sim/object_pose``; the
 ``/check_lift`` margins from the episode metadata or, without it, from the last
-``/dam_grasp/_action/feedback`` that carries them. The title names the bag, the outcome,
-``k_theta`` and ``delta_theta_p``. Time runs in seconds from the bag's first message.
+``/dam_grasp/_action/feedback`` that carries them. The title names the bag, the outcome
+(``, INCOMPLETE episode`` after it when the bag lacks part of the episode,
+:mod:`dam_recorder.completeness`), ``k_theta`` and ``delta_theta_p``. Time runs in seconds
+from the bag's first message.
 
-What is missing (a topic, a joint, a torque) is plotted as far as it is there and listed in
-the figure and in :attr:`GraspData.missing`.
+What is missing (a topic, a joint, a torque, what an incomplete episode lacks) is plotted as
+far as it is there and listed in the figure and in :attr:`GraspData.missing`.
 
 :func:`read_grasp_data` collects the signals (plain numpy arrays), :func:`grasp_figure` draws
 them, :func:`plot_bag` does both and saves the picture.
@@ -29,6 +31,7 @@ import numpy as np
 from dam_common.config import JOINT_ROLES
 from dam_recorder.bag_info import STATUS_TOPIC, grasps_from_status
 from dam_recorder.bag_reading import BagReader, read_bag_metadata
+from dam_recorder.completeness import describe
 from dam_recorder.episode import Episode, format_floats
 from dam_recorder.errors import BagReadError
 
@@ -272,6 +275,10 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
     else:
         grasps = grasps_from_status(status)
         outcome = grasps[-1].outcome if grasps else 'outcome unknown'
+    completeness = meta.completeness()
+    if completeness is not None and not completeness.complete:
+        outcome += ', INCOMPLETE episode'  # the bag lacks part of it: the picture too
+        missing += [f'episode: {line}' for line in describe(completeness.missing)]
     height_t = height_mm = None
     if heights:
         h = np.asarray(heights, dtype=float)

@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from dam_recorder.backlog import BACKLOG_KEY
+from dam_recorder.completeness import Completeness, completeness_from_custom_data
 from dam_recorder.episode import Episode, episode_from_custom_data
 from dam_recorder.errors import BagReadError, EpisodeError
 from dam_recorder.metadata import METADATA_FILE, TOP_KEY
@@ -34,6 +36,7 @@ from dam_recorder.metadata import METADATA_FILE, TOP_KEY
 LOST_KEY = 'dam_recorder.lost_messages'
 PAUSED_KEY = 'dam_recorder.paused_messages'
 TRIMMED_KEY = 'dam_recorder.trimmed_messages'
+DROPPED_KEY = 'dam_recorder.dropped_messages'
 
 
 def one_line(text: str) -> str:
@@ -99,6 +102,32 @@ class BagMetadata:
             return episode_from_custom_data(self.custom_data)
         except EpisodeError as exc:
             raise BagReadError(f'{self.path}: {exc}') from None
+
+    def completeness(self) -> Completeness | None:
+        """Whether the episode bag holds its whole episode (:mod:`dam_recorder.completeness`),
+        ``None`` when the metadata does not say.
+
+        Raises
+        ------
+        BagReadError
+            If it is malformed (the message names the bag, the key and the value).
+        """
+        try:
+            return completeness_from_custom_data(self.custom_data)
+        except EpisodeError as exc:
+            raise BagReadError(f'{self.path}: {exc}') from None
+
+    def backlog(self) -> dict[str, float] | None:
+        """The recorder's backlog (``dam_recorder.backlog``: ``max_s``, ``mean_s``,
+        ``messages``), ``None`` when absent or not such a JSON object."""
+        try:
+            data = json.loads(self.custom_data[BACKLOG_KEY])
+        except (KeyError, TypeError, ValueError):
+            return None
+        if not isinstance(data, dict) or not all(
+                isinstance(data.get(k), (int, float)) for k in ('max_s', 'mean_s', 'messages')):
+            return None
+        return {k: data[k] for k in ('max_s', 'mean_s', 'messages')}
 
 
 @dataclass(frozen=True)

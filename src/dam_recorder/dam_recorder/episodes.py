@@ -4,7 +4,9 @@ The recorder keeps the last ``pre_roll`` seconds of every recorded topic in memo
 starts (the controller's STARTED event on ``/dam/episode``) an episode bag opens with that
 pre-roll; messages go on into it until ``post_roll`` seconds after the goal's end (the ENDED
 event). Then the bag is closed with the episode's metadata in ``custom_data`` and its directory
-is renamed after the goal's start time and outcome (``2026_11_29-18_05_12_success``). Episodes
+is renamed after the goal's start time and outcome (``2026_11_29-18_05_12_success``), with
+``_incomplete`` appended when the bag lacks part of the episode
+(:mod:`~dam_recorder.completeness`: ``2026_11_29-18_05_12_success_incomplete``). Episodes
 may overlap (a goal refused while another runs): every open episode gets every message.
 
 Episode metadata (``custom_data`` of ``metadata.yaml``, strings):
@@ -23,6 +25,13 @@ Episode metadata (``custom_data`` of ``metadata.yaml``, strings):
     The software version the controller reported.
 ``dam_episode.config_source``
     Where the controller's configuration came from (a path on the controller's machine).
+``dam_episode.complete``, ``dam_episode.missing``
+    ``"true"`` or ``"false"``, and the JSON list of what the bag lacks
+    (:mod:`~dam_recorder.completeness`); while the episode is being written ``"false"`` with
+    one item of kind ``open`` (what a recorder killed meanwhile leaves).
+``dam_recorder.lost_messages``, ``dam_recorder.dropped_messages``, ``dam_recorder.backlog``
+    The recorder's counts of this episode's messages, and its backlog while the episode was
+    open (:mod:`~dam_recorder.backlog`).
 """
 
 from __future__ import annotations
@@ -34,11 +43,20 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from rosbags.interfaces import Qos
 
+from dam_recorder.backlog import BACKLOG_KEY, Backlog
+from dam_recorder.bag_reading import DROPPED_KEY
 from dam_recorder.bag_writer import BagWriter
+from dam_recorder.completeness import (
+    INCOMPLETE_SUFFIX,
+    EpisodeAccount,
+    Facts,
+    Missing,
+    completeness_custom_data,
+)
 from dam_recorder.errors import ConfigurationError
 
 #: ``custom_data`` keys of an episode.
@@ -50,8 +68,12 @@ CONFIG_SOURCE_KEY = 'dam_episode.config_source'
 UNFINISHED = 'UNKNOWN'
 #: Suffix of an episode directory while it is being written.
 OPEN_SUFFIX = 'recording'
-#: How long after its post-roll an episode waits for a later message before it closes [ns].
-CATCH_UP_NS = 1_000_000_000
+#: An episode closes once every message received up to this long after its post-roll has
+#: been handed over [ns] (a receive stamp is taken a moment before the message is queued).
+CLOSE_MARGIN_NS = 100_000_000
+#: What an open episode's metadata says (a recorder killed meanwhile leaves it so).
+OPEN_MISSING = (Missing('open', '', 'the episode was still being recorded: the recorder did '
+                        'not close it'),)
 #: How long an open episode holds a message back before it writes it [ns]: an ENDED event that
 #: arrives up to this much later than the messages after the post-roll still keeps them out
 #: (events and data travel on different topics; a resent event arrives late).
@@ -82,6 +104,10 @@ class TopicSpec:
     latched: bool = False
 
 
+#: A message as the episodes keep it: (topic key, receive stamp [ns], data, trimmed, facts).
+_Message = tuple[int, int, bytes, bool, 'Facts | None']
+
+
 @dataclass
 class _Episode:
     goal_id: str
@@ -93,12 +119,25 @@ class _Episode:
     trimmed: dict[str, int] = field(default_factory=dict)
     paused: dict[str, int] = field(default_factory=dict)
     start_info: dict[str, str] = field(default_factory=dict)
+    dropped: dict[str, int] = field(default_factory=dict)
+    backlog: Backlog = field(default_factory=Backlog)
     summary: dict[str, Any] | None = None
     close_after_ns: int | None = None
-    caught_up: bool = False  # a message stamped after close_after_ns has arrived
     window_start_ns: int = 0  # messages stamped before are not the episode's
-    #: (key, stamp, data, trimmed) taken but not yet written (:data:`HOLD_BACK_NS`)
-    held: deque[tuple[int, int, bytes, bool]] = field(default_factory=deque)
+    #: (key, stamp, data, trimmed, facts) taken but not yet written (:data:`HOLD_BACK_NS`)
+    held: deque[_Message] = field(default_factory=deque)
+    account: EpisodeAccount | None = None
+    #: What the bag lacks, once closed (:mod:`~dam_recorder.completeness`)
+    missing: tuple[Missing, ...] = OPEN_MISSING
+
+
+class Closed(NamedTuple):
+    """An episode that was closed: its bag directory, the outcome and what the bag lacks
+    (empty: complete)."""
+
+    path: Path
+    outcome: str
+    missing: tuple[Missing, ...]
 
 
 class EpisodeRecorder:
@@ -124,11 +163,11 @@ class EpisodeRecorder:
     Notes
     -----
     All times are the messages' receive stamps [ns since the epoch]; the caller passes the
-    events' receive stamps (and their own stamps) to :meth:`started` and :meth:`ended` and
-    the current time to :meth:`poll`. An episode takes the messages by their stamps, not by
-    when they are handed over, so messages and events may come late and in either order. A
-    latched topic's last message (e.g. ``/robot_description``) is written into every
-    episode, stamped at the start of the pre-roll when it is older.
+    events' receive stamps (and their own stamps) to :meth:`started` and :meth:`ended`, and
+    to :meth:`poll` how far it has handed messages over. An episode takes the messages by
+    their stamps, not by when they are handed over, so messages and events may come late and
+    in either order. A latched topic's last message (e.g. ``/robot_description``) is written
+    into every episode, stamped at the start of the pre-roll when it is older.
     """
 
     def __init__(self, out_dir: str | Path,
@@ -145,12 +184,13 @@ class EpisodeRecorder:
         self.post_roll_ns = int(round(post_roll_s * 1e9))
         self._custom_data = custom_data
         self._topics: list[TopicSpec] = []
-        #: (key, stamp, data, trimmed), by arrival
-        self._ring: deque[tuple[int, int, bytes, bool]] = deque()
+        #: (key, stamp, data, trimmed, facts), by arrival
+        self._ring: deque[_Message] = deque()
         self._latched: dict[int, tuple[int, bytes]] = {}
         self._open: dict[str, _Episode] = {}
-        #: The finished episodes: (bag directory, outcome name), oldest first.
-        self.finished: list[tuple[Path, str]] = []
+        self._newest_ns = 0  # the latest stamp handed over
+        #: The finished episodes, oldest first.
+        self.finished: list[Closed] = []
 
     # -- topics and messages -----------------------------------------------------------------
 
@@ -168,33 +208,49 @@ class EpisodeRecorder:
         return key
 
     def write(self, key: int, stamp_ns: int, data: bytes | memoryview,
-              trimmed: bool = False) -> None:
+              trimmed: bool = False, facts: Facts | None = None,
+              backlog_ns: int | None = None) -> None:
         """One message of topic ``key`` received at ``stamp_ns`` [ns] (``trimmed``: cut at its
-        CDR end, counted per episode)."""
+        CDR end, counted per episode), with what the caller read from it (``facts``, see
+        :data:`~dam_recorder.completeness.Facts`) and how long after its receipt it is handed
+        over (``backlog_ns``, counted by the open episodes)."""
         data = bytes(data)
-        self._ring.append((key, stamp_ns, data, trimmed))
+        message = (key, stamp_ns, data, trimmed, facts)
+        self._ring.append(message)
+        self._newest_ns = max(self._newest_ns, stamp_ns)
         horizon = stamp_ns - self.pre_roll_ns
         while self._ring and self._ring[0][1] < horizon:
             self._ring.popleft()
         if self._topics[key].latched:
             self._latched[key] = (stamp_ns, data)
         for episode in self._open.values():
+            if backlog_ns is not None:
+                episode.backlog.add(backlog_ns)
             if stamp_ns < episode.window_start_ns:
                 continue  # taken late (a backlog): older than the episode's pre-roll
             if episode.close_after_ns is None:
-                episode.held.append((key, stamp_ns, data, trimmed))
+                episode.held.append(message)
                 while episode.held and episode.held[0][1] < stamp_ns - HOLD_BACK_NS:
                     self._write_to(episode, *episode.held.popleft())
             elif stamp_ns <= episode.close_after_ns:
-                self._write_to(episode, key, stamp_ns, data, trimmed)
-            else:
-                episode.caught_up = True
+                self._write_to(episode, *message)
 
     def note_lost(self, key: int, count: int) -> None:
         """The middleware reports ``count`` messages of topic ``key`` lost."""
         name = self._topics[key].name
         for episode in self._open.values():
             episode.lost[name] = episode.lost.get(name, 0) + int(count)
+
+    def note_dropped(self, key: int, count: int, stamp_ns: int) -> None:
+        """``count`` messages of topic ``key`` were dropped on the way (a gap in the
+        publisher's sequence numbers, found at a message received at ``stamp_ns`` [ns]): the
+        loss of every episode whose window holds that message."""
+        name = self._topics[key].name
+        for episode in self._open.values():
+            if stamp_ns >= episode.window_start_ns and (
+                    episode.close_after_ns is None or stamp_ns <= episode.close_after_ns):
+                episode.dropped[name] = episode.dropped.get(name, 0) + int(count)
+                episode.account.dropped(name, count)
 
     def note_paused(self, key: int) -> None:
         """A message of topic ``key`` arrived while the recorder was paused (not written)."""
@@ -230,7 +286,8 @@ class EpisodeRecorder:
         stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(start_ns / 1e9))
         bag_dir = self._free_dir(f'{stem}_{OPEN_SUFFIX}', goal_id)
         episode = _Episode(goal_id, None, stem, accepted_ns or stamp_ns,  # type: ignore[arg-type]
-                           start_info=dict(start_info or {}))
+                           start_info=dict(start_info or {}),
+                           account=EpisodeAccount(goal_id, start_ns))
         # The writer calls custom_data as soon as it writes metadata.yaml, on opening.
         bag = self._open_bag(bag_dir, stem, lambda: self._episode_custom_data(episode))
         episode.bag = bag
@@ -242,10 +299,10 @@ class EpisodeRecorder:
         ring_start = self._ring[0][1] if self._ring else stamp_ns
         for key, (latched_ns, data) in self._latched.items():
             if latched_ns < ring_start:  # else it is in the ring
-                bag.write(episode.ids[key], max(latched_ns, window_start), data)
-        for key, ring_ns, data, trimmed in self._ring:
-            if ring_ns >= window_start:
-                self._write_to(episode, key, ring_ns, data, trimmed)
+                self._write_to(episode, key, max(latched_ns, window_start), data, False, None)
+        for message in self._ring:
+            if message[1] >= window_start:
+                self._write_to(episode, *message)
         return bag_dir
 
     def ended(self, goal_id: str, stamp_ns: int, summary: Mapping[str, Any],
@@ -264,19 +321,22 @@ class EpisodeRecorder:
         self._release_held(episode)
         return True
 
-    def poll(self, now_ns: int) -> list[tuple[Path, str]]:
-        """Close the episodes whose post-roll is over: a message stamped after it has been
-        written (so every earlier one was taken), or, when messages stopped, at ``now_ns``
-        [ns] :data:`CATCH_UP_NS` after its end. Return them as (bag directory, outcome)."""
+    def poll(self, taken_ns: int) -> list[Closed]:
+        """Close the episodes whose post-roll is over: every message received up to
+        :data:`CLOSE_MARGIN_NS` after it has been handed over. ``taken_ns`` [ns]: every
+        message received before it has been handed to :meth:`write` (the caller has taken
+        everything the middleware had received by then)."""
         due = [g for g, e in self._open.items()
-               if e.close_after_ns is not None
-               and (e.caught_up or now_ns >= e.close_after_ns + CATCH_UP_NS)]
-        return [self._close(goal_id) for goal_id in due]
+               if e.close_after_ns is not None and taken_ns >= e.close_after_ns + CLOSE_MARGIN_NS]
+        return [self._close(goal_id, self._open[goal_id].close_after_ns) for goal_id in due]
 
-    def close_all(self) -> list[tuple[Path, str]]:
-        """Close every open episode now (the recorder stops); a goal that has not ended gets
-        the outcome :data:`UNFINISHED`."""
-        return [self._close(goal_id) for goal_id in list(self._open)]
+    def close_all(self, taken_ns: int | None = None) -> list[Closed]:
+        """Close every open episode now (the recorder stops; ``taken_ns`` as in :meth:`poll`,
+        default: the latest stamp handed over); a goal that has not ended gets the outcome
+        :data:`UNFINISHED`. Their windows end at ``taken_ns`` (a post-roll is cut short)."""
+        end_ns = self._newest_ns if taken_ns is None else taken_ns
+        return [self._close(goal_id, min(end_ns, e.close_after_ns or end_ns))
+                for goal_id, e in list(self._open.items())]
 
     # -- helpers -----------------------------------------------------------------------------
 
@@ -285,18 +345,17 @@ class EpisodeRecorder:
         post-roll (they arrived before the ENDED event did)."""
         close_after = episode.close_after_ns
         while episode.held:
-            key, stamp_ns, data, trimmed = episode.held.popleft()
-            if close_after is None or stamp_ns <= close_after:
-                self._write_to(episode, key, stamp_ns, data, trimmed)
-            else:
-                episode.caught_up = True
+            message = episode.held.popleft()
+            if close_after is None or message[1] <= close_after:
+                self._write_to(episode, *message)
 
     def _write_to(self, episode: _Episode, key: int, stamp_ns: int, data: bytes,
-                  trimmed: bool) -> None:
+                  trimmed: bool, facts: Facts | None) -> None:
         episode.bag.write(episode.ids[key], stamp_ns, data)
+        spec = self._topics[key]
+        episode.account.add(spec.name, stamp_ns, facts, spec.latched)
         if trimmed:
-            name = self._topics[key].name
-            episode.trimmed[name] = episode.trimmed.get(name, 0) + 1
+            episode.trimmed[spec.name] = episode.trimmed.get(spec.name, 0) + 1
 
     def _add_to(self, episode: _Episode, key: int) -> None:
         spec = self._topics[key]
@@ -319,6 +378,9 @@ class EpisodeRecorder:
         data['dam_recorder.lost_messages'] = json.dumps(episode.lost, sort_keys=True)
         data['dam_recorder.trimmed_messages'] = json.dumps(episode.trimmed, sort_keys=True)
         data['dam_recorder.paused_messages'] = json.dumps(episode.paused, sort_keys=True)
+        data[DROPPED_KEY] = json.dumps(episode.dropped, sort_keys=True)
+        data[BACKLOG_KEY] = episode.backlog.json()
+        data.update(completeness_custom_data(episode.missing))
         data.update(episode.start_info)
         if episode.summary is not None:
             summary = dict(episode.summary)
@@ -329,17 +391,24 @@ class EpisodeRecorder:
                                            allow_nan=False)
         return data
 
-    def _close(self, goal_id: str) -> tuple[Path, str]:
+    def _close(self, goal_id: str, window_end_ns: int) -> Closed:
+        """Close the episode of ``goal_id``, its window ending at ``window_end_ns`` [ns]."""
         episode = self._open.pop(goal_id)
         self._release_held(episode)
+        got_result = episode.summary is not None
         if episode.summary is None:
             episode.summary = unfinished_summary(goal_id, episode.started_ns)
         outcome = str(episode.summary.get('outcome_name') or UNFINISHED)
+        episode.missing = tuple(episode.account.judge(
+            episode.window_start_ns, window_end_ns, [t.name for t in self._topics], got_result,
+            episode.lost))
         episode.bag.close()
-        final = self._free_dir(f'{episode.stem}_{outcome.lower()}', goal_id)
+        name = f'{episode.stem}_{outcome.lower()}'
+        final = self._free_dir(name + (INCOMPLETE_SUFFIX if episode.missing else ''), goal_id)
         episode.bag.bag_dir.rename(final)
-        self.finished.append((final, outcome))
-        return final, outcome
+        closed = Closed(final, outcome, episode.missing)
+        self.finished.append(closed)
+        return closed
 
 
 def unfinished_summary(goal_id: str, accepted_ns: int) -> dict[str, Any]:

@@ -25,9 +25,6 @@ discovery_period : double [s]
 queue_depth : int [messages]
     Depth of each subscription's queue (default 5000: 10 s of a 500 Hz topic, a recorder
     that falls behind for a while loses nothing).
-thread_priority : int
-    ``SCHED_FIFO`` priority of every thread of the recorder (default 40, below the controller
-    and the driver; 0: normal scheduling).
 episodes : bool
     Episode mode: one bag per ``/dam_grasp`` goal in the directory ``output``
     (:mod:`~dam_recorder.episodes`), from ``pre_roll`` before the goal to ``post_roll`` after.
@@ -38,6 +35,14 @@ Messages are taken serialized (``raw=True``: never deserialized), cut at their C
 (:mod:`~dam_recorder.cdr_end`) and stamped with the time the middleware received them (the
 node's clock with ``use_sim_time:=true``). Services (``std_srvs/srv/Trigger``): ``~/pause``,
 ``~/resume``, ``~/split``. SIGINT and SIGTERM close the bag (``destroy_node``).
+
+The recorder runs with the normal scheduling policy, never ``SCHED_FIFO``: real-time threads
+of a job that has no deadline (a recorder, like the analysis server and the controller) count
+against the kernel's real-time budget, and once that runs out the kernel stops every
+real-time thread of the machine for the rest of the period (``docs/recording.md``, "Keeping
+up"). It counts what it could not record instead: gaps in each publisher's sequence numbers
+(``dam_recorder.dropped_messages``), and how far behind the middleware's receipt it writes
+(``dam_recorder.backlog``, :mod:`~dam_recorder.backlog`).
 """
 
 from __future__ import annotations
@@ -62,12 +67,22 @@ from rclpy.utilities import remove_ros_args
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
-from dam_common.node import declare_thread_priority, run_node
-from dam_common.realtime import set_process_priority
+from dam_common.node import run_node
 from dam_common.shutdown import SHUTDOWN
+from dam_recorder.backlog import BACKLOG_KEY, Backlog
+from dam_recorder.bag_reading import DROPPED_KEY
 from dam_recorder.bag_writer import CHUNK_INTERVAL_RANGE_S, MIN_SPLIT_BYTES, BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
+from dam_recorder.completeness import (
+    ACTION_STATUS_TOPIC,
+    COUNTED_TOPICS,
+    DIAGNOSTICS_TOPIC,
+    Facts,
+    describe,
+    diagnostic_counts,
+    header_stamp_ns,
+)
 from dam_recorder.episode_messages import (
     EPISODE_TOPIC,
     stamp_ns,
@@ -94,8 +109,12 @@ TAKE_PERIOD_S = 0.005
 WRITE_PERIOD_S = 0.02
 #: Bytes after a message's CDR end that are its final alignment (kept; more is cut).
 MAX_ALIGNMENT_PADDING = 3
-#: SCHED_FIFO priority of the recorder's threads: below the controller (45) and the driver (50).
-THREAD_PRIORITY = 40
+#: A message handed to the bag longer than this after its receipt is logged (throttled) [ns].
+BACKLOG_WARNING_NS = 1_000_000_000
+#: The types whose messages an episode reads facts from (:mod:`dam_recorder.completeness`).
+FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
+              EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
+              ACTION_STATUS_TOPIC: 'action_msgs/msg/GoalStatusArray'}
 
 
 def message_class(type_name: str) -> type:
@@ -144,6 +163,13 @@ class _Recorded:
     paused: int = 0
     trimmed: int = 0
     malformed: int = 0
+    dropped: int = 0
+    #: Gaps in the publication sequence numbers count as dropped while the topic has one
+    #: publisher (rclpy does not say which publisher sent a message).
+    one_publisher: bool = False
+    last_sequence: int | None = None
+    #: What an episode reads from a message (None: nothing).
+    facts: Any = None
 
 
 def _descriptor(description: str, **kwargs: Any) -> ParameterDescriptor:
@@ -168,9 +194,10 @@ class RecorderNode(Node):
         self._refused: set[str] = set()
         self._paused = False
         self._last_message = time.monotonic()
+        self._backlog = Backlog()
+        #: Every message received before this [ns] has been handed over (episode mode).
+        self._taken_ns = 0
         p = self._declare_parameters()
-        self._thread_priority = declare_thread_priority(
-            self, default=THREAD_PRIORITY, what='every thread of the recorder')
         self._selection = TopicSelection(p['topics'], p['regex'], p['exclude'])
         for topic in self._selection.topics:
             if self._selection.excluded(topic):
@@ -208,7 +235,10 @@ class RecorderNode(Node):
 
     def _start(self, p: dict[str, Any], compression: str) -> None:
         self._depth = p['queue_depth']
-        self._taker = SerializedTaker(self, TAKE_PERIOD_S)
+        inbox = self._inbox
+        self._taker = SerializedTaker(
+            self, TAKE_PERIOD_S,
+            on_swept=None if self._episodes is None else lambda t: inbox.append(('swept', t)))
         self.create_service(Trigger, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/resume', self._on_resume)
         self.create_service(Trigger, '~/split', self._on_split)
@@ -231,14 +261,6 @@ class RecorderNode(Node):
             + (f', regex {p["regex"]!r}' if p['regex'] else '')
             + (f', exclude {p["exclude"]!r}' if p['exclude'] else ''))
         self._discover()
-        # The middleware's threads (they acknowledge what reliable publishers send) and the
-        # taker: real-time where permitted, below the nodes of the control loop, so that the
-        # recorder keeps up and its publishers never resend to it.
-        refused = set_process_priority(self._thread_priority)
-        if refused:
-            self.get_logger().warning(
-                f'{refused}: the recorder runs with normal scheduling; on a busy machine it may '
-                'fall behind real-time publishers (thread_priority:=0 silences this)')
 
     def _declare_parameters(self) -> dict[str, Any]:
         declared = {
@@ -284,6 +306,11 @@ class RecorderNode(Node):
     def _discover(self) -> None:
         if self._stopped:
             return
+        for recorded in self._recorded.values():
+            one = self.count_publishers(recorded.name) == 1
+            if one and not recorded.one_publisher:
+                recorded.last_sequence = None  # a new sequence to follow
+            recorded.one_publisher = one
         for name, types in self.get_topic_names_and_types():
             if name in self._recorded or name in self._refused \
                     or not self._selection.selects(name):
@@ -329,7 +356,8 @@ class RecorderNode(Node):
         else:
             topic_id = self._writer.add_topic(name, type_name, message_type.definition(),
                                               type_hash, profiles)
-        recorded = _Recorded(name, topic_id, end)
+        recorded = _Recorded(name, topic_id, end, one_publisher=len(offers) == 1,
+                             facts=self._fact_reader(name, type_name, cls))
         self._recorded[name] = recorded
         self._taker.subscribe(
             cls, name, qos, self._callback(recorded),
@@ -337,6 +365,30 @@ class RecorderNode(Node):
         self.get_logger().info(
             f'recording {name} ({type_name}, {"reliable" if request.reliable else "best_effort"}'
             f', {"transient_local" if request.transient_local else "volatile"})')
+
+    def _fact_reader(self, name: str, type_name: str, cls: type) -> Any:
+        """What an episode reads from the messages of ``name`` (None: nothing)."""
+        if self._episodes is None:
+            return None
+        if name in COUNTED_TOPICS:
+            def stamp(data: bytes) -> Facts:
+                header = header_stamp_ns(data)
+                return () if header is None else (('stamp', header),)
+            return stamp
+        if FACT_TYPES.get(name) != type_name:
+            return None
+        from rclpy.serialization import deserialize_message
+
+        def read(data: bytes) -> Facts:
+            msg = deserialize_message(data, cls)
+            if name == DIAGNOSTICS_TOPIC:
+                return diagnostic_counts((s.name, {kv.key: kv.value for kv in s.values})
+                                         for s in msg.status)
+            if name == EPISODE_TOPIC:
+                return (('event', (msg.goal_id, int(msg.event))),)
+            return [('status', (bytes(bytearray(s.goal_info.goal_id.uuid)).hex(),
+                                int(s.status))) for s in msg.status_list]
+        return read
 
     def _callback(self, recorded: _Recorded) -> Any:
         inbox = self._inbox
@@ -352,21 +404,33 @@ class RecorderNode(Node):
         writer = self._writer if self._episodes is None else self._episodes
         while inbox and not self._stopped:
             item = inbox.popleft()
-            if item[0] == 'lost':
-                self._on_lost(item[1], item[2])
-            else:
+            if item[0] == 'message':
                 self._write(writer, item[1], item[2], item[3])
+            elif item[0] == 'swept':
+                self._taken_ns = item[1]
+            else:
+                self._on_lost(item[1], item[2])
 
     def _write(self, writer: Any, recorded: _Recorded, data: bytes,
                info: dict[str, Any]) -> None:
+        received = info.get('received_timestamp', 0)
+        stamp = received
+        if self._use_sim_time or not stamp:
+            stamp = self.get_clock().now().nanoseconds
+        self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp)
         if self._paused:
             recorded.paused += 1
             if self._episodes is not None:
                 self._episodes.note_paused(recorded.topic_id)
             return
-        stamp = info.get('received_timestamp', 0)
-        if self._use_sim_time or not stamp:
-            stamp = self.get_clock().now().nanoseconds
+        backlog = time.time_ns() - received if received else None
+        if backlog is not None:
+            self._backlog.add(backlog)
+            if backlog > BACKLOG_WARNING_NS:
+                self.get_logger().warning(
+                    f'writing {backlog * 1e-9:.2f} s behind the receipt of the messages '
+                    f'({recorded.name}): the recorder gets too little CPU time',
+                    throttle_duration_sec=5.0)
         try:
             cut = recorded.end.trim(data)
             if len(data) - len(cut) <= MAX_ALIGNMENT_PADDING:
@@ -379,9 +443,39 @@ class RecorderNode(Node):
         trimmed = len(cut) != len(data)
         recorded.trimmed += trimmed
         if self._episodes is not None:
-            writer.write(recorded.topic_id, stamp, cut, trimmed)
+            writer.write(recorded.topic_id, stamp, cut, trimmed, self._read_facts(recorded, cut),
+                         backlog)
         else:
             writer.write(recorded.topic_id, stamp, cut)
+
+    def _read_facts(self, recorded: _Recorded, data: bytes) -> Facts | None:
+        if recorded.facts is None:
+            return None
+        try:
+            return recorded.facts(data)
+        except Exception as exc:  # noqa: BLE001 - a message the recorder cannot read
+            self.get_logger().warning(f'{recorded.name}: cannot read the message: {exc!r}',
+                                      throttle_duration_sec=5.0)
+            return None
+
+    def _follow_sequence(self, recorded: _Recorded, sequence: int | None, stamp: int) -> None:
+        """Count the messages missing before this one by its publisher's sequence number."""
+        if not sequence:
+            return
+        last, recorded.last_sequence = recorded.last_sequence, sequence
+        if last is None:
+            return
+        if sequence <= last:  # another publisher's: gaps mean nothing until the graph says one
+            recorded.one_publisher = False
+        elif sequence > last + 1 and recorded.one_publisher:
+            gap = sequence - last - 1
+            recorded.dropped += gap
+            if self._episodes is not None:
+                self._episodes.note_dropped(recorded.topic_id, gap, stamp)
+            self.get_logger().warning(
+                f'{recorded.name}: {gap} message(s) of its publisher never reached the recorder '
+                f'(sequence {last} to {sequence}; {recorded.dropped} in all)',
+                throttle_duration_sec=2.0)
 
     def _on_lost(self, recorded: _Recorded, change: int) -> None:
         recorded.lost += change
@@ -396,7 +490,8 @@ class RecorderNode(Node):
                                if getattr(r, attribute)}, sort_keys=True)
         return {'dam_recorder.lost_messages': counts('lost'),
                 'dam_recorder.paused_messages': counts('paused'),
-                'dam_recorder.trimmed_messages': counts('trimmed')}
+                'dam_recorder.trimmed_messages': counts('trimmed'),
+                DROPPED_KEY: counts('dropped'), BACKLOG_KEY: self._backlog.json()}
 
     # -- services and timers -----------------------------------------------------------------
 
@@ -426,12 +521,25 @@ class RecorderNode(Node):
         else:
             self.get_logger().warning(f'{EPISODE_TOPIC}: unknown event {msg.event}, ignored')
 
+    def _taken_until_ns(self) -> int:
+        """Every message received before this [ns] has been handed to the episodes (with
+        use_sim_time the node's clock stamps each message as it is handed over)."""
+        return self._now_ns() if self._use_sim_time else self._taken_ns
+
     def _close_due_episodes(self) -> None:
         if self._stopped:
             return
-        closed = self._episodes.poll(self._now_ns())
-        for path, outcome in closed:
-            self.get_logger().info(f'episode {outcome}: {path}')
+        for closed in self._episodes.poll(self._taken_until_ns()):
+            self._log_episode(closed)
+
+    def _log_episode(self, closed: Any) -> None:
+        # 'episode OUTCOME: PATH' alone on its line: scripts read the path from it.
+        if closed.missing:
+            self.get_logger().warning(f'episode {closed.outcome}: {closed.path}')
+            self.get_logger().warning(f'{closed.path.name} is INCOMPLETE, the bag lacks: '
+                                      + '; '.join(describe(closed.missing)))
+        else:
+            self.get_logger().info(f'episode {closed.outcome}: {closed.path}')
 
     def _on_pause(self, _request: Trigger.Request, response: Trigger.Response) -> Any:
         response.success = True
@@ -482,10 +590,13 @@ class RecorderNode(Node):
         """Take what reached the process, close the bag (summary, index and
         ``metadata.yaml``) or every open episode, then destroy the node."""
         taker, self._taker = self._taker, None
+        taken = time.time_ns()
         if taker is not None:
             taker.stop()
+            taken = time.time_ns()
             taker.drain()
         self._write_inbox()
+        self._taken_ns = taken
         self._stopped = True
         self._close_bags()
         if taker is not None:
@@ -494,10 +605,13 @@ class RecorderNode(Node):
 
     def _close_bags(self) -> None:
         if self._episodes is not None:
-            for path, outcome in self._episodes.close_all():
-                self.get_logger().info(f'episode {outcome}: {path}')
-            self.get_logger().info(f'{len(self._episodes.finished)} episode(s) recorded in '
-                                   f'{self._episodes.out_dir}')
+            for closed in self._episodes.close_all(self._taken_until_ns()):
+                self._log_episode(closed)
+            incomplete = sum(1 for c in self._episodes.finished if c.missing)
+            self.get_logger().info(
+                f'{len(self._episodes.finished)} episode(s) recorded in '
+                f'{self._episodes.out_dir} ({incomplete} incomplete); backlog '
+                f'{self._backlog.describe()}; dropped {self._dropped_text()}')
         writer, self._writer = self._writer, None
         if writer is not None and not writer.closed:
             writer.close()
@@ -505,7 +619,12 @@ class RecorderNode(Node):
             lost = sum(r.lost for r in self._recorded.values())
             self.get_logger().info(
                 f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
-                f'{len(writer.files)} file(s); the middleware reported {lost} lost')
+                f'{len(writer.files)} file(s); the middleware reported {lost} lost; dropped '
+                f'{self._dropped_text()}; backlog {self._backlog.describe()}')
+
+    def _dropped_text(self) -> str:
+        dropped = {r.name: r.dropped for r in self._recorded.values() if r.dropped}
+        return ', '.join(f'{n} {c}' for n, c in sorted(dropped.items())) or "none"
 
 
 def main(args: list[str] | None = None) -> None:

@@ -45,11 +45,17 @@ class SerializedTaker:
         How long the thread sleeps after it has emptied every queue [s]: the longest a message
         waits in its reader queue while the process gets CPU (the queues must hold what
         arrives meanwhile).
+    on_swept : callable, optional
+        ``on_swept(start_ns)`` runs in the thread after each pass over every queue, with the
+        time [ns since the epoch, system clock: the clock of the receive stamps] at which the
+        pass began: every message received before then has been handed to its callback.
     """
 
-    def __init__(self, owner: Node, period_s: float) -> None:
+    def __init__(self, owner: Node, period_s: float,
+                 on_swept: Callable[[int], None] | None = None) -> None:
         self._owner = owner
         self._period_s = float(period_s)
+        self._on_swept = on_swept
         # Not on the command line's arguments: a remapping of __node would give it the owner's
         # name. Topic names are absolute, so no remapping is lost.
         self._node = Node(f'{owner.get_name()}_taker', namespace=owner.get_namespace(),
@@ -113,7 +119,10 @@ class SerializedTaker:
                 if time.monotonic() >= next_loss_read:
                     next_loss_read += LOST_POLL_S
                     self._read_losses()
+                start_ns = time.time_ns()
                 self._take_all()  # everything queued: the wait below batches what comes
+                if self._on_swept is not None and not self._stop.is_set():
+                    self._on_swept(start_ns)
                 self._stop.wait(self._period_s)
             except Exception as exc:  # noqa: BLE001 - e.g. the context is going away
                 if self._stop.is_set() or not self._owner.context.ok():
