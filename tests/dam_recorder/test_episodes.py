@@ -298,3 +298,14 @@ def test_messages_are_held_back_for_a_bounded_time_only(tmp_path: Path, prefixes
     assert ids[:21] == list(range(0, 201, 10))  # the window itself is whole
     # Written before the event came: everything older than the hold-back at that time.
     assert max(ids) == (late_ms - 10) - HOLD_BACK_NS // MS - 10
+
+
+def test_an_episode_on_a_simulated_clock_is_named_by_the_wall_clock() -> None:
+    """A stand-in's clock starts at 0: its stamps are no dates (no 1970 names)."""
+    from dam_recorder.episodes import episode_stem
+
+    before = time.strftime('%Y_%m_%d-%H_%M', time.localtime())
+    stem = episode_stem(3 * 1_000_000_000)
+    after = time.strftime('%Y_%m_%d-%H_%M', time.localtime())
+    assert stem[:16] in (before, after), stem
+    assert episode_stem(T0) == time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(T0 / 1e9))

@@ -140,6 +140,18 @@ class Closed(NamedTuple):
     missing: tuple[Missing, ...]
 
 
+#: Stamps before 2000-01-01 are no dates: a simulated clock (``use_sim_time``) starts at 0.
+_DATE_FROM_NS = 946_684_800 * 1_000_000_000
+
+
+def episode_stem(start_ns: int) -> str:
+    """The name of an episode that starts at ``start_ns`` [ns]: its local date and time,
+    ``YYYY_MM_DD-HH_MM_SS``. A stamp of a simulated clock (before 2000) is no date: the
+    wall-clock time of the call names the episode instead, as rosbag2 names its bags."""
+    seconds = start_ns / 1e9 if start_ns >= _DATE_FROM_NS else time.time()
+    return time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(seconds))
+
+
 class EpisodeRecorder:
     """Writes one bag per goal, with pre-roll and post-roll.
 
@@ -283,7 +295,7 @@ class EpisodeRecorder:
         # The earlier of the two: a recorder that takes the event late (a busy machine) still
         # keeps the seconds before the goal; clocks of two machines may differ either way.
         start_ns = min(stamp_ns, accepted_ns) if accepted_ns else stamp_ns
-        stem = time.strftime('%Y_%m_%d-%H_%M_%S', time.localtime(start_ns / 1e9))
+        stem = episode_stem(start_ns)
         bag_dir = self._free_dir(f'{stem}_{OPEN_SUFFIX}', goal_id)
         episode = _Episode(goal_id, None, stem, accepted_ns or stamp_ns,  # type: ignore[arg-type]
                            start_info=dict(start_info or {}),
