@@ -2,7 +2,7 @@
 
 ::
 
-    ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episode, complete
+    ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episode
     ros2 run dam_recorder bag info EPISODES_DIR      # one row per episode bag, totals
     ros2 run dam_recorder bag plot BAG [-o grasp.png]
     ros2 run dam_recorder bag export BAG [-o DIR] [--topics /joint_states /dam/status]
