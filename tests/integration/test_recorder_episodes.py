@@ -5,10 +5,11 @@ The stack is the one a researcher runs: the PyBullet stand-in behind the driver,
 server, the controller and the recorder with its defaults, as separate processes over DDS. Two
 goals: a grasp run to its end and a grasp cancelled on its way. The test does not judge the
 grasps (``test_dam_grasp.py`` does): whatever their outcome, each goal must be one bag named by
-its outcome, marked complete, and holding the goal's result as the action returned it, the /check_lift answer
-(compared with a call of our own), the configuration file's text, the software version, the
-signals from the pre-roll before the goal to the post-roll after its end, the hand's URDF and
-both events; both independent readers read it, and the installed ``bag plot`` draws it.
+its outcome, marked complete, and holding the goal's result as the action returned it, the
+/check_lift answer (compared with a call of our own), the configuration file's text, the
+software version, the signals from the pre-roll before the goal to the post-roll after its
+end, the hand's URDF and both events; both independent readers read it, and the installed
+``bag plot`` draws it.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 ::
 
-    ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episodes
+    ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episode
     ros2 run dam_recorder bag info EPISODES_DIR      # one row per episode bag, totals
     ros2 run dam_recorder bag plot BAG [-o grasp.png]
     ros2 run dam_recorder bag export BAG [-o DIR] [--topics /joint_states /dam/status]
@@ -46,11 +46,14 @@ def build_parser() -> argparse.ArgumentParser:
         'info', help='topics, counts, rates, gaps, losses and episodes of a bag',
         description='For one bag: each topic with its type, message count, mean rate [Hz], '
                     'the largest gap between consecutive messages and when it began '
-                    '[s from the bag start], the messages the recorder counted lost, paused '
-                    'and trimmed, the episode metadata (outcome, k_theta, delta_theta_p, '
-                    'check_lift margins) and the grasps /dam/status shows. For a directory '
-                    'of episode bags: one row per episode (start, durations, outcome, '
-                    'k_theta, delta_theta_p, lift guaranteed) and the totals per outcome.')
+                    '[s from the bag start], the messages the recorder counted lost, '
+                    'dropped, paused and trimmed, its backlog, the episode metadata (outcome, '
+                    'k_theta, delta_theta_p, check_lift margins), whether the episode is '
+                    'complete and what it lacks, and the grasps /dam/status shows. For a '
+                    'directory of episode bags: one row per episode (start, durations, '
+                    'outcome, complete, k_theta, delta_theta_p, lift guaranteed), what the '
+                    'incomplete ones lack and the totals per outcome (an incomplete episode '
+                    'counts as INCOMPLETE).')
     info.add_argument('bag', metavar='BAG', help='a bag directory or a directory of bags')
     info.add_argument('--json', action='store_true',
                       help='print JSON instead of text (non-finite numbers as "nan", "inf")')
