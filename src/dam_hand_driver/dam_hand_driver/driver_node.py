@@ -706,7 +706,7 @@ class HandDriverNode(Node):
         frame = self._last_frame
         device_ns = int(frame.timestamp_ns) if frame is not None else 0
         # Device time per wall time over the last period: the real-time factor of a stand-in
-        # on simulated time (1.0 on an idle machine, lower when the machine holds it up).
+        # on simulated time (at most 1.0; lower when a period's work does not fit in a period).
         rtf = (device_ns - device_ns0) * 1e-9 / dt if device_ns0 and device_ns else math.nan
         self._diag_prev = (now, counters.accepted, published, device_ns)
         tripped = bool(frame is not None and frame.status & DeviceStatus.WATCHDOG_TRIPPED)

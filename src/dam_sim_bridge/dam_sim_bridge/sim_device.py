@@ -25,7 +25,7 @@ period (``1 / device.rate_hz``) it
   ``use_sim_time:=true``): the device clock is the simulated time, and the world is stepped to
   the next period only once the driver has answered the newest state frame (a command frame
   whose ``ref_state_seq`` is that frame's). Cycles are paced to at most real time (a real-time
-  factor of 1 on an idle machine); a stall of the machine, of the driver or of this process
+  factor of at most 1); a stall of the machine, of the driver or of this process
   stretches wall time and changes nothing else. A state frame that stays unanswered is sent
   again every :data:`RESEND_S` (a driver that starts later, or a lost datagram);
 * **lockstep** (:meth:`SimDevice.cycle`, or ``lockstep=True``): as fast as possible, the
