@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 
 from dam_common.cross_section import Circle, CrossSection, Ellipse
+from dam_common.dynamixel_config import DynamixelConfig, parse_dynamixel
 from dam_common.errors import ConfigError
 from dam_common.polygon_section import ConvexPolygon, check_convex_polygon, regular_polygon
 from dam_common.strict_yaml import safe_load_unique
@@ -254,6 +255,8 @@ class DamConfig:
     source: str = field(default='<dict>')
     #: Every object of ``object.library`` by name; :attr:`object` is the configured default.
     objects: Mapping[str, ObjectConfig] = field(default_factory=dict)
+    #: The ``dynamixel:`` section (a hand of Dynamixel servos), ``None`` where it is absent.
+    dynamixel: DynamixelConfig | None = None
 
     def with_object(self, name: str) -> DamConfig:
         """The same configuration with the library object ``name`` in place of the default
@@ -350,7 +353,7 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
             f'unsupported format version {version} (this code reads {_FORMAT_VERSION})'
         )
     root.only_keys({'format_version', 'hand', 'object', 'contact', 'task', 'controller',
-                    'classification', 'sim', 'device'})
+                    'classification', 'sim', 'device', 'dynamixel'})
     hand = _hand(root.child('hand'))
     objects, default = _objects(root.child('object'))
     obj = objects[default]
@@ -360,9 +363,14 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
     classification = _classification(root.child('classification'))
     sim = _sim(root.child('sim'), hand)
     device = _device(root.child('device'))
+    dynamixel = None
+    if 'dynamixel' in root.require_mapping():  # optional: only backend:=dynamixel needs it
+        roles = tuple(r for _ in hand.fingers for r in hand.joint_roles)
+        dynamixel = parse_dynamixel(root.child('dynamixel'), hand.joint_names, roles,
+                                    tuple(hand.joint_limits_rad[r] for r in roles))
     return DamConfig(hand=hand, object=obj, contact=contact, task=task, controller=controller,
                      classification=classification, sim=sim, device=device, source=source,
-                     objects=objects)
+                     objects=objects, dynamixel=dynamixel)
 
 
 # --------------------------------------------------------------------------------------------
