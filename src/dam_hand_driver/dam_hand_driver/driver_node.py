@@ -77,6 +77,7 @@ state) -> ACTIVE only through ``~/reset``.
 from __future__ import annotations
 
 import array
+import contextlib
 import enum
 import math
 import os
@@ -114,14 +115,14 @@ from dam_common.realtime import (
     set_thread_priority,
 )
 from dam_common.shutdown import SHUTDOWN
-from dam_hand_driver.errors import HandDriverError, ParameterError
-from dam_hand_driver.link import DeviceLink
-from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
+from dam_hand_driver.device import HandDevice, JointSample
+from dam_hand_driver.errors import HandDriverError
+from dam_hand_driver.protocol import JointMode
 from dam_hand_driver.slew import CommandSlew
 from dam_hand_driver.urdf import hand_urdf
 from dam_interfaces.msg import HandCommand
 
-BACKENDS = ('auto', 'hardware', 'sim')
+BACKENDS = ('auto', 'hardware', 'sim', 'dynamixel')
 #: HandCommand mode -> wire protocol mode (the values differ: map explicitly).
 MSG_TO_WIRE_MODE: dict[int, JointMode] = {
     HandCommand.MODE_TORQUE: JointMode.TORQUE,
@@ -233,30 +234,6 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
     return out
 
 
-def check_encodable(items: list[CommandItem], calibration: Calibration) -> None:
-    """Refuse impedance gains the device link cannot carry (e.g. a stiffness below one raw
-    unit of the calibration), which would fail every frame after the command was taken.
-
-    Raises
-    ------
-    CommandRejected
-        The gain, the joint and why (from :meth:`Calibration.gains_raw`).
-    """
-    n = calibration.n_joints
-    modes = np.full(n, int(JointMode.HOLD), dtype=np.int64)
-    stiffness = np.zeros(n)
-    damping = np.zeros(n)
-    for item in items:
-        if item.mode is JointMode.IMPEDANCE:
-            modes[item.joint] = int(JointMode.IMPEDANCE)
-            stiffness[item.joint] = item.stiffness
-            damping[item.joint] = item.damping
-    try:
-        calibration.gains_raw(modes, stiffness, damping)
-    except ParameterError as exc:
-        raise CommandRejected(f'impedance gains the device link cannot carry: {exc}') from exc
-
-
 class HandDriverNode(Node):
     """Device link, /joint_states, /hand/command, /diagnostics, backend selection.
 
@@ -275,12 +252,19 @@ class HandDriverNode(Node):
         config_file = declare_config_file(self)
         self.backend = str(self.declare_parameter(
             'backend', 'auto', ParameterDescriptor(
-                description='auto: probe the device, else start the simulator; hardware: '
-                            'never fall back; sim: always start the simulator',
-                additional_constraints='one of auto, hardware, sim',
+                description='auto: probe the UDP device link, else start the simulator; '
+                            'hardware: never fall back; sim: always start the simulator; '
+                            'dynamixel: Dynamixel servos on a serial bus (port, or the '
+                            'emulated bus when no port is configured)',
+                additional_constraints='one of auto, hardware, sim, dynamixel',
                 read_only=True)).value)
         if self.backend not in BACKENDS:
             raise HandDriverError(f'backend {self.backend!r} is not one of {BACKENDS}')
+        self._port = str(self.declare_parameter(
+            'port', '', ParameterDescriptor(
+                description='backend dynamixel: the serial port of the bus (empty: '
+                            'dynamixel.port of the configuration; both empty: start the '
+                            'emulated bus)', read_only=True)).value)
         self.thread_priority = declare_thread_priority(self)
         self._gui = bool(self.declare_parameter(
             'gui', False, ParameterDescriptor(
@@ -302,8 +286,20 @@ class HandDriverNode(Node):
         roles = [r for _ in hand.fingers for r in hand.joint_roles]
         self._lower = np.array([hand.joint_limits_rad[r][0] for r in roles])
         self._upper = np.array([hand.joint_limits_rad[r][1] for r in roles])
-        self.calibration = Calibration.from_config(self.config)
-        self.period_s = 1.0 / float(dev.rate_hz)
+        if self.backend == 'dynamixel':
+            if self.config.dynamixel is None:
+                raise HandDriverError(
+                    f'backend dynamixel needs the dynamixel: section in the configuration '
+                    f'({self.config.source}); see docs/dynamixel.md')
+            self._port = self._port or self.config.dynamixel.port
+            if self._sim_time and self._port:
+                raise HandDriverError(
+                    f'use_sim_time:=true runs on the emulated bus\'s clock, which the driver '
+                    f'starts itself when no port is configured; port {self._port!r} is a real '
+                    f'bus: start the driver without use_sim_time')
+            self.period_s = 1.0 / float(self.config.dynamixel.rate_hz)
+        else:
+            self.period_s = 1.0 / float(dev.rate_hz)
         self.state_timeout_s = float(dev.state_timeout_s)
         #: The silence of the device that is an ERROR [s of wall time].
         self._silence_timeout_s = (float(self.config.sim.stall_timeout_s) if self._sim_time
@@ -314,7 +310,8 @@ class HandDriverNode(Node):
                                 float(dev.torque_rate_limit_nm_per_s), self.period_s)
         self.max_stiffness = float(dev.max_stiffness_nm_per_rad)
         self.max_damping = float(dev.max_damping_nms_per_rad)
-        self.link = DeviceLink(self.n, dev.host, dev.state_port, dev.command_port)
+        #: The backend (set by :meth:`_select_backend`).
+        self.device: HandDevice | None = None
 
         self._lock = threading.Lock()
         self._modes = np.full(self.n, int(JointMode.HOLD), dtype=np.int64)
@@ -323,8 +320,8 @@ class HandDriverNode(Node):
         self._damping = np.zeros(self.n)
         self.state = DriverState.WAITING
         self._error_reason = ''
-        self._last_frame: StateFrame | None = None
-        self._startup_frame: StateFrame | None = None  # the newest frame of the probe
+        self._last_sample: JointSample | None = None
+        self._startup_sample: JointSample | None = None  # the newest sample of the probe
         self._rejected_commands = 0
         self._last_reject_reason = ''
         #: (joint states published, header stamp of the last one [ns])
@@ -377,6 +374,12 @@ class HandDriverNode(Node):
     # Backend
 
     def _select_backend(self) -> None:
+        if self.backend == 'dynamixel':
+            self._select_dynamixel()
+            return
+        from dam_hand_driver.udp_device import UdpDevice
+
+        self.device = UdpDevice(self.config)
         dev = self.config.device
         addr = f'{dev.host}:{dev.command_port} (states to port {dev.state_port})'
         if self.backend == 'sim':
@@ -384,7 +387,7 @@ class HandDriverNode(Node):
             return
         probe = self._receive_at_start(float(dev.probe_timeout_s))
         if probe is not None:
-            self._simulated_device = bool(probe.status & DeviceStatus.SIMULATED)
+            self._simulated_device = probe.simulated
             kind = 'simulated' if self._simulated_device else 'hardware'
             if self._sim_time and not self._simulated_device:
                 raise HandDriverError(
@@ -400,7 +403,32 @@ class HandDriverNode(Node):
             return
         self._start_standin(f'no device answered at {addr} within {dev.probe_timeout_s} s')
 
-    def _start_standin(self, why: str) -> None:
+    def _select_dynamixel(self) -> None:
+        """Open the Dynamixel bus: the configured port, or the emulated bus started here."""
+        from dam_hand_driver.dynamixel_device import DynamixelDevice
+
+        port = self._port
+        if not port:
+            port = self._start_standin('no Dynamixel port configured (dynamixel.port, port)',
+                                       bus='dynamixel')
+
+        def clock_ns() -> int:
+            return self.get_clock().now().nanoseconds
+
+        with SHUTDOWN.uninterrupted():
+            self.device = DynamixelDevice(self.config, port, clock_hint_ns=clock_ns,
+                                          simulated=self._simulated_device)
+        for cap in self.device.rate_report:
+            self.get_logger().warning(f'Dynamixel bus rate: {cap}')
+        dxl = self.config.dynamixel
+        self.get_logger().info(
+            f'Dynamixel bus on {port} at {dxl.baud_rate} bit/s: {len(dxl.servos)} servos '
+            f'answered with their configured models; bus cycle {dxl.rate_hz:g} Hz; torque off '
+            f'until ACTIVE')
+
+    def _start_standin(self, why: str, bus: str = 'udp') -> str:
+        """Start the stand-in (``bus``: its UDP device link, or an emulated Dynamixel bus);
+        returns the emulated bus's port (empty for UDP)."""
         from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
         try:
@@ -417,6 +445,14 @@ class HandDriverNode(Node):
         if os.path.isfile(self.config.source):
             cmd += ['-p', f'config_file:={self.config.source}']
         cmd += ['-p', f'object:={self.config.object.name}']
+        port_file = ''
+        if bus == 'dynamixel':
+            import tempfile
+
+            fd, port_file = tempfile.mkstemp(prefix='dam_dynamixel_port_')
+            os.close(fd)
+            os.unlink(port_file)  # the stand-in writes it when the bus is open
+            cmd += ['-p', 'bus:=dynamixel', '-p', f'port_file:={port_file}']
         # A session of its own: Ctrl-C in the terminal reaches the driver only, which stops the
         # stand-in itself (a signal in the stand-in's first milliseconds, before it handles
         # signals, would end it with a traceback); it dies with the driver however that dies.
@@ -426,30 +462,57 @@ class HandDriverNode(Node):
             f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
             f'(PID {self._child.pid})')
         deadline = time.monotonic() + _STANDIN_START_TIMEOUT_S
+        if bus == 'dynamixel':
+            return self._await_port_file(port_file, deadline)
         while time.monotonic() < deadline and self._child.poll() is None:
             if self._receive_at_start(0.1) is not None:
-                return
+                return ''
         if self._child.poll() is not None:
             raise HandDriverError(f'the stand-in exited with code {self._child.returncode} '
                                   f'before sending a state frame')
         self.get_logger().error(f'the stand-in sent no state frame within '
                                 f'{_STANDIN_START_TIMEOUT_S} s')
+        return ''
 
-    def _receive_at_start(self, timeout_s: float) -> StateFrame | None:
-        """A state frame within ``timeout_s`` [s], or ``None``; in short waits, so that a stop
+    def _await_port_file(self, port_file: str, deadline: float) -> str:
+        """The emulated bus's port, from the file the stand-in writes once it serves."""
+        child = self._child
+        assert child is not None
+        try:
+            while time.monotonic() < deadline and child.poll() is None:
+                SHUTDOWN.raise_if_requested()
+                try:
+                    port = Path(port_file).read_text(encoding='utf-8').strip()
+                except OSError:
+                    port = ''
+                if port:
+                    return port
+                time.sleep(0.05)
+        finally:
+            with contextlib.suppress(OSError):
+                os.unlink(port_file)
+        if child.poll() is not None:
+            raise HandDriverError(f'the emulated Dynamixel bus exited with code '
+                                  f'{child.returncode} before serving its port')
+        raise HandDriverError(f'the emulated Dynamixel bus served no port within '
+                              f'{_STANDIN_START_TIMEOUT_S} s')
+
+    def _receive_at_start(self, timeout_s: float) -> JointSample | None:
+        """A sample within ``timeout_s`` [s], or ``None``; in short waits, so that a stop
         request (SIGINT, SIGTERM) ends the start-up at once
         (:class:`~dam_common.shutdown.StartupInterrupted`)."""
+        assert self.device is not None
         deadline = time.monotonic() + timeout_s
         while True:
             SHUTDOWN.raise_if_requested()
             left = deadline - time.monotonic()
-            frame = self.link.receive(min(0.05, max(left, 0.0)))
-            if frame is not None:
+            sample = self.device.receive(min(0.05, max(left, 0.0)))
+            if sample is not None:
                 # The device link answers it: a stand-in on simulated time sends no newer
                 # frame before this one is answered.
-                self._startup_frame = frame
-            if frame is not None or left <= 0.05:
-                return frame
+                self._startup_sample = sample
+            if sample is not None or left <= 0.05:
+                return sample
 
     def _signal_standin(self) -> None:
         """Ask the stand-in to stop (it tears down while the driver does)."""
@@ -476,9 +539,15 @@ class HandDriverNode(Node):
     # ---------------------------------------------------------------------------------------
     # Control loop (own thread)
 
-    def _activate(self, frame: StateFrame) -> None:
+    def _activate(self, sample: JointSample) -> None:
         """Clean start: every joint HOLDs its measured position; the slew of torque commands
-        starts afresh (from the measured torques)."""
+        starts afresh (from the measured torques); the device's actuators come on."""
+        assert self.device is not None
+        try:
+            self.device.arm(sample)
+        except HandDriverError as exc:
+            self._enter_error(f'the device could not be switched on: {exc}')
+            return
         with self._lock:
             self._modes[:] = int(JointMode.HOLD)
             self._setpoints[:] = 0.0
@@ -487,7 +556,7 @@ class HandDriverNode(Node):
             self.slew.reset()
             self.state = DriverState.ACTIVE
             self._error_reason = ''
-        q = self.calibration.position_si(frame.position_counts)
+        q = sample.position
         self.get_logger().info(f'device link active: holding the measured posture '
                                f'{np.round(q, 3).tolist()} rad; torque commands ramp from '
                                f'the measured torques')
@@ -498,6 +567,11 @@ class HandDriverNode(Node):
                 return
             self.state = DriverState.ERROR
             self._error_reason = reason
+        if self.device is not None:
+            try:
+                self.device.disarm()
+            except Exception as exc:  # noqa: BLE001 - the device may be gone
+                self.get_logger().warning(f'could not switch the device off: {exc!r}')
         self.get_logger().error(f'ERROR: {reason}; /joint_states and torque commands stopped, '
                                 f'call ~/reset to recover')
 
@@ -520,7 +594,8 @@ class HandDriverNode(Node):
         child = self._child
         if self._sim_time and child is not None and child.poll() is not None:
             return f'the stand-in (PID {child.pid}) exited with code {child.returncode}'
-        last = self.link.last_state_time
+        assert self.device is not None
+        last = self.device.last_sample_time
         if last is None or now - last <= self._silence_timeout_s:
             return None
         what = ('sim.stall_timeout_s, wall time: the simulated clock stands still'
@@ -530,62 +605,63 @@ class HandDriverNode(Node):
     def _loop(self) -> None:
         self._schedule_link_thread()
         resend_after_s = 2.0 * 0.1  # twice the stand-in's own resend period
+        device = self.device
+        assert device is not None
         while self._running:
-            frame, self._startup_frame = self._startup_frame, None
-            if frame is None:
-                frame = self.link.receive(min(0.01, self.state_timeout_s / 4.0))
+            sample, self._startup_sample = self._startup_sample, None
+            if sample is None:
+                sample = device.receive(min(0.01, self.state_timeout_s / 4.0))
             now = time.monotonic()
-            if frame is None:
+            if sample is None:
                 if self.state is not DriverState.ACTIVE:
                     continue
                 why = self._silence(now)
                 if why is not None:
                     # This thread may itself have been held up (interpreter lock, CPU):
-                    # frames that arrived meanwhile are waiting in the socket.
-                    frame = self.link.receive(0.0)
-                    if frame is None:
+                    # samples that arrived meanwhile are waiting in the socket.
+                    sample = device.receive(0.0)
+                    if sample is None:
                         self._enter_error(why)
-                elif self._sim_time and now - (self.link.last_state_time or now) \
+                elif self._sim_time and now - (device.last_sample_time or now) \
                         > resend_after_s:
                     # The stand-in waits for this answer: it may have been lost.
-                    self.link.resend()
-                if frame is None:
+                    device.resend()
+                if sample is None:
                     continue
                 now = time.monotonic()
-            self._last_frame = frame
+            self._last_sample = sample
+            if sample.fault and self.state is not DriverState.ERROR:
+                self._enter_error(sample.fault)
             if self.state is DriverState.WAITING:
-                self._activate(frame)
+                self._activate(sample)
             if self.state is not DriverState.ACTIVE:
                 continue
-            state_si = self.calibration.state_si(frame)
             if self._sim_time:
                 # Simulated time: the joint state first, so that the commander computes its
                 # answer while the stand-in steps; then the answer to the previous one.
-                if not self._publish_or_stop(state_si, frame):
+                if not self._publish_or_stop(sample):
                     return
                 self._await_command()
-                self._answer(frame, state_si, now)
+                self._answer(sample, now)
                 continue
-            self._answer(frame, state_si, now)
-            if not self._publish_or_stop(state_si, frame):
+            self._answer(sample, now)
+            if not self._publish_or_stop(sample):
                 return
 
-    def _answer(self, frame: StateFrame,
-                state_si: tuple[np.ndarray, np.ndarray, np.ndarray], received: float) -> None:
+    def _answer(self, sample: JointSample, received: float) -> None:
         try:
-            self._send_command(frame, state_si)
+            self._send_command(sample)
         except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
             self.get_logger().error(f'command not sent: {exc!r}',
                                     throttle_duration_sec=_LOG_THROTTLE_S)
         self._latencies_s.append(time.monotonic() - received)
 
-    def _publish_or_stop(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray],
-                         frame: StateFrame) -> bool:
+    def _publish_or_stop(self, sample: JointSample) -> bool:
         """Publish the joint state; ``False`` when the node is shutting down."""
         if not self.context.ok():
             return False  # shutting down: the publishers are gone
         try:
-            self._publish_joint_states(state_si, frame)
+            self._publish_joint_states(sample)
         except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
             if not self.context.ok():
                 return False
@@ -611,26 +687,23 @@ class HandDriverNode(Node):
                     return
                 self._command_arrived.wait(min(left, 0.05))
 
-    def _send_command(self, frame: StateFrame,
-                      state_si: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-        """Answer ``frame`` (its state in SI: angles [rad], velocities [rad/s], torques
-        [N*m]) with the newest command, slew-limited."""
+    def _send_command(self, sample: JointSample) -> None:
+        """Answer ``sample`` with the newest command, slew-limited."""
+        assert self.device is not None
         with self._lock:
             modes = self._modes.copy()
             target = self._setpoints.copy()
             stiffness = self._stiffness.copy()
             damping = self._damping.copy()
-        setpoints = self.slew.step(modes, target, stiffness, damping, *state_si)
-        raw = self.calibration.setpoints_raw(modes, setpoints)
-        k_raw, d_raw = self.calibration.gains_raw(modes, stiffness, damping)
-        self.link.send(modes, raw, frame.seq, k_raw, d_raw)
+        setpoints = self.slew.step(modes, target, stiffness, damping, sample.position,
+                                   sample.velocity, sample.effort)
+        self.device.send(sample, modes, setpoints, stiffness, damping)
 
-    def _publish_joint_states(self, state_si: tuple[np.ndarray, np.ndarray, np.ndarray],
-                              frame: StateFrame) -> None:
-        q, dq, tau = state_si
+    def _publish_joint_states(self, sample: JointSample) -> None:
+        q, dq, tau = sample.position, sample.velocity, sample.effort
         msg = self._js_msg  # one message, refilled: publish() serialises it at once
         if self._sim_time:  # the device's clock is the simulated time: the state's own
-            stamp_ns = int(frame.timestamp_ns)
+            stamp_ns = int(sample.stamp_ns)
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
             self._stamps_ns = (self._stamps_ns[1], self._stamps_ns[2], stamp_ns)
         else:
@@ -651,7 +724,9 @@ class HandDriverNode(Node):
         try:
             items = validate_command(msg, self._index, self.torque_limit_nm, self._lower,
                                      self._upper, self.max_stiffness, self.max_damping)
-            check_encodable(items, self.calibration)
+            why = self.device.command_error(items) if self.device is not None else None
+            if why is not None:
+                raise CommandRejected(why)
         except CommandRejected as exc:
             self._rejected_commands += 1
             self._last_reject_reason = str(exc)
@@ -676,46 +751,57 @@ class HandDriverNode(Node):
             response.success = True
             response.message = 'already ACTIVE'
             return response
-        self.link.reset()  # the device may have restarted its sequence numbers
+        assert self.device is not None
+        self.device.restart_sequence()  # the device may have restarted its sequence numbers
+        try:
+            done = self.device.recover()
+        except Exception as exc:  # noqa: BLE001 - the node stays up whatever the device does
+            done = f'recovery failed: {exc}'
+        if done:
+            self.get_logger().info(f'~/reset: {done}')
         with self._lock:
             self.state = DriverState.WAITING
         wait_s = max(0.5, 5.0 * self.state_timeout_s)
         deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and self.state is not DriverState.ACTIVE:
+        while time.monotonic() < deadline and self.state is DriverState.WAITING:
             time.sleep(0.01)
+        prefix = f'{done}; ' if done else ''
         if self.state is DriverState.ACTIVE:
             response.success = True
-            response.message = 'device link ACTIVE again: holding the measured posture'
+            response.message = (f'{prefix}device link ACTIVE again: holding the measured '
+                                f'posture')
             return response
         with self._lock:
-            self.state = DriverState.ERROR
-            self._error_reason = 'reset failed: no state frame from the device'
+            if self.state is DriverState.WAITING:
+                self.state = DriverState.ERROR
+                self._error_reason = 'reset failed: no state from the device'
+            reason = self._error_reason
         response.success = False
-        response.message = (f'no state frame from the device within {wait_s:.2f} s; '
-                            f'still in ERROR')
+        response.message = (f'{prefix}still in ERROR: {reason} (waited {wait_s:.2f} s)')
         return response
 
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
         t0, accepted0, published0, device_ns0 = self._diag_prev
-        counters = self.link.decoder.counters
+        device = self.device
+        received = device.samples_received if device is not None else 0
         dt = max(now - t0, 1e-9)
-        state_rate = (counters.accepted - accepted0) / dt
+        state_rate = (received - accepted0) / dt
         published, last_stamp_ns = self._published_last
         js_rate = (published - published0) / dt
-        frame = self._last_frame
-        device_ns = int(frame.timestamp_ns) if frame is not None else 0
+        sample = self._last_sample
+        device_ns = int(sample.stamp_ns) if sample is not None else 0
         # Device time per wall time over the last period: the real-time factor of a stand-in
         # on simulated time (at most 1.0; lower when a period's work does not fit in a period).
         rtf = (device_ns - device_ns0) * 1e-9 / dt if device_ns0 and device_ns else math.nan
-        self._diag_prev = (now, counters.accepted, published, device_ns)
-        tripped = bool(frame is not None and frame.status & DeviceStatus.WATCHDOG_TRIPPED)
-        simulated = bool(frame is not None and frame.status & DeviceStatus.SIMULATED)
+        self._diag_prev = (now, received, published, device_ns)
+        tripped = bool(sample is not None and sample.watchdog_tripped)
+        simulated = bool(sample is not None and sample.simulated)
         lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
-        last = self.link.last_state_time
+        last = device.last_sample_time if device is not None else None
         status = DiagnosticStatus()
         status.name = 'dam_hand_driver: device link'
-        status.hardware_id = f'{self.config.device.host}:{self.config.device.command_port}'
+        status.hardware_id = device.hardware_id if device is not None else ''
         state = self.state
         if state is DriverState.ERROR:
             status.level = DiagnosticStatus.ERROR
@@ -723,7 +809,7 @@ class HandDriverNode(Node):
         elif state is DriverState.WAITING:
             status.level = DiagnosticStatus.ERROR
             status.message = 'waiting for the device'
-        elif (state_rate < 0.8 * self.config.device.rate_hz and not self._sim_time) or tripped:
+        elif (state_rate < 0.8 / self.period_s and not self._sim_time) or tripped:
             status.level = DiagnosticStatus.WARN
             status.message = ('device watchdog tripped' if tripped else
                               f'state rate {state_rate:.0f} Hz below target')
@@ -740,7 +826,7 @@ class HandDriverNode(Node):
             'joint_states_rate_hz': f'{js_rate:.1f}',
             'joint_states_published': str(published),
             'joint_states_last_stamp_ns': str(last_stamp_ns),
-            'target_rate_hz': f'{self.config.device.rate_hz:g}',
+            'target_rate_hz': f'{1.0 / self.period_s:g}',
             'use_sim_time': str(self._sim_time),
             'real_time_factor': f'{rtf:.3f}',
             'command_waits_timed_out': str(self._command_waits_timed_out),
@@ -753,12 +839,12 @@ class HandDriverNode(Node):
             'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
             'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',
             'device_watchdog_tripped': str(tripped),
-            'commands_sent': str(self.link.stats.commands_sent),
-            'send_errors': str(self.link.stats.send_errors),
             'hand_commands_rejected': str(self._rejected_commands),
             'last_command_rejection': self._last_reject_reason,
         }
-        values.update({f'frames_{k}': str(v) for k, v in counters.as_dict().items()})
+        if device is not None:
+            values['device_backend'] = device.kind
+            values.update(device.diagnostics())
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -779,8 +865,9 @@ class HandDriverNode(Node):
         if thread is not None and thread.is_alive():
             thread.join(timeout=2.0)
         self._stop_standin()
-        if hasattr(self, 'link'):
-            self.link.close()
+        device = getattr(self, 'device', None)
+        if device is not None:
+            device.close()
         super().destroy_node()
 
 
