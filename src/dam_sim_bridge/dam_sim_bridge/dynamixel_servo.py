@@ -397,10 +397,11 @@ class DynamixelServo:
         Returns
         -------
         Status
-            The answer, sent before the reboot (no Alert bit).
+            The answer, sent before the reboot (with the Alert bit of the error it clears).
         """
+        answer = self.status()
         self._ram_defaults()
-        return self.status()
+        return answer
 
     # ---------------------------------------------------------------------------------------
     # Faults and the watchdog
