@@ -24,6 +24,7 @@ setup(
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
             'sim_bridge = dam_sim_bridge.entry_points:sim_bridge',
+            'dynamixel_bus = dam_sim_bridge.entry_points:dynamixel_bus',
             'dam_experiment = dam_sim_bridge.experiment:main',
             'sweep = dam_sim_bridge.sweep_cli:main',
             'sweep_plot = dam_sim_bridge.sweep_plot:main',

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -20,6 +21,17 @@ IDS = tuple(range(1, 10))
 MODEL = {i: ('XC330-M288' if i % 3 == 2 else 'XM430-W350') for i in IDS}
 NUMBER = {'XM430-W350': 1020, 'XC330-M288': 1240}
 
+
+
+@pytest.fixture(autouse=True)
+def _fast_gil_handoff() -> Iterator[None]:
+    """The host (the SDK polls the port in a busy loop) and the emulated bus share this
+    process's GIL here; with the default 5 ms switch interval a sync read can outlast the SDK's
+    ~34 ms packet timeout. (In use the bus runs in a process of its own.)"""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    yield
+    sys.setswitchinterval(before)
 
 class _Host:
     """The SDK's side of the line."""

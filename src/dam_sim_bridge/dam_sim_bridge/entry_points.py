@@ -7,9 +7,29 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import run_node_entry
+import sys
+
+from dam_common.shutdown import StartupInterrupted, catch_signals, run_node_entry
 
 
 def sim_bridge() -> None:
     """``ros2 run dam_sim_bridge sim_bridge``: the PyBullet stand-in node."""
     run_node_entry('dam_sim_bridge.sim_bridge_node')
+
+
+def dynamixel_bus() -> None:
+    """``dynamixel_bus``: the emulated Dynamixel bus (not a node; see
+    :func:`dam_sim_bridge.dynamixel_standin.main`). A signal at any moment ends it with status
+    0; a bad argument with status 2."""
+    shutdown = catch_signals(interrupt_startup=True)
+    try:
+        from dam_sim_bridge.dynamixel_standin import main  # noqa: PLC0415
+
+        status = main()
+    except StartupInterrupted:
+        status = 0
+    except Exception:
+        if not shutdown.requested:
+            raise
+        status = 0  # the interrupt surfaced as another error (a C extension's init wraps it)
+    sys.exit(status)
