@@ -1,4 +1,4 @@
-"""One emulated Dynamixel X-series servo: its control table and the rules of reading and writing it.
+"""One emulated Dynamixel X-series servo: its control table and the rules of reading and writing.
 
 No I/O and no physics: :class:`DynamixelServo` keeps a 256-byte control table (little-endian
 fields at the addresses of the ROBOTIS e-manual, X series, Protocol 2.0) and answers PING,
