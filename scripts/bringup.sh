@@ -4,14 +4,18 @@
 #   and spcm_controller. Returns when every node serves, or fails (non-zero) with the fatal
 #   line of the node that died, after stopping what it started.
 #
-#   bash scripts/bringup.sh [--backend auto|sim|hardware] [--gui] [--object NAME]
-#                           [--timeout S] [--params-file FILE]... [--ros-args ARGS... [--]]
+#   bash scripts/bringup.sh [--backend auto|sim|hardware|dynamixel] [--port DEV] [--gui]
+#                           [--object NAME] [--timeout S] [--params-file FILE]...
+#                           [--ros-args ARGS... [--]]
 #   bash scripts/stop.sh          # stops exactly the processes started here, by PID
 #
 #   --backend   auto (default): probe the device link for device.probe_timeout_s; a hand that
 #               answers is driven as hardware, else the stand-in runs (simulated time).
 #               sim: always the stand-in. hardware: a hand must answer within the probe time,
-#               else nothing starts (exit 1).
+#               else nothing starts (exit 1). dynamixel: Dynamixel servos on a serial bus
+#               (docs/dynamixel.md): --port DEV or dynamixel.port; with neither, the driver
+#               starts the emulated bus (the PyBullet stand-in as nine servos, simulated time).
+#   --port      the Dynamixel bus's serial device, e.g. /dev/ttyUSB0 (--backend dynamixel)
 #   --gui       open the stand-in's PyBullet window (needs a display)
 #   --object    an object of config/dam.yaml's object.library (default object.default)
 #   --timeout   how long the nodes may take to become ready [s] (default 60)
@@ -35,14 +39,17 @@ NODES=(check_lift_server hand_driver spcm_controller)
 
 usage_error() { echo "bringup.sh: $1 (see --help)" >&2; exit 2; }
 backend=auto
+port=""
 gui=false
 object=""
 timeout=60
 user_args=()  # --params-file and --ros-args of the caller, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
-    --backend) [ $# -ge 2 ] || usage_error "--backend needs auto, sim or hardware"
+    --backend) [ $# -ge 2 ] || usage_error "--backend needs auto, sim, hardware or dynamixel"
       backend=$2; shift 2 ;;
+    --port) [ $# -ge 2 ] || usage_error "--port needs a serial device (backend dynamixel)"
+      port=$2; shift 2 ;;
     --gui) gui=true; shift ;;
     --object) [ $# -ge 2 ] || usage_error "--object needs a name of object.library"
       object=$2; shift 2 ;;
@@ -58,9 +65,12 @@ while [ $# -gt 0 ]; do
     *) usage_error "unknown argument '$1'" ;;
   esac
 done
-case "$backend" in auto|sim|hardware) ;; *)
-  usage_error "--backend must be auto, sim or hardware, got '$backend'" ;;
+case "$backend" in auto|sim|hardware|dynamixel) ;; *)
+  usage_error "--backend must be auto, sim, hardware or dynamixel, got '$backend'" ;;
 esac
+[ -z "$port" ] || [ "$backend" = dynamixel ] ||
+  usage_error "--port is for --backend dynamixel (the UDP link's addresses are in device:)"
+[ -z "$port" ] || [ -e "$port" ] || usage_error "--port: no such device '$port'"
 [[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] ||
   usage_error "--timeout must be a positive number of seconds, got '$timeout'"
 
@@ -91,7 +101,20 @@ echo "==> Bringing up the DAM suite (ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-0}, backend 
 # probe binds the state port and closes it before the driver binds it.
 driver_backend=$backend
 sim_time=true
-if [ "$backend" != sim ]; then
+if [ "$backend" = dynamixel ]; then
+  # A port (here or dynamixel.port): a real bus, wall-clock time; none: the emulated bus the
+  # driver starts, which is the clock.
+  [ -n "$port" ] || port=$(python -c 'from dam_common.config import load_config
+c = load_config()
+print(c.dynamixel.port if c.dynamixel is not None else "")') || {
+    echo "bringup.sh: the configuration cannot be read; nothing started" >&2; exit 1; }
+  if [ -n "$port" ]; then
+    sim_time=false
+    echo "    Dynamixel bus on $port"
+  else
+    echo "    no Dynamixel port configured: the driver starts the emulated bus"
+  fi
+elif [ "$backend" != sim ]; then
   probe=$(python "$REPO_ROOT/scripts/lib/probe_device.py") || {
     echo "bringup.sh: the device probe failed; nothing started" >&2; exit 1; }
   kind=${probe%%$'\t'*}
@@ -134,8 +157,10 @@ trap 'echo "bringup.sh: stopping what it started" >&2;
 object_args=()
 [ -z "$object" ] || object_args=(-p "object:=$object")
 start check_lift_server dam_analysis check_lift_server
+port_args=()
+[ -z "$port" ] || port_args=(-p "port:=$port")
 start hand_driver dam_hand_driver hand_driver -p "backend:=$driver_backend" -p "gui:=$gui" \
-  ${object_args[@]+"${object_args[@]}"}
+  ${object_args[@]+"${object_args[@]}"} ${port_args[@]+"${port_args[@]}"}
 start spcm_controller dam_spcm_controller spcm_controller ${object_args[@]+"${object_args[@]}"}
 
 watch=()

@@ -9,6 +9,8 @@
 #   bash scripts/run.sh                                   # the pair configured in config/dam.yaml
 #   bash scripts/run.sh --k-theta 0.5 --delta-theta-p 10deg   # any other pair
 #   bash scripts/run.sh --backend hardware --keep         # a real hand; leave the suite running
+#   bash scripts/run.sh --backend dynamixel               # Dynamixel servos: the emulated bus
+#   bash scripts/run.sh --backend dynamixel --port /dev/ttyUSB0   # ... or a real one
 #   bash scripts/run.sh --object square_bar               # another object of object.library
 #   bash scripts/run.sh --params-file my_params.yaml      # parameters for the nodes
 #   bash scripts/run.sh --ros-args -p spcm_controller:state_timeout:=0.2 --
@@ -29,6 +31,7 @@ BAG_DIR=${DAM_BAG_DIR:-$REPO_ROOT/bags}
 k_theta=""
 delta_theta_p=""
 backend=auto
+port=""
 keep=false
 object=""
 params=()    # the caller's --params-file FILE pairs, for every node
@@ -44,7 +47,8 @@ while [ $# -gt 0 ]; do
       [ $# -eq 0 ] || shift ;;
     --k-theta) k_theta=${2:?--k-theta needs a value}; shift 2 ;;
     --delta-theta-p) delta_theta_p=${2:?--delta-theta-p needs a value}; shift 2 ;;
-    --backend) backend=${2:?--backend needs auto, sim or hardware}; shift 2 ;;
+    --backend) backend=${2:?--backend needs auto, sim, hardware or dynamixel}; shift 2 ;;
+    --port) port=${2:?--port needs a serial device (backend dynamixel)}; shift 2 ;;
     --keep) keep=true; shift ;;
     --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
     -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
@@ -79,6 +83,7 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
 fi
 
 bringup_args=(--backend "$backend" ${params[@]+"${params[@]}"})
+[ -z "$port" ] || bringup_args+=(--port "$port")
 [ -z "$object" ] || bringup_args+=(--object "$object")
 [ ${#ros_args[@]} -eq 0 ] || bringup_args+=(--ros-args "${ros_args[@]}" --)
 # bringup.sh returns when every node serves; when it fails it has stopped what it started.

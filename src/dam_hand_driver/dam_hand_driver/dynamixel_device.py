@@ -63,6 +63,7 @@ HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
                        5: 'overload error'}
 #: The errors a reboot clears and ``~/reset`` reboots for.
 REBOOT_BITS = (1 << 2) | (1 << 5)
+_KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
 _REBOOT_WAIT_S = 2.0
 
@@ -168,6 +169,7 @@ class DynamixelDevice(HandDevice):
         self.write_failures = 0
         self.commands_sent = 0
         self.hardware_errors = np.zeros(self.n, dtype=np.int64)  #: Hardware Error Status
+        self._error_candidates = np.zeros(self.n, dtype=np.int64)
         self.armed = False
         self._seq = 0
         self._cycles = 0
@@ -280,22 +282,39 @@ class DynamixelDevice(HandDevice):
         with self._lock:
             if self._closed:
                 return None
-            sample = self._read_state()
+            try:
+                sample = self._read_state()
+            except Exception as exc:  # noqa: BLE001 - whatever the bus sends, no sample
+                sample = self._read_failed(f'sync read: {exc!r}')
         return sample
+
+    def _read_failed(self, why: str) -> None:
+        """Count a failed or incomplete read; let answers still under way arrive and drop
+        them, so that they are not taken for the next transaction's (the SDK matches status
+        packets by ID only)."""
+        self.read_failures += 1
+        self.last_read_failure = why
+        time.sleep(min(0.005, self.period_s))
+        self._port.clearPort()
+
+    def _complete(self, reader: object, length: int) -> str | None:
+        """Which servo's data is missing or of the wrong length (``None``: all there)."""
+        data = getattr(reader, 'data_dict', {})
+        for j, servo_id in enumerate(self.table.ids):
+            if len(data.get(servo_id) or ()) != length:
+                return f'no complete data from {self.table.label(j)}'
+        return None
 
     def _read_state(self) -> JointSample | None:
         sdk = self._sdk
         result = self._reader.txRxPacket()
         if result != sdk.COMM_SUCCESS:
-            self.read_failures += 1
-            self.last_read_failure = f'sync read: {self._ph.getTxRxResult(result)}'
-            return None
+            return self._read_failed(f'sync read: {self._ph.getTxRxResult(result)}')
+        missing = self._complete(self._reader, STATE_LENGTH)
+        if missing is not None:
+            return self._read_failed(f'sync read: {missing}')
         raw = np.zeros((self.n, 4), dtype=np.int64)
         for j, servo_id in enumerate(self.table.ids):
-            if not self._reader.isAvailable(servo_id, STATE_START, STATE_LENGTH):
-                self.read_failures += 1
-                self.last_read_failure = f'sync read: no data from {self.table.label(j)}'
-                return None
             raw[j] = (self._reader.getData(servo_id, ADDR_REALTIME_TICK, 2),
                       self._reader.getData(servo_id, ADDR_PRESENT_CURRENT, 2),
                       self._reader.getData(servo_id, ADDR_PRESENT_VELOCITY, 4),
@@ -303,7 +322,7 @@ class DynamixelDevice(HandDevice):
         q, dq, tau = state_si(self.table, signed(raw[:, 1], 16), signed(raw[:, 2], 32),
                               signed(raw[:, 3], 32))
         self._cycles += 1
-        if self._cycles % HARDWARE_ERROR_EVERY == 1:
+        if self._cycles % HARDWARE_ERROR_EVERY in (1, 2):
             self._read_hardware_errors()
         self._seq = (self._seq + 1) % 2**32
         self.samples_received += 1
@@ -327,12 +346,22 @@ class DynamixelDevice(HandDevice):
         return self._time_ms * 1_000_000
 
     def _read_hardware_errors(self) -> None:
-        if self._error_reader.txRxPacket() != self._sdk.COMM_SUCCESS:
-            return  # the state read counts the bus's failures
-        for j, servo_id in enumerate(self.table.ids):
-            if self._error_reader.isAvailable(servo_id, ADDR_HARDWARE_ERROR, 1):
-                self.hardware_errors[j] = self._error_reader.getData(
-                    servo_id, ADDR_HARDWARE_ERROR, 1)
+        result = self._error_reader.txRxPacket()
+        if result != self._sdk.COMM_SUCCESS or self._complete(self._error_reader, 1):
+            self._port.clearPort()  # the state reads count the bus's failures
+            return
+        bits = np.array([self._error_reader.getData(servo_id, ADDR_HARDWARE_ERROR, 1)
+                         for servo_id in self.table.ids], dtype=np.int64)
+        if np.any(bits & ~_KNOWN_BITS):
+            # Not a Hardware Error Status: an answer of an earlier transaction (the SDK
+            # matches by ID only). Dropped, like the rest of the input.
+            self.read_failures += 1
+            self.last_read_failure = 'hardware error read: a stale answer'
+            self._port.clearPort()
+            return
+        # A bit counts when two reads in a row show it.
+        self.hardware_errors = bits & self._error_candidates
+        self._error_candidates = bits
 
     def _fault(self) -> str:
         bad = np.flatnonzero(self.hardware_errors)

@@ -111,6 +111,9 @@ class DynamixelStandIn:
         Symlink to the pty, created here and removed by :meth:`close`.
     clock
         Device clock in real time [s].
+    return_delay_time_raw
+        Return Delay Time of every servo [2 us units]: 0, as a hand set up for speed; 250 as
+        a servo from the factory.
 
     Raises
     ------
@@ -123,7 +126,8 @@ class DynamixelStandIn:
 
     def __init__(self, config: DamConfig, world: HandWorld | None = None, *,
                  sim_time: bool = False, link_path: str | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 return_delay_time_raw: int = 0) -> None:
         dxl = getattr(config, 'dynamixel', None)
         if dxl is None:
             raise WorldConfigError('the configuration has no dynamixel: section')
@@ -173,6 +177,9 @@ class DynamixelStandIn:
             self._refresh_present()
             for s in self.servos:  # at power-up the goal is where the servo stands
                 s.set('goal_position', s.get('present_position'))
+                # A hand set up as docs/dynamixel.md says: no Return Delay Time (a servo
+                # fresh from the factory waits 500 us before each answer).
+                s.set('return_delay_time', return_delay_time_raw)
 
     # ---------------------------------------------------------------------------------------
     # Clock and physics

@@ -46,6 +46,24 @@ publish_clock : bool, read-only
     Publish ``/clock`` from the simulated time also in real-time mode.
 pose_rate_hz : double [Hz], in [1, 1000]
     Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
+bus : string, read-only, ``udp`` (default) or ``dynamixel``
+    ``dynamixel``: serve the world as nine emulated Dynamixel servos on a pseudo-terminal
+    (:class:`~dam_sim_bridge.dynamixel_standin.DynamixelStandIn`, the ``dynamixel:`` section of
+    the configuration) instead of the UDP device link; the driver's ``backend:=dynamixel``
+    starts it so when no port is configured. With ``use_sim_time`` the world steps one bus
+    period per read of Present Position (the host's bus cycle is the clock).
+port_file : string, read-only
+    ``bus:=dynamixel``: write the pseudo-terminal's path into this file once it serves.
+port_link : string, read-only
+    ``bus:=dynamixel``: a symbolic link to the pseudo-terminal (a fixed name for tools).
+fault_crc_error_ids, fault_silent_ids : int[], ``bus:=dynamixel``, may be set at run time
+    Servos (by ID) whose status packets get a wrong CRC, or that stop answering.
+fault_status_delay_s : double [s] in [0, 1], ``bus:=dynamixel``, may be set at run time
+    Every status packet is sent this late.
+fault_hardware_error : int[], ``bus:=dynamixel``, may be set at run time
+    Pairs ``[id, bits, ...]``: set these Hardware Error Status bits on the servo (bit 5
+    overload, 2 overheating, 0 input voltage, 3 motor encoder, 4 electrical shock): its torque
+    goes off and every status packet carries the alert bit, until a reboot.
 thread_priority : int, read-only, in [0, 99], default 0
     ``SCHED_FIFO`` priority of the simulated device's thread only (0: normal scheduling, the
     default: a simulation has no physical deadline, and real-time threads of a physics that
@@ -56,6 +74,7 @@ thread_priority : int, read-only, in [0, 99], default 0
 from __future__ import annotations
 
 import math
+import os
 import sys
 import threading
 
@@ -81,11 +100,16 @@ from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_common.ros_args import strip_ros_args
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
+from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
 _POSE_RATE_RANGE = (1.0, 1000.0)
+_BUSES = ('udp', 'dynamixel')
+_FAULT_PARAMETERS = ('fault_crc_error_ids', 'fault_silent_ids', 'fault_status_delay_s',
+                     'fault_hardware_error')
+_HARDWARE_ERROR_BITS = 0b111101  # the bits an X series servo has
 
 
 def _sim_stamp(seconds: float) -> Time:
@@ -131,11 +155,32 @@ class SimBridgeNode(Node):
             self, default=0, what='the simulated device thread')
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
+        self._bus = str(self.declare_parameter(
+            'bus', 'udp', ParameterDescriptor(
+                description='udp: the UDP device link; dynamixel: nine emulated Dynamixel '
+                            'servos on a pseudo-terminal', additional_constraints='udp or '
+                            'dynamixel', read_only=True)).value)
+        if self._bus not in _BUSES:
+            raise SimBridgeError(f'bus {self._bus!r} is not one of {_BUSES}')
+        port_file = str(self.declare_parameter(
+            'port_file', '', ParameterDescriptor(
+                description='bus dynamixel: write the pseudo-terminal path here',
+                read_only=True)).value)
+        port_link = str(self.declare_parameter(
+            'port_link', '', ParameterDescriptor(
+                description='bus dynamixel: a symbolic link to the pseudo-terminal',
+                read_only=True)).value)
+        self._declare_fault_parameters()
         self._config = declare_object(self, load_config(config_file or None))
         with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
             world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
             try:
-                self._device = SimDevice(self._config, world, sim_time=self._sim_time)
+                if self._bus == 'dynamixel':
+                    self._device = DynamixelStandIn(self._config, world,
+                                                    sim_time=self._sim_time,
+                                                    link_path=port_link or None)
+                else:
+                    self._device = SimDevice(self._config, world, sim_time=self._sim_time)
             except BaseException:
                 world.close()
                 raise
@@ -153,6 +198,9 @@ class SimBridgeNode(Node):
             SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
         self._thread.start()
         dev = self._config.device
+        if isinstance(self._device, DynamixelStandIn):
+            self._announce_bus(port_file)
+            return
         self.get_logger().info(
             f'simulated DAM hand on {dev.host}: commands on UDP port {dev.command_port}, '
             f'states to port {dev.state_port} at {dev.rate_hz:g} Hz '
@@ -162,6 +210,72 @@ class SimBridgeNode(Node):
             f'{self._config.source}{", GUI" if gui else ""}')
 
     # ---------------------------------------------------------------------------------------
+
+    def _announce_bus(self, port_file: str) -> None:
+        device = self._device
+        assert isinstance(device, DynamixelStandIn)
+        dxl = self._config.dynamixel
+        assert dxl is not None
+        if port_file:
+            tmp = f'{port_file}.tmp'
+            with open(tmp, 'w', encoding='utf-8') as f:
+                f.write(device.port_path + '\n')
+            os.replace(tmp, port_file)  # whole or not at all for the reader
+        ids = ', '.join(f'{s.servo_id} {s.model}' for s in dxl.servos)
+        link = f' (link {device.link_path})' if device.link_path else ''
+        clock = ('simulated time: one cycle per read of Present Position, publishing /clock'
+                 if self._sim_time else 'real time')
+        self.get_logger().info(
+            f'simulated DAM hand as an emulated Dynamixel bus on {device.port_path}{link}: '
+            f'servos {ids}; {dxl.rate_hz:g} Hz bus cycle ({device.steps_per_cycle} physics '
+            f'steps), {clock}; object {self._config.object.name}, config '
+            f'{self._config.source}')
+
+    def _declare_fault_parameters(self) -> None:
+        descriptor = ParameterDescriptor(
+            description='bus dynamixel: servo IDs (fault injection)')
+        for name in ('fault_crc_error_ids', 'fault_silent_ids', 'fault_hardware_error'):
+            self.declare_parameter(name, Parameter.Type.INTEGER_ARRAY, descriptor)
+        self.declare_parameter('fault_status_delay_s', 0.0, ParameterDescriptor(
+            description='bus dynamixel: every status packet this late [s]',
+            floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0,
+                                                     step=0.0)]))
+
+    def _fault_error(self, param: Parameter) -> str | None:
+        """Why a fault parameter cannot be set (``None``: it can), and apply it if it can."""
+        device = getattr(self, '_device', None)
+        if not isinstance(device, DynamixelStandIn):
+            return f'{param.name} needs bus:=dynamixel (this stand-in serves the UDP link)'
+        dxl = self._config.dynamixel
+        assert dxl is not None
+        known = {s.servo_id for s in dxl.servos}
+        value = param.value
+        if param.name == 'fault_status_delay_s':
+            device.status_delay_s = float(value)
+            return None
+        values = [int(v) for v in (value or [])]
+        if param.name == 'fault_hardware_error':
+            if len(values) % 2:
+                return f'fault_hardware_error takes pairs [id, bits, ...], got {values!r}'
+            pairs = list(zip(values[::2], values[1::2], strict=True))
+            for servo_id, bits in pairs:
+                if servo_id not in known:
+                    return f'fault_hardware_error: no servo with ID {servo_id} ({sorted(known)})'
+                if not 0 < bits <= 255 or bits & ~_HARDWARE_ERROR_BITS:
+                    return (f'fault_hardware_error: bits {bits} are not Hardware Error Status '
+                            f'bits (0 input voltage, 2 overheating, 3 motor encoder, 4 '
+                            f'electrical shock, 5 overload)')
+            for servo_id, bits in pairs:
+                device.hardware_error(servo_id, bits)
+            return None
+        unknown = sorted(set(values) - known)
+        if unknown:
+            return f'{param.name}: no servo with ID {unknown} (IDs: {sorted(known)})'
+        if param.name == 'fault_crc_error_ids':
+            device.crc_error_ids = values
+        else:
+            device.silent_ids = values
+        return None
 
     def _run_device(self) -> None:
         refused = set_thread_priority(self._thread_priority)
@@ -173,6 +287,13 @@ class SimBridgeNode(Node):
 
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for param in params:
+            if param.name in _FAULT_PARAMETERS and param.value is not None:
+                if not hasattr(self, '_device'):  # at start-up: taken once the bus runs
+                    continue
+                why = self._fault_error(param)
+                if why is not None:
+                    return SetParametersResult(successful=False, reason=why)
         for param in params:
             if param.name == 'pose_rate_hz':
                 value = param.value
