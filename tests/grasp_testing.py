@@ -164,9 +164,10 @@ class Grasper:
 
 
 @contextlib.contextmanager
-def grasp_stack(config_file: Path, object_name: str = '', sim_time: bool = True
-                ) -> Iterator[Grasper]:
-    """The stand-in (started by the driver, ``backend:=sim``), the driver, the analysis
+def grasp_stack(config_file: Path, object_name: str = '', sim_time: bool = True,
+                backend: str = 'sim') -> Iterator[Grasper]:
+    """The stand-in (started by the driver, ``backend:=sim``, or as the emulated Dynamixel
+    bus with ``backend='dynamixel'``), the driver, the analysis
     server and the controller as separate processes with ``config_file``, the driver and the
     controller given ``object:=object_name``, every node ``use_sim_time:=sim_time`` (as the
     scripts start them on the stand-in); a :class:`Grasper` once joint states and the object
@@ -177,7 +178,7 @@ def grasp_stack(config_file: Path, object_name: str = '', sim_time: bool = True
     selected = ['-p', f'object:={object_name}'] if object_name else []
     clock = ['-p', f'use_sim_time:={str(sim_time).lower()}']
     with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
-                       '--ros-args', '-p', 'backend:=sim', *selected, *clock],
+                       '--ros-args', '-p', f'backend:={backend}', *selected, *clock],
                       env=env) as driver, \
             node_process([installed_executable('dam_analysis', 'check_lift_server'),
                           '--ros-args', *clock], env=env) as analysis, \

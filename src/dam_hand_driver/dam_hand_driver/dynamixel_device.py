@@ -308,9 +308,10 @@ class DynamixelDevice(HandDevice):
     def _read_state(self) -> JointSample | None:
         sdk = self._sdk
         result = self._reader.txRxPacket()
-        if result != sdk.COMM_SUCCESS:
-            return self._read_failed(f'sync read: {self._ph.getTxRxResult(result)}')
         missing = self._complete(self._reader, STATE_LENGTH)
+        if result != sdk.COMM_SUCCESS:
+            return self._read_failed(f'sync read: {missing or "failed"} '
+                                     f'({self._ph.getTxRxResult(result)})')
         if missing is not None:
             return self._read_failed(f'sync read: {missing}')
         raw = np.zeros((self.n, 4), dtype=np.int64)

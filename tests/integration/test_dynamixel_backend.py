@@ -1,0 +1,175 @@
+"""The Dynamixel backend end to end: the driver (``backend:=dynamixel``) speaks Protocol 2.0
+through the real ``dynamixel-sdk`` to the emulated bus (the PyBullet stand-in as nine servos on
+a pseudo-terminal), over DDS with real processes.
+
+1. Grasps: the default pair lifts and the too-soft pair does not, as the UDP stand-in's
+   lockstep trial of the same pair says (``grasp_testing.lockstep_reference``), beside two
+   CPU-burning processes (simulated time: load may slow a grasp, never change it).
+2. Faults, on the bus in real time: a servo that stops answering, CRC errors, a hardware
+   error: no /joint_states while the bus fails, ERROR after ``device.state_timeout_s`` or at
+   the hardware error, ``/diagnostics`` naming the servo, and ``~/reset`` bringing the hand
+   back (rebooting the servo in an overload error).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from grasp_testing import config_with_free_ports, grasp_stack, lockstep_reference
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from std_srvs.srv import Trigger
+
+from ros_testing import RosClient, cpu_burners, installed_executable, node_process
+
+pytestmark = [pytest.mark.integration]
+
+DELTA_THETA_P = math.radians(10.0)
+LIFT_M = 0.005
+
+
+@pytest.fixture(scope='module')
+def config_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return config_with_free_ports(tmp_path_factory.mktemp('dynamixel'))
+
+
+def test_grasps_through_the_sdk_end_as_the_udp_standin_says(config_file: Path) -> None:
+    expected = {k: lockstep_reference(config_file, k, DELTA_THETA_P)[0] for k in (10.0, 0.5)}
+    assert expected == {10.0: 'SUCCESS', 0.5: 'FAILURE'}
+    with grasp_stack(config_file, backend='dynamixel') as grasper, cpu_burners(2):
+        for k_theta in (10.0, 0.5):
+            z0 = grasper.z()
+            result = grasper.result(grasper.send(k_theta, DELTA_THETA_P), timeout=240.0)
+            grasper.client.spin_until(lambda: False, 0.3)  # the newest ground truth
+            rise = grasper.z() - z0
+            assert result.result.outcome_name == expected[k_theta], result.result.message
+            if expected[k_theta] == 'SUCCESS':
+                assert rise > LIFT_M, f'k_theta {k_theta}: rise {rise * 1e3:.2f} mm'
+            else:
+                assert rise < LIFT_M, f'k_theta {k_theta}: rise {rise * 1e3:.2f} mm'
+            grasper.reset_world()
+        log = grasper.driver.output()
+        assert 'Dynamixel bus on /dev/pts/' in log, log[-3000:]
+
+
+# -------------------------------------------------------------------------------------------
+# Faults
+
+
+class _Bus:
+    """A client of the driver (diagnostics, joint states, ~/reset) and of the stand-in's fault
+    parameters."""
+
+    def __init__(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import JointState
+
+        self.client = RosClient()
+        self.diag: dict[str, str] = {}
+        self.joint_states = 0
+        node = self.client.node
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
+        node.create_subscription(JointState, '/joint_states', self._on_js, 50)
+
+    def _on_diag(self, msg) -> None:
+        for status in msg.status:
+            if status.name.startswith('dam_hand_driver'):
+                self.diag = {kv.key: kv.value for kv in status.values}
+                self.diag['message'] = status.message
+
+    def _on_js(self, msg) -> None:
+        self.joint_states += 1
+
+    def state(self) -> str:
+        return self.diag.get('state', '')
+
+    def wait_state(self, state: str, timeout: float) -> bool:
+        self.diag = {}
+        return self.client.spin_until(lambda: self.state() == state, timeout)
+
+    def set_fault(self, name: str, values: list[int] | float) -> SetParameters.Response:
+        if isinstance(values, float):
+            value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=values)
+        else:
+            value = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
+                                   integer_array_value=values)
+        request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
+        return self.client.call(SetParameters, '/hand_driver_sim/set_parameters', request)
+
+    def reset(self) -> Trigger.Response:
+        return self.client.call(Trigger, '/hand_driver/reset', Trigger.Request(), timeout=30.0)
+
+
+@pytest.fixture(scope='module')
+def bus(config_file: Path) -> Iterator[tuple[_Bus, object]]:
+    env = {'DAM_CONFIG': str(config_file)}
+    with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
+                       '--ros-args', '-p', 'backend:=dynamixel'], env=env) as driver:
+        client = _Bus()
+        try:
+            assert client.wait_state('ACTIVE', 30.0), driver.output()
+            yield client, driver
+        finally:
+            client.client.close()
+
+
+def _no_joint_states_while_in_error(client: _Bus) -> None:
+    before = client.joint_states
+    client.client.spin_until(lambda: False, 0.5)
+    assert client.joint_states == before, 'joint states published in ERROR'
+
+
+def test_a_silent_servo_is_an_error_after_the_state_timeout_named(bus) -> None:
+    client, driver = bus
+    assert client.set_fault('fault_silent_ids', [3]).results[0].successful
+    assert client.wait_state('ERROR', 5.0), driver.output()[-3000:]
+    assert 'no state frame' in client.diag['message'] or 'no state' in client.diag['message']
+    assert 'ID 3 (finger1_position_joint)' in client.diag['bus_last_read_failure']
+    assert int(client.diag['bus_read_failures']) > 0
+    _no_joint_states_while_in_error(client)
+    failed = client.reset()
+    assert not failed.success, failed.message
+    assert client.set_fault('fault_silent_ids', []).results[0].successful
+    reset = client.reset()
+    assert reset.success, reset.message
+    assert client.wait_state('ACTIVE', 5.0)
+
+
+def test_crc_errors_publish_nothing_and_end_in_error(bus) -> None:
+    client, driver = bus
+    assert client.set_fault('fault_crc_error_ids', [2]).results[0].successful
+    assert client.wait_state('ERROR', 5.0), driver.output()[-3000:]
+    assert int(client.diag['bus_read_failures']) > 0
+    _no_joint_states_while_in_error(client)
+    assert client.set_fault('fault_crc_error_ids', []).results[0].successful
+    assert client.reset().success
+    assert client.wait_state('ACTIVE', 5.0)
+
+
+def test_an_overload_is_an_error_named_and_reset_reboots_the_servo(bus) -> None:
+    client, driver = bus
+    assert client.set_fault('fault_hardware_error', [6, 1 << 5]).results[0].successful
+    assert client.wait_state('ERROR', 5.0), driver.output()[-3000:]
+    message = client.diag['message']
+    assert 'ID 6 (finger2_position_joint)' in message and 'overload' in message, message
+    assert client.diag['hardware_error_id6'].startswith('32 (overload'), client.diag
+    _no_joint_states_while_in_error(client)
+    reset = client.reset()
+    assert reset.success, reset.message
+    assert 'rebooted servo ID 6 (finger2_position_joint) (overload error)' in reset.message
+    assert client.wait_state('ACTIVE', 5.0)
+    assert client.diag['hardware_error_id6'] == '0'
+    assert client.diag['torque_enabled'] == 'True'
+
+
+def test_bad_fault_parameters_are_refused_with_the_reason(bus) -> None:
+    client, _driver = bus
+    bad = client.set_fault('fault_silent_ids', [42]).results[0]
+    assert not bad.successful and 'no servo with ID [42]' in bad.reason
+    odd = client.set_fault('fault_hardware_error', [6]).results[0]
+    assert not odd.successful and 'pairs' in odd.reason
+    assert client.wait_state('ACTIVE', 5.0)
+
