@@ -165,6 +165,16 @@ def test_hand_driver_and_its_standin_stop_cleanly_at_any_moment(tmp_path: Path) 
     assert sum('RUNNING ON THE SIMULATOR' in t.output for t in trials) >= 10
 
 
+def test_hand_driver_on_the_dynamixel_bus_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
+    """backend dynamixel: the driver, the emulated bus it starts and the SDK's port, with
+    torque switched off on the way out."""
+    exe = str(installed_executable('dam_hand_driver', 'hand_driver'))
+    trials = _storm(lambda _t: [exe, '--ros-args', '-p', 'backend:=dynamixel'], tmp_path, 3.5,
+                    'hand_driver_dynamixel', with_config=True)
+    _assert_all_clean(trials)
+    assert sum('Dynamixel bus on' in t.output for t in trials) >= 5
+
+
 @pytest.fixture(scope='module')
 def plant_and_analysis() -> Iterator[RosClient]:
     with ExitStack() as es:
