@@ -12,6 +12,7 @@ emulator's own Python work, not the wire, bounds both numbers.
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import time
@@ -72,6 +73,7 @@ def run(args) -> dict:
     bare_s, cycle_s = np.array(bare), np.array(cycle)
     rate = 1.0 / float(np.median(cycle_s))
     return {
+        'load_average_1min': round(os.getloadavg()[0], 2),
         'cycles': n,
         'failed_reads': failures,
         'bare_sync_read_p50_ms': round(float(np.median(bare_s)) * 1e3, 3),

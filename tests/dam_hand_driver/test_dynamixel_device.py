@@ -145,6 +145,18 @@ def standin(cfg: DamConfig) -> Iterator[object]:
     sys.setswitchinterval(before)
 
 
+def _eventually(predicate, timeout_s: float = 2.0) -> bool:
+    """A sync write has no answer: the bus thread takes it a moment later."""
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True
+
+
 def _field(bus, j: int, name: str) -> int:
     with bus.lock:
         return int(bus.servos[j].get(name))
@@ -227,3 +239,37 @@ def test_a_port_that_does_not_exist_is_named(cfg: DamConfig) -> None:
 
     with pytest.raises(HandDriverError, match="cannot open the Dynamixel port '/nonexistent/tty"):
         DynamixelDevice(cfg, '/nonexistent/ttyUSB9')
+
+
+def test_failed_reads_leave_the_compliant_joints_limp_not_pushing(cfg: DamConfig,
+                                                                  standin) -> None:
+    """A host law without state must not keep its last current: after three failed reads
+    the current servos get zero current, the position servos keep their goal."""
+    from dam_hand_driver.dynamixel_device import LIMP_AFTER_FAILED_READS, DynamixelDevice
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        sample = device.receive(1.0)
+        device.arm(sample)
+        n = len(cfg.dynamixel.servos)
+        modes = np.array([T, H, H] * 3)
+        setpoints = np.where(modes == T, 0.3, 0.0)
+        device.send(sample, modes, setpoints, np.zeros(n), np.zeros(n))
+        compliant = [j for j, s in enumerate(cfg.dynamixel.servos) if s.role == 'compliant']
+        assert _eventually(lambda: all(_field(standin, j, 'goal_current') != 0
+                                       for j in compliant))
+        goals = [_field(standin, j, 'goal_position') for j in range(n)]
+        standin.silent_ids = [cfg.dynamixel.servos[4].servo_id]
+        for _ in range(LIMP_AFTER_FAILED_READS):
+            assert device.receive(1.0) is None
+        assert 'ID 5 (finger2_locked_joint)' in device.last_failure
+        assert _eventually(lambda: all(_field(standin, j, 'goal_current') == 0
+                                       for j in compliant))
+        assert [_field(standin, j, 'goal_position') for j in range(n)] == goals
+        standin.silent_ids = []
+        assert device.receive(1.0) is not None
+    finally:
+        device.close()
+    # Closing switched torque off and cleared the watchdog: no servo is left tripped.
+    assert all(_field(standin, j, 'torque_enable') == 0 for j in range(9))
+    assert all(_field(standin, j, 'bus_watchdog') == 0 for j in range(9))

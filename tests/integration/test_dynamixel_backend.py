@@ -91,7 +91,9 @@ class _Bus:
         return self.client.spin_until(lambda: self.state() == state, timeout)
 
     def set_fault(self, name: str, values: list[int] | float) -> SetParameters.Response:
-        if isinstance(values, float):
+        if isinstance(values, list) and not values:  # as `ros2 param set NODE NAME "[]"`
+            value = ParameterValue(type=ParameterType.PARAMETER_BOOL_ARRAY, bool_array_value=[])
+        elif isinstance(values, float):
             value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=values)
         else:
             value = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
@@ -126,7 +128,8 @@ def test_a_silent_servo_is_an_error_after_the_state_timeout_named(bus) -> None:
     client, driver = bus
     assert client.set_fault('fault_silent_ids', [3]).results[0].successful
     assert client.wait_state('ERROR', 5.0), driver.output()[-3000:]
-    assert 'no state frame' in client.diag['message'] or 'no state' in client.diag['message']
+    assert 'no state frame' in client.diag['message'], client.diag['message']
+    assert 'ID 3 (finger1_position_joint)' in client.diag['message'], client.diag['message']
     assert 'ID 3 (finger1_position_joint)' in client.diag['bus_last_read_failure']
     assert int(client.diag['bus_read_failures']) > 0
     _no_joint_states_while_in_error(client)
@@ -169,6 +172,11 @@ def test_bad_fault_parameters_are_refused_with_the_reason(bus) -> None:
     client, _driver = bus
     bad = client.set_fault('fault_silent_ids', [42]).results[0]
     assert not bad.successful and 'no servo with ID [42]' in bad.reason
+    request = SetParameters.Request(parameters=[Parameter(
+        name='fault_silent_ids', value=ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                                      string_value='3'))])
+    text = client.client.call(SetParameters, '/hand_driver_sim/set_parameters', request)
+    assert not text.results[0].successful and 'list of servo IDs' in text.results[0].reason
     odd = client.set_fault('fault_hardware_error', [6]).results[0]
     assert not odd.successful and 'pairs' in odd.reason
     assert client.wait_state('ACTIVE', 5.0)

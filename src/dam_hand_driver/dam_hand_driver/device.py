@@ -68,6 +68,8 @@ class HandDevice(abc.ABC):
     last_sample_time: float | None = None
     #: Samples returned so far (the achieved rate in ``/diagnostics`` comes from it).
     samples_received: int = 0
+    #: Reads that failed or came back incomplete or garbled (a WARN while they grow).
+    read_failures: int = 0
 
     @abc.abstractmethod
     def receive(self, timeout_s: float) -> JointSample | None:
@@ -115,6 +117,12 @@ class HandDevice(abc.ABC):
 
     def restart_sequence(self) -> None:  # noqa: B027 - optional for a backend
         """Forget the device's sequence numbers (it may have restarted)."""
+
+    @property
+    def last_failure(self) -> str:
+        """What went wrong with the newest failed read, naming the part (empty: nothing):
+        the driver adds it to an ERROR for silence."""
+        return ''
 
     @abc.abstractmethod
     def diagnostics(self) -> dict[str, str]:

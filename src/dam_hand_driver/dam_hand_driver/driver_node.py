@@ -83,6 +83,7 @@ import math
 import os
 import signal
 import subprocess
+import tempfile
 import threading
 import time
 from collections import deque
@@ -116,9 +117,11 @@ from dam_common.realtime import (
 )
 from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.device import HandDevice, JointSample
+from dam_hand_driver.dynamixel_device import DynamixelDevice
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.protocol import JointMode
 from dam_hand_driver.slew import CommandSlew
+from dam_hand_driver.udp_device import UdpDevice
 from dam_hand_driver.urdf import hand_urdf
 from dam_interfaces.msg import HandCommand
 
@@ -328,6 +331,7 @@ class HandDriverNode(Node):
         self._published_last: tuple[int, int] = (0, 0)
         self._latencies_s: deque[float] = deque(maxlen=2000)
         self._diag_prev = (time.monotonic(), 0, 0, 0)
+        self._failures_prev = 0
         #: Header stamp [ns] of the joint state the newest /hand/command answers (its own
         #: stamp), and the condition the device-link thread waits on for it.
         self._command_ref_ns: int | None = None
@@ -377,8 +381,6 @@ class HandDriverNode(Node):
         if self.backend == 'dynamixel':
             self._select_dynamixel()
             return
-        from dam_hand_driver.udp_device import UdpDevice
-
         self.device = UdpDevice(self.config)
         dev = self.config.device
         addr = f'{dev.host}:{dev.command_port} (states to port {dev.state_port})'
@@ -405,8 +407,6 @@ class HandDriverNode(Node):
 
     def _select_dynamixel(self) -> None:
         """Open the Dynamixel bus: the configured port, or the emulated bus started here."""
-        from dam_hand_driver.dynamixel_device import DynamixelDevice
-
         port = self._port
         if not port:
             port = self._start_standin('no Dynamixel port configured (dynamixel.port, port)',
@@ -447,8 +447,6 @@ class HandDriverNode(Node):
         cmd += ['-p', f'object:={self.config.object.name}']
         port_file = ''
         if bus == 'dynamixel':
-            import tempfile
-
             fd, port_file = tempfile.mkstemp(prefix='dam_dynamixel_port_')
             os.close(fd)
             os.unlink(port_file)  # the stand-in writes it when the bus is open
@@ -545,7 +543,7 @@ class HandDriverNode(Node):
         assert self.device is not None
         try:
             self.device.arm(sample)
-        except HandDriverError as exc:
+        except Exception as exc:  # noqa: BLE001 - a port that went away raises anything
             self._enter_error(f'the device could not be switched on: {exc}')
             return
         with self._lock:
@@ -600,7 +598,9 @@ class HandDriverNode(Node):
             return None
         what = ('sim.stall_timeout_s, wall time: the simulated clock stands still'
                 if self._sim_time else 'device.state_timeout_s')
-        return f'no state frame for {now - last:.3f} s ({what}, {self._silence_timeout_s} s)'
+        detail = self.device.last_failure
+        return (f'no state frame for {now - last:.3f} s ({what}, {self._silence_timeout_s} s)'
+                + (f'; last read: {detail}' if detail else ''))
 
     def _loop(self) -> None:
         self._schedule_link_thread()
@@ -652,8 +652,9 @@ class HandDriverNode(Node):
         try:
             self._send_command(sample)
         except Exception as exc:  # noqa: BLE001 - the loop must survive any bug
-            self.get_logger().error(f'command not sent: {exc!r}',
-                                    throttle_duration_sec=_LOG_THROTTLE_S)
+            if self._running:  # (stopping: the stand-in may have closed the port first)
+                self.get_logger().error(f'command not sent: {exc!r}',
+                                        throttle_duration_sec=_LOG_THROTTLE_S)
         self._latencies_s.append(time.monotonic() - received)
 
     def _publish_or_stop(self, sample: JointSample) -> bool:
@@ -758,7 +759,10 @@ class HandDriverNode(Node):
         except Exception as exc:  # noqa: BLE001 - the node stays up whatever the device does
             done = f'recovery failed: {exc}'
         if done:
-            self.get_logger().info(f'~/reset: {done}')
+            if 'does not answer' in done or 'keeps' in done or 'failed' in done:
+                self.get_logger().warning(f'~/reset: {done}')
+            else:
+                self.get_logger().info(f'~/reset: {done}')
         with self._lock:
             self.state = DriverState.WAITING
         wait_s = max(0.5, 5.0 * self.state_timeout_s)
@@ -795,6 +799,8 @@ class HandDriverNode(Node):
         # on simulated time (at most 1.0; lower when a period's work does not fit in a period).
         rtf = (device_ns - device_ns0) * 1e-9 / dt if device_ns0 and device_ns else math.nan
         self._diag_prev = (now, received, published, device_ns)
+        failures = device.read_failures if device is not None else 0
+        failures0, self._failures_prev = self._failures_prev, failures
         tripped = bool(sample is not None and sample.watchdog_tripped)
         simulated = bool(sample is not None and sample.simulated)
         lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
@@ -809,10 +815,14 @@ class HandDriverNode(Node):
         elif state is DriverState.WAITING:
             status.level = DiagnosticStatus.ERROR
             status.message = 'waiting for the device'
-        elif (state_rate < 0.8 / self.period_s and not self._sim_time) or tripped:
+        elif (state_rate < 0.8 / self.period_s and not self._sim_time) or tripped \
+                or failures > failures0:
             status.level = DiagnosticStatus.WARN
-            status.message = ('device watchdog tripped' if tripped else
-                              f'state rate {state_rate:.0f} Hz below target')
+            status.message = (
+                'device watchdog tripped' if tripped else
+                f'{failures - failures0} failed reads in {dt:.1f} s (last: '
+                f'{device.last_failure if device is not None else ""})'
+                if failures > failures0 else f'state rate {state_rate:.0f} Hz below target')
         else:
             status.level = DiagnosticStatus.OK
             status.message = 'ACTIVE' + (' (simulator)' if simulated else '')

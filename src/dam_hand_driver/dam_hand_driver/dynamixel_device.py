@@ -37,6 +37,13 @@ from dam_hand_driver.dynamixel_goals import (
 from dam_hand_driver.errors import HandDriverError
 from dam_hand_driver.protocol import JointMode
 
+try:  # imported here, not at start-up: a stop request may come at any moment of that
+    import dynamixel_sdk as sdk
+    _SDK_IMPORT_ERROR = ''
+except ImportError as _exc:  # the driver still serves the UDP link without it
+    sdk = None
+    _SDK_IMPORT_ERROR = str(_exc)
+
 # Control table addresses (X series, shared by the supported models).
 ADDR_MODEL_NUMBER = 0
 ADDR_RETURN_DELAY_TIME = 9
@@ -63,8 +70,12 @@ HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
                        5: 'overload error'}
 #: The errors a reboot clears and ``~/reset`` reboots for.
 REBOOT_BITS = (1 << 2) | (1 << 5)
+#: Tries of one start-up, arming or recovery transaction before a servo counts as silent.
+_TRANSACTION_TRIES = 3
 _KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
+#: Failed reads in a row after which the compliant (current) joints get zero current.
+LIMP_AFTER_FAILED_READS = 3
 _REBOOT_WAIT_S = 2.0
 
 
@@ -122,11 +133,9 @@ class DynamixelDevice(HandDevice):
         if not port:
             raise HandDriverError('backend dynamixel: no serial port (dynamixel.port is empty '
                                   'and no port parameter was given)')
-        try:
-            import dynamixel_sdk as sdk
-        except ImportError as exc:
+        if sdk is None:
             raise HandDriverError(f'backend dynamixel needs the dynamixel-sdk package '
-                                  f'(pip install dynamixel-sdk): {exc}') from exc
+                                  f'(pip install dynamixel-sdk): {_SDK_IMPORT_ERROR}')
         self._sdk = sdk
         self.config = dxl
         self.port = port
@@ -178,6 +187,9 @@ class DynamixelDevice(HandDevice):
         self._time_ms = 0
         self._modes = np.full(self.n, int(JointMode.HOLD), dtype=np.int64)
         self._hold = np.zeros(self.n)
+        self._failed_in_a_row = 0
+        self._goal_current = np.zeros(self.n, dtype=np.int64)
+        self._goal_position = np.zeros(self.n, dtype=np.int64)
         self._closed = False
 
     # ---------------------------------------------------------------------------------------
@@ -195,7 +207,11 @@ class DynamixelDevice(HandDevice):
         """Ping every servo; refuse the bus naming each one missing or of another model."""
         problems = []
         for j, servo in enumerate(self.config.servos):
-            model, result, _error = self._ph.ping(self._port, servo.servo_id)
+            for _ in range(_TRANSACTION_TRIES):
+                model, result, _error = self._ph.ping(self._port, servo.servo_id)
+                if result == self._sdk.COMM_SUCCESS:
+                    break
+                self._clear_input()
             if result != self._sdk.COMM_SUCCESS:
                 problems.append(f'servo {self.table.label(j)} does not answer the ping '
                                 f'({self._ph.getTxRxResult(result)})')
@@ -211,13 +227,22 @@ class DynamixelDevice(HandDevice):
     def _write(self, j: int, address: int, size: int, value: int, what: str) -> None:
         write = {1: self._ph.write1ByteTxRx, 2: self._ph.write2ByteTxRx,
                  4: self._ph.write4ByteTxRx}[size]
-        result, error = write(self._port, self.table.ids[j], address, int(value) % (1 << 8 * size))
+        raw = int(value) % (1 << 8 * size)
+        for _ in range(_TRANSACTION_TRIES):  # a late answer is not yet a missing servo
+            result, error = write(self._port, self.table.ids[j], address, raw)
+            if result == self._sdk.COMM_SUCCESS:
+                break
+            self._clear_input()
         self._result(f'writing {what}', j, result, error)
 
     def _read(self, j: int, address: int, size: int, what: str) -> int:
         read = {1: self._ph.read1ByteTxRx, 2: self._ph.read2ByteTxRx,
                 4: self._ph.read4ByteTxRx}[size]
-        value, result, error = read(self._port, self.table.ids[j], address)
+        for _ in range(_TRANSACTION_TRIES):
+            value, result, error = read(self._port, self.table.ids[j], address)
+            if result == self._sdk.COMM_SUCCESS:
+                break
+            self._clear_input()
         self._result(f'reading {what}', j, result, error)
         return int(value)
 
@@ -294,8 +319,22 @@ class DynamixelDevice(HandDevice):
         packets by ID only)."""
         self.read_failures += 1
         self.last_read_failure = why
+        self._failed_in_a_row += 1
         time.sleep(min(0.005, self.period_s))
-        self._port.clearPort()
+        self._clear_input()
+        if self._failed_in_a_row == LIMP_AFTER_FAILED_READS and self.armed:
+            # The host law has no state to run on: a current held from an old state would
+            # keep pushing (to a joint limit). The compliant joints go limp, the position
+            # servos keep their goal; the next good read takes over again.
+            current = np.where(self.table.current_mode, 0, self._goal_current)
+            self._write_goals(current, self._goal_position)
+
+    def _clear_input(self) -> None:
+        """Drop what the port has received (nothing if the port is gone: the reads say so)."""
+        try:
+            self._port.clearPort()
+        except Exception:  # noqa: BLE001 - termios.error, OSError: a port that went away
+            pass
 
     def _complete(self, reader: object, length: int) -> str | None:
         """Which servo's data is missing or of the wrong length (``None``: all there)."""
@@ -326,6 +365,7 @@ class DynamixelDevice(HandDevice):
         if self._cycles % HARDWARE_ERROR_EVERY in (1, 2):
             self._read_hardware_errors()
         self._seq = (self._seq + 1) % 2**32
+        self._failed_in_a_row = 0
         self.samples_received += 1
         self.last_sample_time = time.monotonic()
         return JointSample(seq=self._seq, stamp_ns=self._stamp_ns(int(raw[0, 0])), position=q,
@@ -349,7 +389,7 @@ class DynamixelDevice(HandDevice):
     def _read_hardware_errors(self) -> None:
         result = self._error_reader.txRxPacket()
         if result != self._sdk.COMM_SUCCESS or self._complete(self._error_reader, 1):
-            self._port.clearPort()  # the state reads count the bus's failures
+            self._clear_input()  # the state reads count the bus's failures
             return
         bits = np.array([self._error_reader.getData(servo_id, ADDR_HARDWARE_ERROR, 1)
                          for servo_id in self.table.ids], dtype=np.int64)
@@ -358,7 +398,7 @@ class DynamixelDevice(HandDevice):
             # matches by ID only). Dropped, like the rest of the input.
             self.read_failures += 1
             self.last_read_failure = 'hardware error read: a stale answer'
-            self._port.clearPort()
+            self._clear_input()
             return
         # A bit counts when two reads in a row show it.
         self.hardware_errors = bits & self._error_candidates
@@ -383,6 +423,7 @@ class DynamixelDevice(HandDevice):
             self._write_goals(current, position)
 
     def _write_goals(self, current: np.ndarray, position: np.ndarray) -> None:
+        self._goal_current, self._goal_position = current, position
         self._writer.clearParam()
         for j, servo_id in enumerate(self.table.ids):
             block = (int(current[j]) % (1 << 16)).to_bytes(2, 'little') + bytes(12) \
@@ -426,16 +467,19 @@ class DynamixelDevice(HandDevice):
                 self._write(j, ADDR_TORQUE_ENABLE, 1, 1, 'Torque Enable')
                 self._write(j, ADDR_BUS_WATCHDOG, 1, self.config.bus_watchdog_raw,
                             'Bus Watchdog')
+            self._goal_current, self._goal_position = current, position
             self.armed = True
 
     def disarm(self) -> None:
-        """Torque off on every servo that answers (best effort: the Bus Watchdog stops the
-        others once the host stops writing)."""
+        """Torque off and Bus Watchdog cleared on every servo that answers (best effort: the
+        Bus Watchdog stops the others once the host stops writing)."""
         with self._lock:
             if self._closed:
                 return
             for servo_id in self.table.ids:
                 self._ph.write1ByteTxRx(self._port, servo_id, ADDR_TORQUE_ENABLE, 0)
+                # A host that stops now would trip the watchdog of a servo already off.
+                self._ph.write1ByteTxRx(self._port, servo_id, ADDR_BUS_WATCHDOG, 0)
             self.armed = False
 
     def recover(self) -> str:
@@ -511,3 +555,7 @@ class DynamixelDevice(HandDevice):
     @property
     def closed(self) -> bool:
         return self._closed
+
+    @property
+    def last_failure(self) -> str:
+        return self.last_read_failure

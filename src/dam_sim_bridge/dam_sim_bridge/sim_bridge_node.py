@@ -232,10 +232,14 @@ class SimBridgeNode(Node):
             f'{self._config.source}')
 
     def _declare_fault_parameters(self) -> None:
+        # Dynamic typing: `ros2 param set NODE fault_silent_ids "[]"` sends an empty list as a
+        # bool array; any empty list clears a fault, and the callback checks the rest.
         descriptor = ParameterDescriptor(
-            description='bus dynamixel: servo IDs (fault injection)')
+            description='bus dynamixel: servo IDs (fault injection); [] clears',
+            additional_constraints='a list of the configured servo IDs',
+            dynamic_typing=True)
         for name in ('fault_crc_error_ids', 'fault_silent_ids', 'fault_hardware_error'):
-            self.declare_parameter(name, Parameter.Type.INTEGER_ARRAY, descriptor)
+            self.declare_parameter(name, None, descriptor)
         self.declare_parameter('fault_status_delay_s', 0.0, ParameterDescriptor(
             description='bus dynamixel: every status packet this late [s]',
             floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0,
@@ -253,7 +257,15 @@ class SimBridgeNode(Node):
         if param.name == 'fault_status_delay_s':
             device.status_delay_s = float(value)
             return None
-        values = [int(v) for v in (value or [])]
+        array_types = (Parameter.Type.BOOL_ARRAY, Parameter.Type.BYTE_ARRAY,
+                       Parameter.Type.INTEGER_ARRAY, Parameter.Type.DOUBLE_ARRAY,
+                       Parameter.Type.STRING_ARRAY)
+        if value is None or (param.type_ in array_types and len(value) == 0):
+            values: list[int] = []  # any empty list (ros2 param set sends [] as bools)
+        elif param.type_ == Parameter.Type.INTEGER_ARRAY:
+            values = [int(v) for v in value]
+        else:
+            return f'{param.name} takes a list of servo IDs (integers), got {value!r}'
         if param.name == 'fault_hardware_error':
             if len(values) % 2:
                 return f'fault_hardware_error takes pairs [id, bits, ...], got {values!r}'
@@ -288,7 +300,7 @@ class SimBridgeNode(Node):
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         for param in params:
-            if param.name in _FAULT_PARAMETERS and param.value is not None:
+            if param.name in _FAULT_PARAMETERS:
                 if not hasattr(self, '_device'):  # at start-up: taken once the bus runs
                     continue
                 why = self._fault_error(param)
