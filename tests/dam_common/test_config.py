@@ -324,3 +324,20 @@ def test_a_key_written_twice_in_a_list_item_is_refused(tmp_path: Path) -> None:
                        match=rf'^hand\.fingers\[1\]\.stiffness_ratio: duplicate key, first on '
                              rf'line {first}, again on line {first + 1} '):
         load_config(path)
+
+
+@pytest.mark.parametrize('entry, match', [
+    ({'shape': 'regular_polygon', 'sides': 3, 'across_flats_m': 1e-9},
+     r'object\.library\.odd: .*thin at its thinnest.*at least 1 mm'),
+    ({'shape': 'ellipse', 'semi_axes_m': [0.01, 1e-9]}, r'object\.library\.odd: .*thin'),
+    ({'shape': 'circle', 'radius_m': 10.0},
+     r'object\.library\.odd: .*20000 mm across its widest.*finger bases \(58 mm apart\)'),
+])
+def test_objects_the_hand_and_the_standin_cannot_take_are_refused(entry, match) -> None:
+    from dam_common.config import config_from_dict
+
+    data = yaml.safe_load((REPO_ROOT / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data = copy.deepcopy(data)
+    data['object']['library']['odd'] = dict(entry, length_m=0.1, mass_kg=0.04)
+    with pytest.raises(ConfigError, match=match):
+        config_from_dict(data)

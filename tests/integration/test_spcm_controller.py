@@ -635,3 +635,41 @@ def test_a_controller_stopped_mid_grasp_aborts_the_goal_for_its_client(signum: s
 
 if __name__ == '__main__':  # pragma: no cover
     sys.exit(pytest.main([__file__, '-v']))
+
+
+def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path) -> None:
+    """An object the loader takes but the analysis cannot answer for (a 2 mm rod: the distal
+    links reach no first contact with it) gets no grasp, whatever ``require_lift_guarantee``
+    says: ABORTED at once with the analysis' reason, and the hand is never commanded."""
+    import yaml
+    from action_msgs.msg import GoalStatus
+
+    from dam_interfaces.action import DamGrasp
+
+    data = yaml.safe_load((REPO / 'config' / 'dam.yaml').read_text(encoding='utf-8'))
+    data['object']['library']['thin_rod'] = {'shape': 'circle', 'radius_m': 0.002,
+                                             'length_m': 0.1, 'mass_kg': 0.005}
+    config = tmp_path / 'dam.yaml'
+    config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    env = {'DAM_CONFIG': str(config),
+           'PYTHONPATH': os.pathsep.join([str(REPO / 'src' / 'dam_analysis'),
+                                          os.environ.get('PYTHONPATH', '')])}
+    with ExitStack() as es:
+        es.enter_context(node_process(fixture_command('spcm_plant_node.py'), env))
+        es.enter_context(node_process(
+            [str(installed_executable('dam_analysis', 'check_lift_server'))], env))
+        ctl = es.enter_context(node_process(controller_command('-p', 'object:=thin_rod'), env))
+        h = Harness()
+        es.callback(h.close)
+        h.wait_ready()
+        n_commands = len(h.commands)
+        handle = h.send([INSIDE[0]], [INSIDE[1]])
+        assert handle.accepted
+        res = h.result(handle, 30.0)
+        assert res.status == GoalStatus.STATUS_ABORTED, res.result.message
+        assert res.result.outcome == DamGrasp.Result.OUTCOME_ABORTED
+        assert 'cannot answer' in res.result.message, res.result.message
+        assert 'cannot be analysed with this hand' in res.result.message, res.result.message
+        assert 'APPROACH' not in h.phases()
+        assert len(h.commands) == n_commands, 'the hand was commanded'
+        assert ctl.alive(), ctl.output()

@@ -355,7 +355,7 @@ def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
     root.only_keys({'format_version', 'hand', 'object', 'contact', 'task', 'controller',
                     'classification', 'sim', 'device', 'dynamixel'})
     hand = _hand(root.child('hand'))
-    objects, default = _objects(root.child('object'))
+    objects, default = _objects(root.child('object'), hand)
     obj = objects[default]
     contact = _contact(root.child('contact'))
     task = _task(root.child('task'), hand)
@@ -443,7 +443,7 @@ _SHAPE_KEYS = {
 }
 
 
-def _objects(node: _Node) -> tuple[dict[str, ObjectConfig], str]:
+def _objects(node: _Node, hand: HandConfig) -> tuple[dict[str, ObjectConfig], str]:
     """The object library and the name of the default object."""
     node.only_keys({'default', 'position_m', 'axis', 'library'})
     axis_node = node.child('axis')
@@ -465,12 +465,45 @@ def _objects(node: _Node) -> tuple[dict[str, ObjectConfig], str]:
         entry = library_node.child(str(key))
         name = _Node(key, entry.path, entry.source).identifier()
         objects[name] = _library_object(entry, name, axis, place)
+        _check_fits_hand(entry, objects[name], hand)
     default_node = node.child('default')
     default = default_node.string()
     if default not in objects:
         raise default_node.error(f'{default!r} is not in object.library '
                                  f'(known: {", ".join(sorted(objects))})')
     return objects, default
+
+
+#: The thinnest section the stand-in simulates [m]: PyBullet's contact margins are of the
+#: order of a millimetre, so a thinner object would pass through the fingers or the table.
+MIN_OBJECT_WIDTH_M = 1e-3
+
+
+def _check_fits_hand(node: _Node, obj: ObjectConfig, hand: HandConfig) -> None:
+    """Refuse an object that neither the stand-in nor the hand can take: thinner than
+    :data:`MIN_OBJECT_WIDTH_M` in any direction, or too large to lie between the opposing
+    finger bases (the fingers would stand inside it).
+
+    Raises
+    ------
+    ConfigError
+        Naming the library entry, its size and the bound.
+    """
+    section = obj.section
+    width = section.min_width
+    if width < MIN_OBJECT_WIDTH_M:
+        raise node.error(
+            f'{section.describe()} is {width * 1e3:.3g} mm thin at its thinnest: the '
+            f'stand-in simulates objects of at least {MIN_OBJECT_WIDTH_M * 1e3:g} mm, and the '
+            f'joints cannot tell a thinner one from none (a unit missing? lengths are in m)')
+    bases = np.array([f.base_position_m for f in hand.fingers])
+    across = bases @ obj.section_x
+    gap = float(across.max() - across.min())
+    if 2.0 * section.circumradius >= gap:
+        raise node.error(
+            f'{section.describe()} is {2.0 * section.circumradius * 1e3:.6g} mm across its '
+            f'widest: it does not fit between the opposing finger bases ({gap * 1e3:.4g} mm '
+            f'apart), the fingers would stand inside it (a unit missing? lengths are in m)')
 
 
 def _library_object(node: _Node, name: str, axis: np.ndarray, place: np.ndarray

@@ -812,6 +812,13 @@ class SpcmControllerNode(Node):
             feedback.csm_lift = bool(answer.csm_lift)
             feedback.csm_margin = float(answer.csm_margin)
         goal_handle.publish_feedback(feedback)
+        if answer is not None and not answer.ok:
+            # The analysis cannot answer for this object or pair (e.g. the fingers reach no
+            # first contact with it): whatever the hand did then would be claimed without
+            # evidence. Refused, with or without require_lift_guarantee.
+            return self._finish(goal_handle, 'abort', aborted,
+                                f'/check_lift cannot answer for this grasp, so it is not '
+                                f'attempted: {answer.message}', t0)
         if self._flags['require_lift_guarantee']:
             if answer is None:
                 return self._finish(goal_handle, 'abort', aborted,
@@ -888,6 +895,15 @@ class SpcmControllerNode(Node):
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
                                 f'grasp done, classification failed: {exc!r}', t0)
         outcome = _OUTCOME[c.outcome]
+        lift_height = self._classifier.lift_height
+        if outcome == DamGrasp.Result.OUTCOME_SUCCESS and not c.lift_m >= lift_height:
+            # A SUCCESS is a measured rise (classification already requires one: this keeps
+            # it so whatever the classifier becomes).
+            outcome = DamGrasp.Result.OUTCOME_FAILURE
+            return self._finish(goal_handle, 'abort', outcome,
+                                f'grasp done, no rise measured ({c.lift_m * 1e3:.3g} mm, '
+                                f'{lift_height * 1e3:g} mm needed): {c.reason}', t0,
+                                object_rise=c.lift_m)
         # Goal status SUCCEEDED means the outcome SUCCESS, for every generic action client.
         status = 'succeed' if outcome == DamGrasp.Result.OUTCOME_SUCCESS else 'abort'
         return self._finish(goal_handle, status, outcome, f'grasp done: {c.reason}', t0,
