@@ -149,3 +149,38 @@ def test_one_subscription_per_thread(context) -> None:
         intake.create_subscription(Int64, _topic(), lambda _m: None, 1)
     intake.stop()
     owner.destroy_node()
+
+
+def test_an_incompatible_publisher_is_logged_once_per_topic_and_counted(context,
+                                                                        capfd) -> None:
+    """A best-effort publisher to the intake's reliable subscription delivers nothing: the
+    side node's QoS events are served by the intake thread, so this is said (once) and
+    counted, as an executor would say it for an ordinary subscription."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    owner = rclpy.create_node('intake_qos_owner', context=context)
+    talker = rclpy.create_node('intake_qos_talker', context=context)
+    topic = _topic()
+    got: list[int] = []
+    intake = SubscriptionThread(owner, 'qos')
+    intake.create_subscription(Int64, topic, lambda m: got.append(m.data),
+                               QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    intake.start()
+    try:
+        best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+        first = talker.create_publisher(Int64, topic, best_effort)
+        assert _wait(lambda: intake.incompatible_qos >= 1), 'no incompatible-QoS event'
+        second = talker.create_publisher(Int64, topic, best_effort)
+        assert _wait(lambda: intake.incompatible_qos >= 2), intake.incompatible_qos
+        for i in range(20):
+            first.publish(Int64(data=i))
+            second.publish(Int64(data=i))
+        time.sleep(0.3)
+        assert got == []  # nothing arrives: the log line is all the user is told
+    finally:
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()
+    err = capfd.readouterr().err
+    assert err.count('offers a QoS incompatible with this subscription') == 1, err
+    assert 'RELIABILITY' in err and topic in err, err

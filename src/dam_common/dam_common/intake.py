@@ -21,6 +21,12 @@ would give it the owner's name).
 
 The callback runs concurrently with the owner's executor: it must protect the state it shares
 (the controller takes its lock).
+
+No executor spins the side node, so the subscription's QoS events are served by the same
+thread: a publisher that offers an incompatible QoS (a best-effort publisher to a reliable
+subscription: none of its messages would arrive) or an incompatible type is logged once per
+topic by the owner's logger, naming the policy, and counted (:attr:`incompatible_qos`,
+:attr:`incompatible_type`), which the owners report in ``/diagnostics``.
 """
 
 from __future__ import annotations
@@ -29,10 +35,11 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.guard_condition import GuardCondition
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, qos_policy_name_from_kind
 from rclpy.subscription import Subscription
 
 #: The longest one wait lasts before the thread looks at the context again [s].
@@ -70,6 +77,12 @@ class SubscriptionThread:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f'{suffix}_thread', daemon=True)
         self._stopped = False
+        self._topic = ''
+        #: Publishers seen offering an incompatible QoS (the middleware's total count).
+        self.incompatible_qos = 0
+        #: Publishers seen offering an incompatible type.
+        self.incompatible_type = 0
+        self._warned: set[str] = set()
 
     @property
     def node_name(self) -> str:
@@ -90,8 +103,12 @@ class SubscriptionThread:
         if self._subscription is not None:
             raise RuntimeError('a SubscriptionThread serves one subscription')
         resolved = self._owner.resolve_topic_name(topic)
+        self._topic = resolved
+        events = SubscriptionEventCallbacks(incompatible_qos=self._on_incompatible_qos,
+                                            incompatible_type=self._on_incompatible_type,
+                                            use_default_callbacks=False)
         self._subscription = self._node.create_subscription(
-            msg_type, resolved, lambda _msg: None, qos)
+            msg_type, resolved, lambda _msg: None, qos, event_callbacks=events)
         self._callback = callback
         return self._subscription
 
@@ -104,7 +121,8 @@ class SubscriptionThread:
         if sub is None or callback is None:
             return
         context = self._owner.context
-        wait_set = _rclpy.WaitSet(1, 1, 0, 0, 0, 0, context.handle)
+        events = list(sub.event_handlers)
+        wait_set = _rclpy.WaitSet(1, 1, 0, 0, 0, len(events), context.handle)
         timeout_ns = int(POLL_S * 1e9)
         try:
             while not self._stop.is_set() and context.ok():
@@ -112,7 +130,14 @@ class SubscriptionThread:
                     wait_set.clear_entities()
                     wait_set.add_subscription(sub.handle)
                     wait_set.add_guard_condition(self._wake.handle)
+                    for handler in events:
+                        handler.add_to_wait_set(wait_set)
                     wait_set.wait(timeout_ns)
+                    for handler in events:
+                        if handler.is_ready(wait_set):
+                            event = handler.take_data()
+                            if event is not None:
+                                self._call(handler.callback, event)
                     while not self._stop.is_set():
                         taken = sub.handle.take_message(sub.msg_type, sub.raw)
                         if taken is None:
@@ -121,6 +146,24 @@ class SubscriptionThread:
         except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
             if context.ok() and not self._stop.is_set():
                 self._owner.get_logger().error(f'{self.node_name} stopped: {exc!r}')
+
+    def _on_incompatible_qos(self, event: Any) -> None:
+        self.incompatible_qos = int(event.total_count)
+        if 'qos' not in self._warned:
+            self._warned.add('qos')
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            self._owner.get_logger().warning(
+                f'a publisher on {self._topic} offers a QoS incompatible with this '
+                f'subscription ({policy}): none of its messages arrive (counted in '
+                f'/diagnostics; logged once per topic)')
+
+    def _on_incompatible_type(self, event: Any) -> None:
+        self.incompatible_type = int(event.total_count)
+        if 'type' not in self._warned:
+            self._warned.add('type')
+            self._owner.get_logger().warning(
+                f'a publisher on {self._topic} offers another message type: none of its '
+                f'messages arrive (counted in /diagnostics; logged once per topic)')
 
     def _call(self, callback: Callable[[Any], None], msg: Any) -> None:
         try:

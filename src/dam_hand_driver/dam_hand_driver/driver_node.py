@@ -850,6 +850,9 @@ class HandDriverNode(Node):
             'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',
             'device_watchdog_tripped': str(tripped),
             'hand_commands_rejected': str(self._rejected_commands),
+            # Publishers of /hand/command whose QoS or type cannot match (logged once).
+            'hand_command_incompatible_qos': str(self._intake.incompatible_qos),
+            'hand_command_incompatible_type': str(self._intake.incompatible_type),
             'last_command_rejection': self._last_reject_reason,
         }
         if device is not None:

@@ -521,7 +521,12 @@ class SpcmControllerNode(Node):
         status.message = f'phase {_phase_name(self._seq.phase)}'
         status.values = [KeyValue(key='hand_commands_published', value=str(count)),
                          KeyValue(key='hand_commands_last_stamp_ns', value=str(stamp_ns)),
-                         KeyValue(key='use_sim_time', value=str(self._sim_time))]
+                         KeyValue(key='use_sim_time', value=str(self._sim_time)),
+                         # Publishers of /joint_states whose QoS or type cannot match.
+                         KeyValue(key='joint_states_incompatible_qos',
+                                  value=str(self._intake.incompatible_qos)),
+                         KeyValue(key='joint_states_incompatible_type',
+                                  value=str(self._intake.incompatible_type))]
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status = [status]
