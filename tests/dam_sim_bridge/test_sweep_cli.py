@@ -378,3 +378,51 @@ def test_installed_command() -> None:
     code = ('import sys, dam_sim_bridge.sweep_cli, dam_sim_bridge.sweep_table; '
             'assert "rclpy" not in sys.modules, "the sweep imports rclpy"')
     subprocess.run([sys.executable, '-c', code], check=True, timeout=60, env=_env())
+
+
+def test_a_second_sweep_on_a_busy_directory_is_refused_naming_the_first(
+        reference: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two sweeps started on one directory: the second is refused at once (exit 1, not a
+    'bad arguments' 2), naming the first; the first finishes with the reference table, and
+    once it is done (or killed) the directory is free again."""
+    table = tmp_path / TABLE_FILE
+    first = subprocess.Popen(_sweep_command(tmp_path, '--workers', '1'), env=_env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120.0
+        while not table.is_file() and first.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert first.poll() is None, 'the first sweep ended before the second started'
+        assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 1
+        err = capsys.readouterr().err
+        assert f'is being written by another sweep (PID {first.pid} on ' in err, err
+        _out, first_err = first.communicate(timeout=300)
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    assert first.returncode == 0, first_err
+    assert table.read_text(encoding='utf-8') == reference  # no trial run twice or lost
+    # The first is gone: the same command now takes the directory (all done: nothing to run).
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
+    assert 'resuming: 8 done, 0 to run' in capsys.readouterr().out
+
+
+def test_a_killed_sweep_leaves_no_stale_lock(tmp_path: Path) -> None:
+    from dam_sim_bridge.sweep_lock import SweepLock, SweepLocked
+
+    holder = subprocess.Popen(
+        [sys.executable, '-c', 'import sys, time\n'
+         'from dam_sim_bridge.sweep_lock import SweepLock\n'
+         f'SweepLock({str(tmp_path)!r}).acquire(); print("locked", flush=True)\n'
+         'time.sleep(60)'], env=_env(), stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == 'locked'
+        with pytest.raises(SweepLocked, match=f'PID {holder.pid}'):
+            SweepLock(tmp_path).acquire()
+    finally:
+        holder.kill()
+        holder.wait()
+    lock = SweepLock(tmp_path)
+    lock.acquire()  # the kernel dropped the killed holder's lock
+    lock.release()

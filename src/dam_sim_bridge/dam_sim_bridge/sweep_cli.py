@@ -13,8 +13,11 @@ per core; ``--workers 1`` runs them in this process, without Dask) or on a Dask 
 (:mod:`dam_sim_bridge.sweep_table`). Ctrl-C (SIGINT) or SIGTERM stops it with the finished
 trials kept; the same command again runs only the missing ones.
 
-Exit status: 0 done; 1 some trials failed (their rows are missing: a rerun retries them) or the
-scheduler cannot be reached; 2 bad arguments; 130 interrupted.
+One sweep at a time writes a directory: a second one started on it is refused with a message
+naming the first (PID, host, start, command line; ``DIR/.sweep.lock``), exit status 1.
+
+Exit status: 0 done; 1 some trials failed (their rows are missing: a rerun retries them), the
+scheduler cannot be reached, or another sweep writes DIR; 2 bad arguments; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from dam_sim_bridge.sweep import (
     run_trial,
 )
 from dam_sim_bridge.sweep_axes import parse_axis
+from dam_sim_bridge.sweep_lock import SweepLocked
 from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, TrialTable
 
 PROG = 'sweep'
@@ -256,6 +260,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      'k_theta': args.k_theta,
                                      'delta_theta_p': args.delta_theta_p}})
         done = table.open()
+    except SweepLocked as exc:  # not a bad argument: the same command works later
+        if client is not None:
+            client.close()
+        return fail(str(exc), 1)
     except (SweepError, DamCommonError, OSError) as exc:
         if client is not None:
             client.close()
@@ -265,7 +273,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _run(args, sweep, config, table, done, client)
     finally:
         signal.signal(signal.SIGTERM, previous)
-        table.close()
+        table.release()
         if client is not None:
             client.close()
 

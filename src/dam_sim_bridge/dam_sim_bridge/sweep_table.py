@@ -36,6 +36,7 @@ from dam_sim_bridge.sweep import (
     input_columns,
     table_columns,
 )
+from dam_sim_bridge.sweep_lock import SweepLock
 
 #: The classes a row's ``outcome`` may hold; a row with another (an edited table) is run again.
 _OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')
@@ -140,6 +141,7 @@ class TrialTable:
         self.rows: dict[int, dict[str, str]] = {}
         self.dropped = 0
         self._handle: TextIO | None = None
+        self._lock = SweepLock(self.directory)
 
     @property
     def table_path(self) -> Path:
@@ -150,6 +152,9 @@ class TrialTable:
 
         Raises
         ------
+        SweepLocked
+            Another sweep writes the directory (named); the lock is held until
+            :meth:`release`.
         SweepError
             The directory holds a different sweep, a table without ``sweep.json``, or a table
             with other columns.
@@ -160,6 +165,14 @@ class TrialTable:
             raise SweepError(f'--out {str(self.directory)!r}: the directory it goes into, '
                              f'{str(self.directory.parent)!r}, does not exist')
         self.directory.mkdir(exist_ok=True)
+        self._lock.acquire()
+        try:
+            return self._open_locked()
+        except BaseException:
+            self._lock.release()
+            raise
+
+    def _open_locked(self) -> int:
         params = self.directory / PARAMS_FILE
         if params.exists():
             try:
@@ -233,6 +246,11 @@ class TrialTable:
         if self._handle is not None:
             self._handle.close()
             self._handle = None
+
+    def release(self) -> None:
+        """Close the file and let another sweep have the directory (idempotent)."""
+        self.close()
+        self._lock.release()
 
     @property
     def complete(self) -> bool:
