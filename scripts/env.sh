@@ -33,6 +33,9 @@ else
     esac
   fi
   unset _dam_index
+  # What a sourced Jazzy install sets, for the tools and code that ask (ros2 doctor, rosdep,
+  # launch files, scripts testing ROS_DISTRO).
+  export ROS_DISTRO=jazzy ROS_VERSION=2 ROS_PYTHON_VERSION=3
 fi
 if [ -f "$_dam_root/.venv/bin/activate" ]; then
   # shellcheck disable=SC1091

@@ -16,10 +16,12 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 #: Asks the ament index, as `ros2` tools do, and prints what it found as JSON.
 _ASK_INDEX = """
-import json
+import json, os
 from ament_index_python.packages import get_package_prefix, get_packages_with_prefixes
 packages = get_packages_with_prefixes()
 print(json.dumps({'packages': sorted(packages),
+                  'distro': [os.environ.get(k) for k in
+                             ('ROS_DISTRO', 'ROS_VERSION', 'ROS_PYTHON_VERSION')],
                   'sensor_msgs': get_package_prefix('sensor_msgs'),
                   'dam_common': get_package_prefix('dam_common')}))
 """
@@ -62,6 +64,8 @@ def test_env_sh_works_under_set_u_and_the_ament_index_lists_the_ros_packages() -
         assert ros_prefix == REPO_ROOT / '.venv'
     # the workspace overlay comes first
     assert Path(found['dam_common']) == REPO_ROOT / 'ros2_ws' / 'install' / 'dam_common'
+    # as a sourced Jazzy install (ros2 doctor's distribution check reads ROS_DISTRO)
+    assert found['distro'] == ['jazzy', '2', '3']
 
 
 def test_env_sh_leaves_set_u_off_when_the_caller_had_it_off() -> None:

@@ -117,6 +117,10 @@ def test_an_override_that_matches_no_parameter_is_warned_about(tmp_path: Path) -
     assert len(warnings) == 2, output
     assert any("'default_fiction_angle'" in w for w in warnings)
     assert any("'defualt_friction_angle'" in w for w in warnings)
+    # how to list them, with ros2cli and without it (the PyPI wheels have none)
+    assert all('`ros2 param list /check_lift_server`' in w and
+               '/check_lift_server/list_parameters (rcl_interfaces/srv/ListParameters)' in w
+               for w in warnings), warnings
 
 
 @pytest.mark.parametrize(('package', 'executable', 'status'), NODES)

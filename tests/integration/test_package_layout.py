@@ -144,3 +144,77 @@ def test_node_plumbing_comes_from_dam_common_only() -> None:
         sources = '\n'.join(p.read_text() for p in (SRC / package / package).glob('*.py'))
         forbidden = 'dam_analysis' if package == 'dam_hand_driver' else 'dam_hand_driver'
         assert f'from {forbidden}' not in sources and f'import {forbidden}' not in sources
+
+
+#: Top-level Python modules of other projects -> their rosdep key. A key of the ROS rosdep
+#: database where one exists (rosdistro's rosdep/base.yaml and python.yaml); otherwise the
+#: ``-pip`` key convention (pip package name). ROS packages are their own key.
+ROSDEP_KEYS = {
+    'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
+    'matplotlib': 'python3-matplotlib', 'tqdm': 'python3-tqdm',
+    'pybullet': 'python3-pybullet-pip', 'pybullet_utils': 'python3-pybullet-pip',
+    'rosbags': 'python3-rosbags-pip', 'mcap': 'python3-mcap-pip',
+    'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip',
+    'dynamixel_sdk': 'python3-dynamixel-sdk-pip', 'serial': 'python3-serial',
+}
+#: ROS packages imported as Python modules (their name is their key).
+ROS_MODULES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'sensor_msgs', 'std_srvs',
+               'diagnostic_msgs', 'geometry_msgs', 'builtin_interfaces', 'rosgraph_msgs',
+               'action_msgs', 'ament_index_python'}
+
+
+def imported_modules(package: str) -> set[str]:
+    """Top-level names of every module the package's code imports (at any depth of the code),
+    without the standard library and ``__future__``."""
+    import sys
+
+    found: set[str] = set()
+    for path in (SRC / package / package).rglob('*.py'):
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            if isinstance(node, ast.Import):
+                found |= {alias.name.split('.')[0] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                found.add(node.module.split('.')[0])
+    return {m for m in found if m not in sys.stdlib_module_names and m != '__future__'}
+
+
+@pytest.mark.parametrize('package', PYTHON_PACKAGES)
+def test_every_import_is_declared_in_package_xml(package: str) -> None:
+    """`rosdep install --from-paths src` installs what the code imports: every module the
+    package imports is an exec dependency of its package.xml, by its rosdep key."""
+    root = ET.parse(SRC / package / 'package.xml').getroot()
+    declared = {e.text for e in root if e.tag in ('depend', 'exec_depend')}
+    missing = []
+    for module in sorted(imported_modules(package)):
+        if module == package:
+            continue
+        if module.startswith('dam_') or module in ROS_MODULES:
+            key = module
+        elif module in ROSDEP_KEYS:
+            key = ROSDEP_KEYS[module]
+        else:
+            missing.append(f'{module} (no rosdep key known: add it to ROSDEP_KEYS)')
+            continue
+        if key not in declared:
+            missing.append(f'{module} -> <exec_depend>{key}</exec_depend>')
+    assert not missing, f'{package}/package.xml lacks: {missing}'
+
+
+#: -pip keys the ROS rosdep database has (rosdistro rosdep/python.yaml).
+PIP_KEYS_IN_DATABASE = {'python3-pybullet-pip', 'python3-rosbags-pip'}
+
+
+def test_pip_keys_outside_the_database_are_defined_in_rosdep_yaml() -> None:
+    """Every -pip key a package.xml names resolves: the database has it, or the workspace's
+    rosdep.yaml (a source `rosdep update` takes) defines it with the pip package to install."""
+    import yaml
+
+    defined = yaml.safe_load((REPO_ROOT / 'rosdep.yaml').read_text(encoding='utf-8'))
+    used = {e.text for package in PYTHON_PACKAGES
+            for e in ET.parse(SRC / package / 'package.xml').getroot()
+            if e.tag.endswith('depend') and (e.text or '').endswith('-pip')}
+    assert used - PIP_KEYS_IN_DATABASE == set(defined), (used, sorted(defined))
+    for key, rules in defined.items():
+        pip_name = key[len('python3-'):-len('-pip')]
+        for platform in ('debian', 'ubuntu'):
+            assert rules[platform]['pip']['packages'] == [pip_name], (key, platform)

@@ -30,7 +30,7 @@ from rclpy.signals import SignalHandlerOptions
 from dam_common.collector import ScheduledCollector
 from dam_common.config import DamConfig
 from dam_common.errors import DamCommonError
-from dam_common.parameter_services import harden_parameter_services
+from dam_common.parameter_services import harden_parameter_services, list_parameters_hint
 from dam_common.shutdown import ShutdownRequest, StartupInterrupted, catch_signals
 from dam_common.sim_time import fix_use_sim_time
 
@@ -269,8 +269,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
             for override in unmatched_overrides(node):
                 node.get_logger().warning(
                     f'parameter override {override!r} matches no parameter of this node: '
-                    f'ignored (misspelled? `ros2 param list {node.get_fully_qualified_name()}` '
-                    'lists them)')
+                    f'ignored (misspelled? {list_parameters_hint(node)} lists them)')
         finally:
             shutdown.started()  # from here on a signal asks; it never interrupts
         if switch_interval_s is not None:

@@ -65,12 +65,22 @@ def _refused(reason: str) -> SetParametersResult:
     return SetParametersResult(successful=False, reason=reason)
 
 
+def list_parameters_hint(node: Node) -> str:
+    """How a user lists the node's parameters: ``ros2 param list`` where ros2cli is installed
+    (a system Jazzy), and the service it calls, which any ROS 2 client has (the PyPI wheels
+    ship no ros2cli)."""
+    name = node.get_fully_qualified_name()
+    return (f'`ros2 param list {name}`, or without ros2cli a call of the service '
+            f'{name}/list_parameters (rcl_interfaces/srv/ListParameters)')
+
+
 def _set(node: Node, parameters: list[Parameter]) -> SetParametersResult:
     """``node.set_parameters_atomically`` that answers any failure with a reason."""
     undeclared = [p.name for p in parameters if not node.has_parameter(p.name)]
     if undeclared:
         return _refused(f'no parameter {", ".join(map(repr, undeclared))} on '
-                        f'{node.get_fully_qualified_name()} (`ros2 param list` lists them)')
+                        f'{node.get_fully_qualified_name()} ({list_parameters_hint(node)} '
+                        f'lists them)')
     try:
         return node.set_parameters_atomically(parameters)
     except ParameterException as exc:  # read-only, wrong type, out of range
