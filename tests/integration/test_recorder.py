@@ -285,6 +285,44 @@ def test_losses_the_middleware_reports_are_logged_and_stored(tmp_path: Path) -> 
     assert recorded < count
 
 
+def test_an_incompatible_publisher_is_logged_once_and_counted(tmp_path: Path) -> None:
+    """A best-effort publisher joining a topic recorded as reliable delivers nothing to the
+    recording: said once per topic, however many such publishers join, and counted in the
+    bag's custom data (it used to lose all its messages without a word)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    bag = tmp_path / 'incompatible'
+    with node_process(fixture_command('recorder_publishers.py', '--count', '400',
+                                      '--rate', '100', '--wait-for', '/joint_states',
+                                      '--no-late')) as pub:
+        wait_for(pub, 'waiting')
+        with node_process([RECORDER, '-o', str(bag), '/joint_states']) as rec:
+            wait_for(pub, 'publishing')
+            client = RosClient()
+            try:
+                best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+                late = [client.node.create_publisher(JointState, '/joint_states', best_effort)
+                        for _ in range(2)]
+                for i in range(50):
+                    for p in late:
+                        p.publish(JointState(name=['late'], position=[float(i)]))
+                    client.spin_until(lambda: False, 0.02)
+                wait_for(rec, 'cannot take', timeout=10.0)
+                client.spin_until(lambda: False, 1.0)  # the second publisher's event
+            finally:
+                client.close()
+            wait_for(pub, 'done')
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+    assert log.count('a publisher joined offering a QoS this recording cannot take') == 1, log
+    assert 'RELIABILITY' in log
+    counted = json.loads(metadata(bag)['custom_data']['dam_recorder.incompatible_publishers'])
+    assert counted.get('/joint_states', 0) == 2, counted
+    records = read_with_rosbags(bag)['/joint_states']
+    assert all('late' not in (r.values or {}).get('name', []) for r in records)
+
+
 def test_record_sh_records_beside_a_session_until_stopped(tmp_path: Path) -> None:
     """scripts/record.sh: the default topics into $DAM_BAG_DIR/rosbag2_<time> until SIGINT."""
     import os

@@ -67,6 +67,7 @@ from rclpy.utilities import remove_ros_args
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
+from dam_common.echo import brief_repr
 from dam_common.node import run_node
 from dam_common.shutdown import SHUTDOWN
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
@@ -164,6 +165,9 @@ class _Recorded:
     trimmed: int = 0
     malformed: int = 0
     dropped: int = 0
+    #: Publishers that joined with a QoS the subscription cannot match (nothing of theirs is
+    #: recorded).
+    incompatible: int = 0
     #: Gaps in the publication sequence numbers count as dropped while the topic has one
     #: publisher (rclpy does not say which publisher sent a message).
     one_publisher: bool = False
@@ -361,7 +365,9 @@ class RecorderNode(Node):
         self._recorded[name] = recorded
         self._taker.subscribe(
             cls, name, qos, self._callback(recorded),
-            on_lost=lambda change, r=recorded: self._inbox.append(('lost', r, change)))
+            on_lost=lambda change, r=recorded: self._inbox.append(('lost', r, change)),
+            on_incompatible=lambda change, policy, r=recorded: self._on_incompatible(
+                r, change, policy))
         self.get_logger().info(
             f'recording {name} ({type_name}, {"reliable" if request.reliable else "best_effort"}'
             f', {"transient_local" if request.transient_local else "volatile"})')
@@ -454,7 +460,8 @@ class RecorderNode(Node):
         try:
             return recorded.facts(data)
         except Exception as exc:  # noqa: BLE001 - a message the recorder cannot read
-            self.get_logger().warning(f'{recorded.name}: cannot read the message: {exc!r}',
+            self.get_logger().warning(f'{recorded.name}: cannot read the message: '
+                                      f'{brief_repr(exc)}',
                                       throttle_duration_sec=5.0)
             return None
 
@@ -484,6 +491,19 @@ class RecorderNode(Node):
         self.get_logger().warning(f'{recorded.name}: the middleware reports {change} message(s) '
                                   f'lost ({recorded.lost} in all)')
 
+    def _on_incompatible(self, recorded: _Recorded, change: int, policy: str) -> None:
+        """The taker's thread: ``change`` more publishers of the topic offer a QoS its
+        subscription cannot match. Logged once per topic, counted in the bag's custom data
+        (``dam_recorder.incompatible_publishers``)."""
+        first = recorded.incompatible == 0
+        recorded.incompatible += change
+        if first:
+            self.get_logger().warning(
+                f'{recorded.name}: a publisher joined offering a QoS this recording cannot '
+                f'take ({policy}; the topic is recorded as its first publishers offered it): '
+                f'none of its messages are recorded (counted in the bag\'s custom data '
+                f'dam_recorder.incompatible_publishers; logged once per topic)')
+
     def _custom_data(self) -> dict[str, str]:
         def counts(attribute: str) -> str:
             return json.dumps({r.name: getattr(r, attribute) for r in self._recorded.values()
@@ -491,6 +511,7 @@ class RecorderNode(Node):
         return {'dam_recorder.lost_messages': counts('lost'),
                 'dam_recorder.paused_messages': counts('paused'),
                 'dam_recorder.trimmed_messages': counts('trimmed'),
+                'dam_recorder.incompatible_publishers': counts('incompatible'),
                 DROPPED_KEY: counts('dropped'), BACKLOG_KEY: self._backlog.json()}
 
     # -- services and timers -----------------------------------------------------------------

@@ -13,7 +13,10 @@ Losses the middleware reports (the ``message_lost`` event) are read by the same 
 :data:`LOST_POLL_S`. Its event handler cannot go to the owner's executor: the middleware marks
 it ready whenever data is queued, and the executor, which would not take the data, would spin.
 rclpy offers no public way to read an event outside a wait set, so the thread marks the handler
-ready itself (``EventHandler._ready_to_take_data``, rclpy 7) before it takes the status.
+ready itself (``EventHandler._ready_to_take_data``, rclpy 7) before it takes the status. The
+same thread reads the ``incompatible_qos`` event the same way: a publisher that joins with a
+QoS this subscription cannot match (a best-effort publisher to a topic recorded as reliable)
+delivers nothing, and the owner is told (``on_incompatible``) instead of losing it silently.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from typing import Any
 
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import QoSProfile, qos_policy_name_from_kind
 
 #: How often the middleware's count of lost messages is read [s].
 LOST_POLL_S = 0.5
@@ -63,34 +66,55 @@ class SerializedTaker:
                           start_parameter_services=False, enable_rosout=False)
         self._subscriptions: list[tuple[Any, OnMessage]] = []
         self._lost_handlers: list[tuple[Any, Callable[[int], None]]] = []
+        self._incompatible_handlers: list[tuple[Any, Callable[[int, str], None]]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name='serialized_taker', daemon=True)
         self._thread.start()
 
     def subscribe(self, msg_type: type, topic: str, qos: QoSProfile, on_message: OnMessage,
-                  on_lost: Callable[[int], None] | None = None) -> None:
+                  on_lost: Callable[[int], None] | None = None,
+                  on_incompatible: Callable[[int, str], None] | None = None) -> None:
         """Subscribe to ``topic``; ``on_message(data, info)`` runs in the taker's thread, and
-        so does ``on_lost(count)`` when the middleware reports ``count`` more messages lost."""
+        so does ``on_lost(count)`` when the middleware reports ``count`` more messages lost,
+        and ``on_incompatible(count, policy)`` when ``count`` more publishers offer a QoS this
+        subscription cannot match (``policy``: the last incompatible policy's name)."""
         subscription = self._node.create_subscription(
             msg_type, topic, lambda *_args: None, qos, raw=True,
-            event_callbacks=SubscriptionEventCallbacks(message_lost=lambda _status: None))
-        lost = [h for h in subscription.event_handlers
-                if 'MESSAGE_LOST' in str(getattr(h, 'event_type', ''))]
+            event_callbacks=SubscriptionEventCallbacks(
+                message_lost=lambda _status: None, incompatible_qos=lambda _status: None,
+                use_default_callbacks=False))
+
+        def handler(kind: str) -> Any:
+            found = [h for h in subscription.event_handlers
+                     if kind in str(getattr(h, 'event_type', ''))]
+            return found[0] if found and hasattr(found[0], '_ready_to_take_data') else None
+
+        lost, incompatible = handler('MESSAGE_LOST'), handler('INCOMPATIBLE_QOS')
         with self._lock:
             self._subscriptions.append((subscription, on_message))
-            if on_lost is not None and lost and hasattr(lost[0], '_ready_to_take_data'):
-                self._lost_handlers.append((lost[0], on_lost))
+            if on_lost is not None and lost is not None:
+                self._lost_handlers.append((lost, on_lost))
+            if on_incompatible is not None and incompatible is not None:
+                self._incompatible_handlers.append((incompatible, on_incompatible))
 
     def _read_losses(self) -> None:
         with self._lock:
             handlers = list(self._lost_handlers)
+            incompatible = list(self._incompatible_handlers)
         for handler, on_lost in handlers:
             handler._ready_to_take_data = True  # noqa: SLF001 - see the module's docstring
             status = handler.take_data()
             change = int(getattr(status, 'total_count_change', 0) or 0)
             if change > 0:
                 on_lost(change)
+        for handler, on_incompatible in incompatible:
+            handler._ready_to_take_data = True  # noqa: SLF001 - see the module's docstring
+            status = handler.take_data()
+            change = int(getattr(status, 'total_count_change', 0) or 0)
+            if change > 0:
+                policy = qos_policy_name_from_kind(status.last_policy_kind)
+                on_incompatible(change, policy)
 
     def _take_all(self, until_stopped: bool = True) -> int:
         with self._lock:
@@ -149,4 +173,5 @@ class SerializedTaker:
         self.stop()
         with self._lock:
             self._subscriptions, self._lost_handlers = [], []
+            self._incompatible_handlers = []
         self._node.destroy_node()
