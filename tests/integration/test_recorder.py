@@ -323,6 +323,39 @@ def test_an_incompatible_publisher_is_logged_once_and_counted(tmp_path: Path) ->
     assert all('late' not in (r.values or {}).get('name', []) for r in records)
 
 
+def test_a_topic_that_appears_late_counts_what_it_sent_before_it_was_found(
+        tmp_path: Path) -> None:
+    """A volatile topic that appears while recording: what its publisher sent before the
+    recorder found it and subscribed is not in the bag, and the bag says exactly how much
+    (the messages recorded and the count add up to what was published)."""
+    from rosbags.highlevel import AnyReader
+    from std_msgs.msg import Int64
+
+    bag = tmp_path / 'late'
+    sent = 300
+    with node_process([RECORDER, '-o', str(bag), '/dam_test_late']) as rec:
+        wait_for(rec, f'recording {bag}')
+        client = RosClient()
+        try:
+            client.spin_until(lambda: False, 1.5)  # the recording has begun without it
+            pub = client.node.create_publisher(Int64, '/dam_test_late', 1000)
+            for i in range(1, sent + 1):  # at once, 200 Hz: nobody listens yet
+                pub.publish(Int64(data=i))
+                client.spin_until(lambda: False, 0.005)
+            client.spin_until(lambda: False, 1.0)
+        finally:
+            client.close()
+        assert stop(rec, signal.SIGINT) == 0, rec.output()
+        log = rec.output()
+    missed = json.loads(metadata(bag)['custom_data']['dam_recorder.before_subscription_messages'])
+    with AnyReader([bag]) as reader:
+        values = [reader.deserialize(raw, conn.msgtype).data
+                  for conn, _t, raw in reader.messages()]
+    assert missed.get('/dam_test_late', 0) > 0, (missed, log[-1500:])
+    assert values == list(range(missed['/dam_test_late'] + 1, sent + 1)), values[:5]
+    assert 'appeared while recording' in log and 'not in the bag' in log
+
+
 def test_record_sh_records_beside_a_session_until_stopped(tmp_path: Path) -> None:
     """scripts/record.sh: the default topics into $DAM_BAG_DIR/rosbag2_<time> until SIGINT."""
     import os

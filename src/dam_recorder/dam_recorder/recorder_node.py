@@ -69,6 +69,7 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.echo import brief_repr
 from dam_common.node import run_node
+from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
 from dam_recorder.bag_reading import DROPPED_KEY
@@ -168,6 +169,10 @@ class _Recorded:
     #: Publishers that joined with a QoS the subscription cannot match (nothing of theirs is
     #: recorded).
     incompatible: int = 0
+    #: The topic appeared after the recording began (found by a later discovery).
+    appeared_late: bool = False
+    #: Messages its publisher sent before the recorder had subscribed (a late topic).
+    before_subscription: int = 0
     #: Gaps in the publication sequence numbers count as dropped while the topic has one
     #: publisher (rclpy does not say which publisher sent a message).
     one_publisher: bool = False
@@ -195,6 +200,10 @@ class RecorderNode(Node):
         #: touches the writer (sqlite3 connections belong to the thread that opened them).
         self._inbox: deque[tuple[Any, ...]] = deque()
         self._recorded: dict[str, _Recorded] = {}
+        #: Topics found by the first discovery: the recording begins with them. A topic found
+        #: later appeared while recording, and what it published before it was found is
+        #: missing (counted: :meth:`_follow_sequence`).
+        self._found_first: set[str] | None = None
         self._refused: set[str] = set()
         self._paused = False
         self._last_message = time.monotonic()
@@ -243,9 +252,10 @@ class RecorderNode(Node):
         self._taker = SerializedTaker(
             self, TAKE_PERIOD_S,
             on_swept=None if self._episodes is None else lambda t: inbox.append(('swept', t)))
-        self.create_service(Trigger, '~/pause', self._on_pause)
-        self.create_service(Trigger, '~/resume', self._on_resume)
-        self.create_service(Trigger, '~/split', self._on_split)
+        self.create_service(Trigger, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, '~/resume', self._on_resume, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, '~/split', self._on_split, qos_profile=SERVICE_QOS)
+        self._discovery_period = float(p['discovery_period'])
         create_steady_timer(self, p['discovery_period'], self._discover)
         create_steady_timer(self, p['chunk_interval'], self._flush)
         create_steady_timer(self, WRITE_PERIOD_S, self._write_inbox)
@@ -315,7 +325,11 @@ class RecorderNode(Node):
             if one and not recorded.one_publisher:
                 recorded.last_sequence = None  # a new sequence to follow
             recorded.one_publisher = one
-        for name, types in self.get_topic_names_and_types():
+        topics = self.get_topic_names_and_types()
+        first = self._found_first is None
+        if first:
+            self._found_first = {name for name, _types in topics}
+        for name, types in topics:
             if name in self._recorded or name in self._refused \
                     or not self._selection.selects(name):
                 continue
@@ -329,6 +343,8 @@ class RecorderNode(Node):
                 self._record(name, types[0], offers)
             except DamRecorderError as exc:
                 self._refuse(name, str(exc))
+                continue
+            self._recorded[name].appeared_late = name not in (self._found_first or set())
 
     def _refuse(self, name: str, reason: str) -> None:
         self._refused.add(name)
@@ -471,6 +487,17 @@ class RecorderNode(Node):
             return
         last, recorded.last_sequence = recorded.last_sequence, sequence
         if last is None:
+            if recorded.appeared_late and recorded.one_publisher and sequence > 1 \
+                    and not recorded.before_subscription:
+                # Published before the topic was found and subscribed to: a volatile topic
+                # keeps nothing for a late subscriber.
+                recorded.before_subscription = sequence - 1
+                self.get_logger().warning(
+                    f'{recorded.name} appeared while recording: its publisher sent '
+                    f'{sequence - 1} message(s) before the recorder had found and subscribed '
+                    f'to it (discovery_period {self._discovery_period:g} s); they are not in '
+                    f'the bag (counted in its custom data '
+                    f'dam_recorder.before_subscription_messages)')
             return
         if sequence <= last:  # another publisher's: gaps mean nothing until the graph says one
             recorded.one_publisher = False
@@ -512,6 +539,7 @@ class RecorderNode(Node):
                 'dam_recorder.paused_messages': counts('paused'),
                 'dam_recorder.trimmed_messages': counts('trimmed'),
                 'dam_recorder.incompatible_publishers': counts('incompatible'),
+                'dam_recorder.before_subscription_messages': counts('before_subscription'),
                 DROPPED_KEY: counts('dropped'), BACKLOG_KEY: self._backlog.json()}
 
     # -- services and timers -----------------------------------------------------------------
