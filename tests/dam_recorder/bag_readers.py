@@ -9,14 +9,17 @@ Both return ``{topic: [Record(timestamp_ns, values, data), ...]}`` in file and t
 ``values`` being plain Python (dicts, lists, numbers, strings) so that the two can be compared
 with each other and with ``recorder_samples``, and ``data`` the serialized message as stored.
 
-``mcap-ros2-support`` (0.6) refuses to build a decoder for a type whose name has an underscore
-(its copy of rosidl's name rule ``^[A-Z][A-Za-z0-9]*$``), which every type derived from an
-action has (``DamGrasp_FeedbackMessage``); for those the reader hands it the schema with the
-underscores taken out of the derived names (:func:`without_underscores`): the same layout.
+``mcap-ros2-support`` (0.6) refuses the *name* of a schema whose type name has an underscore
+other than before ``_Goal``, ``_Result``, ``_Feedback``, ``_Request``, ``_Response`` (its copy of
+rosidl's rule ``^[A-Z][A-Za-z0-9]*$``): ``DamGrasp_FeedbackMessage``, ``Name_Event``, whatever
+the definition says. For those the reader hands it the schema under the name without its
+underscores (:func:`decodable_schema`) and the stored definition *unchanged*, so that every
+section and every field type of the definition is read as stored.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 from pathlib import Path
@@ -35,9 +38,9 @@ class Record(NamedTuple):
 
 def plain(value: Any) -> Any:
     """A decoded message (either reader's) as plain Python values."""
-    if hasattr(value, '__dataclass_fields__'):
-        return {k: plain(getattr(value, k)) for k in value.__dataclass_fields__
-                if not k.startswith('_')}
+    if dataclasses.is_dataclass(value):  # fields only: no constants (upper case names)
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if not f.name.startswith('_') and not f.name.isupper()}
     if hasattr(value, '__slots__') and not isinstance(value, (str, bytes)):
         return {k: plain(getattr(value, k)) for k in value.__slots__}
     if hasattr(value, 'tolist'):
@@ -56,38 +59,48 @@ def bag_files(bag_dir: str | os.PathLike[str]) -> list[Path]:
 
 
 def read_with_rosbags(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
-    """Every message of the bag, deserialized by ``rosbags``."""
+    """Every message of the bag, deserialized by ``rosbags`` (which must find the type hash of
+    each stored definition equal to the one ``metadata.yaml`` stores, as its ``AnyReader``
+    requires)."""
+    from rosbags.highlevel import AnyReader
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.EMPTY)
     out: dict[str, list[Record]] = {}
     with Reader(bag_dir) as reader:
+        defined = any(c.msgdef.data for c in reader.connections)
+    if defined:  # (without any definition AnyReader wants a type store of its own)
+        with AnyReader([Path(bag_dir)]):
+            pass  # it refuses a bag whose definitions and hashes disagree
+    with Reader(bag_dir) as reader:
         for connection in reader.connections:
             store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
             out.setdefault(connection.topic, [])
+        for connection in reader.connections:  # what rosbags' AnyReader checks
+            if connection.digest and connection.msgdef.data:
+                assert store.hash_rihs01(connection.msgtype) == connection.digest, \
+                    f'{connection.topic}: the definition stored gives another type hash'
         for connection, timestamp, data in reader.messages():
             message = store.deserialize_cdr(data, connection.msgtype)
             out[connection.topic].append(Record(timestamp, plain(message), bytes(data)))
     return out
 
 
-_DERIVED_TYPE = re.compile(r'\b([a-z][a-z0-9_]*)/(?:action|srv)/([A-Za-z][A-Za-z0-9_]*)')
+_MESSAGE_NAME = re.compile(r'^[A-Z][A-Za-z0-9]*(_Goal|_Result|_Feedback|_Request|_Response)?$')
 
 
-def without_underscores(schema: Any) -> Any:
-    """``schema`` with every type derived from an action or a service renamed without its
-    underscores (``pkg/action/Name_Feedback`` -> ``pkg/NameFeedback``), in its name and its
-    definition: ``mcap-ros2-support`` refuses such names, the layout is unchanged."""
+def decodable_schema(schema: Any) -> Any:
+    """``schema`` as ``mcap-ros2-support`` accepts it: under a name without underscores when its
+    name rule refuses the type's name (``pkg/action/Name_FeedbackMessage`` ->
+    ``pkg/action/NameFeedbackMessage``); the definition is never touched."""
     from mcap.records import Schema
 
-    def rename(match: re.Match[str]) -> str:
-        return f'{match.group(1)}/{match.group(2).replace("_", "")}'
-    name = _DERIVED_TYPE.sub(rename, schema.name)
-    package, _, type_name = name.partition('/')
-    data = _DERIVED_TYPE.sub(rename, schema.data.decode())
-    return Schema(id=schema.id, name=f'{package}/msg/{type_name}', encoding=schema.encoding,
-                  data=data.encode())
+    package, _, name = schema.name.rpartition('/')
+    if _MESSAGE_NAME.match(name):
+        return schema
+    return Schema(id=schema.id, name=f'{package}/{name.replace("_", "")}',
+                  encoding=schema.encoding, data=schema.data)
 
 
 def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
@@ -104,10 +117,8 @@ def read_with_mcap(bag_dir: str | os.PathLike[str]) -> dict[str, list[Record]]:
             reader = make_reader(stream)
             for schema, channel, message in reader.iter_messages(log_time_order=True):
                 if schema.id not in decoders:
-                    if _DERIVED_TYPE.search(schema.name + schema.data.decode()):
-                        schema = without_underscores(schema)
                     decoders[schema.id] = factory.decoder_for(channel.message_encoding,
-                                                              schema)
+                                                              decodable_schema(schema))
                 decoder = decoders[schema.id]
                 values = plain(decoder(message.data)) if decoder is not None else None
                 out.setdefault(channel.topic, []).append(

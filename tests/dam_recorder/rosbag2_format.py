@@ -6,6 +6,7 @@ every key it reads with ``node[key].as<T>()`` must be there with a value of that
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -112,3 +113,46 @@ def metadata_problems(bag_dir: str | Path) -> list[str]:
     if sum(t['message_count'] for t in topics) != total:
         problems.append('the topics\' message counts do not add up to message_count')
     return problems
+
+
+# -- message definitions ---------------------------------------------------------------------
+
+#: rosbag2's (Jazzy, ``local_message_definition_source.cpp``) rules, restated: a field's type is
+#: the first word of a line followed by whitespace (arrays' brackets aside), a type without
+#: ``/`` belongs to the package of the file, primitives have no section.
+_FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')
+_PRIMITIVES = {'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
+               'int32', 'uint32', 'int64', 'uint64', 'string'}
+
+
+def rosbag2_msg_definition(type_name: str, prefixes: list[str]) -> str:
+    """The definition Jazzy's rosbag2 writes for the message type ``type_name``
+    (``pkg/msg/Name``), from the installed ``.msg`` files: the type's text, then per
+    dependency (sorted names, depth first, each once) a newline, 80 ``=``, ``MSG: pkg/Name``
+    and its text."""
+    def text_of(name: str) -> str:
+        package, _, short = name.partition('/')
+        short = short.removeprefix('msg/')
+        for prefix in prefixes:
+            path = Path(prefix) / 'share' / package / 'msg' / f'{short}.msg'
+            if path.is_file():
+                return path.read_text(encoding='utf-8')
+        raise FileNotFoundError(f'no {package}/msg/{short}.msg under the prefixes')
+
+    seen: set[str] = set()
+
+    def append(name: str) -> str:
+        text = text_of(name)
+        package = name.split('/')[0]
+        deps = set()
+        for match in _FIELD_TYPE.finditer(text):
+            dep = match.group(1)
+            if dep not in _PRIMITIVES:
+                deps.add(dep if '/' in dep else f'{package}/{dep}')
+        for dep in sorted(deps):
+            if dep not in seen:
+                seen.add(dep)
+                text += '\n' + '=' * 80 + f'\nMSG: {dep}\n' + append(dep)
+        return text
+
+    return append(type_name)

@@ -6,18 +6,21 @@ to, with the RIHS01 type hash of each. For an action ``action/Name.json`` also d
 types derived from it (``Name_FeedbackMessage``, ``Name_Goal``, ...), which have no file of their
 own. This module reads those files (pure data, no rclpy) and gives
 
-- the message definition in the ``ros2msg`` form a bag stores (the fields of the type, then
-  one ``MSG: pkg/Name`` section per referenced type, separated by a line of 80 ``=``), which
-  MCAP readers such as ``mcap-ros2-support`` decode with and ``rosbags`` parses;
+- the message definition in the ``ros2msg`` form rosbag2 stores (the installed ``.msg`` text
+  of the type, then one ``MSG: pkg/Name`` section per referenced type, separated by a line of
+  80 ``=``: :mod:`dam_recorder.msg_definition`), which MCAP readers such as
+  ``mcap-ros2-support`` decode with and ``rosbags`` parses;
 - the type hash (``RIHS01_...``) that ``metadata.yaml`` stores as ``type_description_hash``;
 - the field layout that :mod:`dam_recorder.cdr_end` walks.
 
-Constants and comments are not part of a type description; the definition text has the fields
-only, which is all a decoder needs.
+Constants and comments are not part of a type description: :func:`load_message_type` reads
+them from the installed ``.msg`` files, for the definition text. A type without one (derived
+from an action or a service) is described by its fields.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
@@ -26,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from dam_recorder.errors import TypeDescriptionError
+from dam_recorder.msg_definition import field_type_name, header_name, ros2msg_definition
 
 #: ``type_description_interfaces/FieldType`` ids of the single (non-array) field types.
 NESTED = 1
@@ -48,8 +52,6 @@ UNSUPPORTED_NAMES: dict[int, str] = {
 ARRAY_OFFSET = 48
 BOUNDED_SEQUENCE_OFFSET = 96
 UNBOUNDED_SEQUENCE_OFFSET = 144
-#: The line that separates the sections of a ``ros2msg`` definition.
-SECTION_SEPARATOR = '=' * 80
 
 
 @dataclass(frozen=True)
@@ -94,20 +96,30 @@ class MessageType:
         RIHS01 hash of the type (``'RIHS01_<64 hex digits>'``).
     fields : dict[str, tuple[Field, ...]]
         Fields of this type and of each type it refers to (directly or not), by full name.
+    texts : dict[str, str]
+        The installed ``.msg`` text of those types that have one, by full name (the
+        definition takes it as it is; types without one are described by their fields).
     """
 
     name: str
     type_hash: str
     fields: Mapping[str, tuple[Field, ...]]
+    texts: Mapping[str, str] = dataclasses.field(default_factory=dict)
 
     def definition(self) -> str:
-        """The ``ros2msg`` message definition: this type's fields, then one section per
-        referenced type (depth first, in order of first use)."""
-        sections = [_fields_text(self.fields[self.name])]
-        for name in self.referenced_types():
-            sections.append(f'{SECTION_SEPARATOR}\nMSG: {short_name(name)}\n'
-                            f'{_fields_text(self.fields[name])}')
-        return '\n'.join(sections) + '\n'
+        """The ``ros2msg`` message definition, as rosbag2 writes it into a bag: this type's
+        text, then one section per referenced type (:mod:`dam_recorder.msg_definition`)."""
+        nested = {name: [f.type.nested_type_name for f in fields if f.type.nested_type_name]
+                  for name, fields in self.fields.items()}
+        return ros2msg_definition(self.name, nested, self.own_text)
+
+    def own_text(self, type_name: str) -> str:
+        """The text of ``type_name`` alone: its ``.msg`` file, else its fields (one line each,
+        nested types spelt as :func:`~dam_recorder.msg_definition.field_type_name` says)."""
+        if type_name in self.texts:
+            return self.texts[type_name]
+        return ''.join(f'{field_type_text(f.type, type_name)} {f.name}\n'
+                       for f in self.fields[type_name])
 
     def referenced_types(self) -> list[str]:
         """Full names of the types this type refers to, depth first, each once."""
@@ -124,19 +136,9 @@ class MessageType:
         return seen
 
 
-def short_name(type_name: str) -> str:
-    """How a definition spells a nested type: ``'pkg/msg/Name'`` -> ``'pkg/Name'`` (as a
-    ``.msg`` file does); a type derived from an action or a service keeps its full name
-    (``'pkg/action/Name_Feedback'``), because a reader takes ``pkg/Name`` for
-    ``pkg/msg/Name`` and would compute another type hash than the one stored."""
-    parts = type_name.split('/')
-    if len(parts) == 3 and parts[1] != 'msg':
-        return type_name
-    return f'{parts[0]}/{parts[-1]}'
-
-
-def field_type_text(field_type: FieldType) -> str:
-    """The ``.msg`` spelling of a field type, e.g. ``'float64[]'``, ``'string<=8[3]'``.
+def field_type_text(field_type: FieldType, owner: str = '') -> str:
+    """The ``.msg`` spelling of a field type of the type ``owner``, e.g. ``'float64[]'``,
+    ``'string<=8[3]'``, ``'std_msgs/Header'``, ``'DamGrasp_Feedback'``.
 
     Raises
     ------
@@ -146,7 +148,8 @@ def field_type_text(field_type: FieldType) -> str:
     """
     element = field_type.element_id
     if element == NESTED:
-        base = short_name(field_type.nested_type_name)
+        nested = field_type.nested_type_name
+        base = field_type_name(nested, owner) if owner else header_name(nested)
     elif element in PRIMITIVE_NAMES:
         base = PRIMITIVE_NAMES[element]
     elif element == STRING:
@@ -164,10 +167,6 @@ def field_type_text(field_type: FieldType) -> str:
     if container == 'sequence':
         return f'{base}[]'
     return base
-
-
-def _fields_text(fields: Sequence[Field]) -> str:
-    return '\n'.join(f'{field_type_text(f.type)} {f.name}' for f in fields)
 
 
 def _parse_fields(description: Mapping[str, Any]) -> tuple[str, tuple[Field, ...]]:
@@ -274,8 +273,36 @@ def load_message_type(type_name: str, prefixes: Iterable[str | os.PathLike[str]]
             raise TypeDescriptionError(f'cannot read {path}: {exc}') from None
         names = {h.get('type_name') for h in document.get('type_hashes', [])}
         if type_name in names:
-            return message_type_from_description(document, type_name)
+            message_type = message_type_from_description(document, type_name)
+            texts = installed_msg_texts(message_type.fields, prefixes)
+            return dataclasses.replace(message_type, texts=texts)
     package = type_name.split('/')[0]
     raise TypeDescriptionError(
         f'no type description of {type_name!r} installed (looked for share/{package}/.../*.json'
         f' under {len(prefixes)} prefix(es) of AMENT_PREFIX_PATH)')
+
+
+def installed_msg_texts(type_names: Iterable[str], prefixes: Sequence[str | os.PathLike[str]]
+                        ) -> dict[str, str]:
+    """The installed ``.msg`` file text (``<prefix>/share/pkg/msg/Name.msg``, the first prefix
+    that has it) of each message type of ``type_names`` that has one, by full name.
+
+    Raises
+    ------
+    TypeDescriptionError
+        If a ``.msg`` file is there but cannot be read (the message names it).
+    """
+    texts = {}
+    for type_name in type_names:
+        package, kind, name = type_name.split('/')
+        if kind != 'msg':
+            continue
+        for prefix in prefixes:
+            path = Path(prefix) / 'share' / package / 'msg' / f'{name}.msg'
+            if path.is_file():
+                try:
+                    texts[type_name] = path.read_text(encoding='utf-8')
+                except (OSError, ValueError) as exc:
+                    raise TypeDescriptionError(f'cannot read {path}: {exc}') from None
+                break
+    return texts
