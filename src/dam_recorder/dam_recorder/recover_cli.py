@@ -1,9 +1,10 @@
 """``recover``: make a bag whole again after its recorder was killed (no rclpy).
 
-``ros2 run dam_recorder recover DIR`` rebuilds the summary and index of every MCAP file of the
-bag that lacks them, from the chunks that were written completely, and writes ``metadata.yaml``
-anew (:mod:`dam_recorder.recovery`). Exit status 0 on success, 1 when ``DIR`` holds no bag that
-can be recovered.
+``ros2 run dam_recorder recover DIR`` rewrites every MCAP file of the bag that lacks its
+summary or holds records that cannot be read, from every record that can, and writes
+``metadata.yaml`` anew from the data files (:mod:`dam_recorder.recovery`). It prints what it
+corrected in ``metadata.yaml``, per file what was lost and why, and per topic the messages
+kept. Exit status 0 on success, 1 when ``DIR`` holds no bag that can be recovered.
 """
 
 from __future__ import annotations
@@ -20,11 +21,12 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``recover``."""
     parser = argparse.ArgumentParser(
         prog='recover',
-        description='Make a bag whose recorder was killed readable again: rebuild the summary '
-                    'and index of damaged MCAP files from their complete chunks, and '
-                    'metadata.yaml from what the files hold. Messages of the chunk that was '
-                    'being written when the recorder died are lost (at most chunk_interval, '
-                    '1 s by default).')
+        description='Make a bag whose recorder was killed, or whose files were damaged, '
+                    'readable again: rewrite damaged MCAP files from every record that can be '
+                    'read (a chunk that cannot is skipped and its messages counted as lost), '
+                    'and metadata.yaml from what the files hold (the files win where the old '
+                    'metadata disagrees). Messages of the chunk that was being written when '
+                    'the recorder died are lost (at most chunk_interval, 1 s by default).')
     parser.add_argument('bag', metavar='DIR', help='the bag directory')
     return parser
 
@@ -36,10 +38,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RecoveryError as exc:
         print(f'recover: {exc}', file=sys.stderr)
         return 1
+    for problem in report.metadata_problems:
+        print(f'{problem}: corrected from the data files')
     for file in report.files:
-        state = (f'rebuilt, {file.dropped_bytes} unreadable bytes at the end dropped'
-                 if file.rebuilt else 'intact')
+        if not file.rebuilt:
+            state = 'intact'
+        elif file.problems:
+            state = 'rebuilt, with losses' if any('lost' in p for p in file.problems) \
+                else 'rebuilt'
+        else:
+            state = 'rebuilt'
         print(f'{file.path}: {file.message_count} messages ({state})')
+        for problem in file.problems:
+            print(f'  {file.path}: {problem}')
     for topic in report.topics:
         print(f'  {topic.name}: {topic.message_count} ({topic.type})')
     print(f'{report.bag_dir}: {report.message_count} messages; metadata.yaml written')
