@@ -356,6 +356,61 @@ def test_a_topic_that_appears_late_counts_what_it_sent_before_it_was_found(
     assert 'appeared while recording' in log and 'not in the bag' in log
 
 
+@pytest.mark.parametrize('clock', [True, False])
+def test_messages_before_the_first_clock_are_held_not_stamped_1970(tmp_path: Path,
+                                                                   clock: bool) -> None:
+    """use_sim_time: messages that come before the first /clock are written once it comes,
+    stamped with its time (counted); without any /clock they keep their receive time. No
+    message is stamped 0 (a bag that starts in 1970) and none is lost."""
+    from builtin_interfaces.msg import Time
+    from rosbags.highlevel import AnyReader
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import Int64
+
+    bag = tmp_path / 'sim'
+    clock_start_ns = 100 * 10**9
+    with node_process([RECORDER, '-o', str(bag), '/dam_test_counter',
+                       '--ros-args', '-p', 'use_sim_time:=true']) as rec:
+        wait_for(rec, f'recording {bag}')
+        client = RosClient()
+        try:
+            pub = client.node.create_publisher(Int64, '/dam_test_counter', 1000)
+            clock_pub = client.node.create_publisher(Clock, '/clock', 10)
+            assert client.spin_until(lambda: pub.get_subscription_count() > 0, 20.0)
+            for i in range(100):  # no clock yet
+                pub.publish(Int64(data=i))
+                client.spin_until(lambda: False, 0.005)
+            client.spin_until(lambda: False, 1.0)
+            if clock:  # the clock runs before the next message comes
+                clock_pub.publish(Clock(clock=Time(sec=clock_start_ns // 10**9)))
+                client.spin_until(lambda: False, 0.5)
+            for i in range(100, 200):
+                if clock:
+                    t = clock_start_ns + (i - 100) * 10_000_000
+                    clock_pub.publish(Clock(clock=Time(sec=t // 10**9, nanosec=t % 10**9)))
+                pub.publish(Int64(data=i))
+                client.spin_until(lambda: False, 0.01)
+            client.spin_until(lambda: False, 1.0)
+        finally:
+            client.close()
+        assert stop(rec, signal.SIGINT) == 0, rec.output()
+        log = rec.output()
+    with AnyReader([bag]) as reader:
+        stamped = [(t, reader.deserialize(raw, conn.msgtype).data)
+                   for conn, t, raw in reader.messages()]
+    assert sorted(v for _t, v in stamped) == list(range(200)), log[-1500:]
+    held = int(metadata(bag)['custom_data']['dam_recorder.before_clock_messages'])
+    if clock:
+        assert held == 100, log[-1500:]
+        assert min(t for t, _v in stamped) >= clock_start_ns
+        assert max(t for t, _v in stamped) < clock_start_ns + 10**10
+        assert '100 message(s) arrived before the first /clock' in log
+    else:
+        assert held == 0
+        assert min(t for t, _v in stamped) > 10**18  # receive times: not 1970
+        assert 'no /clock came while recording' in log
+
+
 def test_record_sh_records_beside_a_session_until_stopped(tmp_path: Path) -> None:
     """scripts/record.sh: the default topics into $DAM_BAG_DIR/rosbag2_<time> until SIGINT."""
     import os

@@ -58,6 +58,10 @@ MIN_SPLIT_BYTES = 86_016
 CHUNK_INTERVAL_RANGE_S = (0.01, 60.0)
 
 
+#: A message stamped this much before the newest of its file is a clock that jumped back
+#: (receive stamps of different topics may be out of order by a sweep of the taker) [ns].
+CLOCK_JUMP_BACK_NS = 1_000_000_000
+
 class _FileTarget:
     """Stands in for the bag directory that ``rosbags``' storage writers take: they open
     ``<directory>/<directory name>.<suffix>``; this names the file of a split bag instead."""
@@ -131,8 +135,9 @@ class BagWriter:
     max_file_bytes : int
         Start a new file once the current one holds this many bytes [bytes]; 0: no limit.
     max_file_duration_ns : int
-        Start a new file before a message stamped this long [ns] after the file's first one;
-        0: no limit.
+        Start a new file before a message stamped this long [ns] after the file's first one,
+        or more than :data:`CLOCK_JUMP_BACK_NS` before its newest (the clock jumped back: a
+        simulation started again); 0: no limit.
     ros_distro : str
         Written as ``ros_distro``.
     custom_data : callable, optional
@@ -177,6 +182,9 @@ class BagWriter:
         self.compression = compression
         self.max_file_bytes = int(max_file_bytes)
         self.max_file_duration_ns = int(max_file_duration_ns)
+        #: Times the clock of the messages went back by more than CLOCK_JUMP_BACK_NS while
+        #: a duration limit was set (each started a new file).
+        self.clock_jumps_back = 0
         self.ros_distro = ros_distro
         self._custom_data = custom_data
         self.file_stem = file_stem or self.bag_dir.name
@@ -283,7 +291,12 @@ class BagWriter:
         topic = self._topics[topic_id - 1]
         file = self.files[-1]
         if (self.max_file_duration_ns and file.message_count
-                and timestamp_ns - file.start_ns >= self.max_file_duration_ns):
+                and (timestamp_ns - file.start_ns >= self.max_file_duration_ns
+                     or timestamp_ns < file.end_ns - CLOCK_JUMP_BACK_NS)):
+            # The duration of a file is that of one clock run: a clock that jumps back (a
+            # simulation started again) starts a new file, as the duration limit would.
+            if timestamp_ns < file.end_ns - CLOCK_JUMP_BACK_NS:
+                self.clock_jumps_back += 1
             self.split()
             file = self.files[-1]
         writer = self._writer

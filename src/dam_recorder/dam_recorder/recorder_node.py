@@ -200,6 +200,12 @@ class RecorderNode(Node):
         #: touches the writer (sqlite3 connections belong to the thread that opened them).
         self._inbox: deque[tuple[Any, ...]] = deque()
         self._recorded: dict[str, _Recorded] = {}
+        #: use_sim_time: the first /clock has come (until then messages are held), or never
+        #: came while recording (then they are stamped with their receive time).
+        self._clock_started = False
+        self._no_clock = False
+        self._before_clock = 0
+        self._releasing = False  # writing the messages held for the first /clock
         #: Topics found by the first discovery: the recording begins with them. A topic found
         #: later appeared while recording, and what it published before it was found is
         #: missing (counted: :meth:`_follow_sequence`).
@@ -420,13 +426,39 @@ class RecorderNode(Node):
             inbox.append(('message', recorded, data, info))
         return on_message
 
-    def _write_inbox(self) -> None:
-        """Write what the taker took (in the executor's thread)."""
+    def _write_inbox(self, final: bool = False) -> None:
+        """Write what the taker took (in the executor's thread).
+
+        With ``use_sim_time``, messages that arrive before the first ``/clock`` are held (in
+        order) and written once it comes, stamped with the clock's time then: a bag on
+        simulated time never starts in 1970. When the recorder stops (``final``) without a
+        ``/clock`` ever, they are written with their receive time (system clock)."""
         inbox = self._inbox
+        if self._use_sim_time and not self._clock_started:
+            held = sum(1 for item in inbox if item[0] == 'message')
+            if self.get_clock().now().nanoseconds > 0:
+                self._clock_started = True
+                self._before_clock = held
+                if held:
+                    self.get_logger().info(
+                        f'{held} message(s) arrived before the first /clock: written now, '
+                        f'stamped with its time ({self.get_clock().now().nanoseconds * 1e-9:.3f}'
+                        f' s; counted in dam_recorder.before_clock_messages)')
+            elif final:
+                self._no_clock = True
+                if held:
+                    self.get_logger().warning(
+                        f'no /clock came while recording (use_sim_time): {held} message(s) '
+                        f'written with their receive time (system clock)')
+            else:
+                return  # held until the clock runs
         writer = self._writer if self._episodes is None else self._episodes
+        releasing = self._before_clock if self._releasing else 0
         while inbox and not self._stopped:
             item = inbox.popleft()
             if item[0] == 'message':
+                self._releasing = releasing > 0
+                releasing -= 1
                 self._write(writer, item[1], item[2], item[3])
             elif item[0] == 'swept':
                 self._taken_ns = item[1]
@@ -437,7 +469,7 @@ class RecorderNode(Node):
                info: dict[str, Any]) -> None:
         received = info.get('received_timestamp', 0)
         stamp = received
-        if self._use_sim_time or not stamp:
+        if (self._use_sim_time and not self._no_clock) or not stamp:
             stamp = self.get_clock().now().nanoseconds
         self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp)
         if self._paused:
@@ -445,7 +477,8 @@ class RecorderNode(Node):
             if self._episodes is not None:
                 self._episodes.note_paused(recorded.topic_id)
             return
-        backlog = time.time_ns() - received if received else None
+        # (Messages held for the first /clock waited for it, not for CPU time.)
+        backlog = time.time_ns() - received if received and not self._releasing else None
         if backlog is not None:
             self._backlog.add(backlog)
             if backlog > BACKLOG_WARNING_NS:
@@ -540,6 +573,7 @@ class RecorderNode(Node):
                 'dam_recorder.trimmed_messages': counts('trimmed'),
                 'dam_recorder.incompatible_publishers': counts('incompatible'),
                 'dam_recorder.before_subscription_messages': counts('before_subscription'),
+                'dam_recorder.before_clock_messages': str(self._before_clock),
                 DROPPED_KEY: counts('dropped'), BACKLOG_KEY: self._backlog.json()}
 
     # -- services and timers -----------------------------------------------------------------
@@ -644,7 +678,7 @@ class RecorderNode(Node):
             taker.stop()
             taken = time.time_ns()
             taker.drain()
-        self._write_inbox()
+        self._write_inbox(final=True)
         self._taken_ns = taken
         self._stopped = True
         self._close_bags()
