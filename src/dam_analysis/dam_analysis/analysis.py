@@ -40,6 +40,7 @@ from dam_analysis.regions import (
 )
 from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths
 from dam_common.config import DamConfig, load_config
+from dam_common.echo import brief_repr
 
 ArrayLike = float | Sequence[float] | np.ndarray
 
@@ -48,7 +49,8 @@ def _as_vector(field: str, value: ArrayLike) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise InputError(f'{field}: not a number or list of numbers: {value!r}') from exc
+        raise InputError(f'{field}: not a number or list of numbers: '
+                         f'{brief_repr(value)}') from exc
     arr = np.atleast_1d(arr)
     if arr.ndim != 1:
         raise InputError(f'{field}: expected a scalar or a flat list, got shape {arr.shape}')
@@ -56,7 +58,8 @@ def _as_vector(field: str, value: ArrayLike) -> np.ndarray:
         raise InputError(f'{field}: empty list')
     bad = ~np.isfinite(arr)
     if np.any(bad):
-        raise InputError(f'{field}: non-finite value {float(arr[bad][0])!r} in {arr.tolist()!r}')
+        raise InputError(f'{field}: non-finite value {float(arr[bad][0])!r} in '
+                         f'{brief_repr(arr)}')
     return arr
 
 
@@ -121,9 +124,9 @@ def check_k_theta(k_theta: ArrayLike, stiffness_ratios: np.ndarray) -> np.ndarra
         arr = arr[0] * ratios / ratios[0]
     elif arr.size != ratios.size:
         raise InputError(f'k_theta: expected 1 or {ratios.size} values, got {arr.size}: '
-                         f'{arr.tolist()!r}')
+                         f'{brief_repr(arr)}')
     if np.any(arr <= 0.0):
-        raise InputError(f'k_theta: stiffness must be positive, got {arr.tolist()!r}')
+        raise InputError(f'k_theta: stiffness must be positive, got {brief_repr(arr)}')
     return arr
 
 
@@ -135,11 +138,11 @@ def check_delta_theta_p(delta_theta_p: ArrayLike, n_fingers: int,
         arr = np.full(n_fingers, arr[0])
     elif arr.size != n_fingers:
         raise InputError(f'delta_theta_p: expected 1 or {n_fingers} values, got {arr.size}: '
-                         f'{arr.tolist()!r}')
+                         f'{brief_repr(arr)}')
     if np.any(arr < 0.0):
-        raise InputError(f'delta_theta_p: must be >= 0, got {arr.tolist()!r} rad')
+        raise InputError(f'delta_theta_p: must be >= 0, got {brief_repr(arr)} rad')
     if np.any(arr > delta_theta_p_max + 1e-12):
-        raise InputError(f'delta_theta_p: {arr.tolist()!r} rad exceeds delta_theta_p_max = '
+        raise InputError(f'delta_theta_p: {brief_repr(arr)} rad exceeds delta_theta_p_max = '
                          f'{delta_theta_p_max!r} rad ({math.degrees(delta_theta_p_max):.6g} '
                          'deg)')
     return arr
@@ -149,7 +152,7 @@ def check_friction_angle(friction_angle: float, configured: float) -> float:
     """Validate alpha [rad]; negative selects ``configured``. Must be below pi/2."""
     arr = _as_vector('friction_angle', friction_angle)
     if arr.size != 1:
-        raise InputError(f'friction_angle: expected one value, got {arr.tolist()!r}')
+        raise InputError(f'friction_angle: expected one value, got {brief_repr(arr)}')
     alpha = float(arr[0])
     if alpha < 0.0:
         return configured

@@ -59,6 +59,7 @@ from dam_analysis.errors import DamAnalysisError, InputError, NoSolutionError
 from dam_analysis.hand_limits import limit_notes
 from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_from_request
 from dam_common.config import DamConfig, load_config
+from dam_common.echo import brief_repr, brief_text
 from dam_common.errors import ConfigError
 from dam_common.node import declare_config_file, run_node
 from dam_common.shutdown import SHUTDOWN
@@ -114,7 +115,8 @@ class CheckLiftServer(Node):
                         or not 0.0 <= value < _MAX_FRICTION_ANGLE:
                     return SetParametersResult(
                         successful=False,
-                        reason=f'default_friction_angle must be in [0, pi/2) rad, got {value!r}')
+                        reason=f'default_friction_angle must be in [0, pi/2) rad, got '
+                               f'{brief_repr(value)}')
         for param in params:
             if param.name == 'default_friction_angle':
                 self._default_friction_angle = float(param.value)
@@ -220,11 +222,11 @@ class CheckLiftServer(Node):
             return compute()
         except DamAnalysisError as exc:
             response.ok = False
-            response.message = str(exc)
-            self.get_logger().warning(f'rejected request ({doing}): {exc}')
+            response.message = brief_text(str(exc))  # quotes of the request are cut already
+            self.get_logger().warning(f'rejected request ({doing}): {response.message}')
         except Exception as exc:  # noqa: BLE001 - the server must stay up whatever happens
             response.ok = False
-            response.message = f'internal error while {doing}: {exc!r}'
+            response.message = brief_text(f'internal error while {doing}: {exc!r}')
             self.get_logger().error(response.message)
         return None
 

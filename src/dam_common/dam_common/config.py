@@ -25,6 +25,7 @@ import yaml
 
 from dam_common.cross_section import Circle, CrossSection, Ellipse
 from dam_common.dynamixel_config import DynamixelConfig, parse_dynamixel
+from dam_common.echo import brief_repr
 from dam_common.errors import ConfigError
 from dam_common.polygon_section import ConvexPolygon, check_convex_polygon, regular_polygon
 from dam_common.strict_yaml import safe_load_unique
@@ -270,7 +271,7 @@ class DamConfig:
         if name == '' or name == self.object.name:
             return self
         if name not in self.objects:
-            raise ConfigError(f'object {name!r} is not in the object library '
+            raise ConfigError(f'object {brief_repr(name)} is not in the object library '
                               f'(known: {", ".join(sorted(self.objects))})')
         return dataclasses.replace(self, object=self.objects[name])
 

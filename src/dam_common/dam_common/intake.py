@@ -42,6 +42,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_policy_name_from_kind
 from rclpy.subscription import Subscription
 
+from dam_common.echo import brief_repr
+
 #: The longest one wait lasts before the thread looks at the context again [s].
 POLL_S = 0.1
 #: How long :meth:`SubscriptionThread.stop` waits for the thread [s].
@@ -145,7 +147,7 @@ class SubscriptionThread:
                         self._call(callback, taken[0])
         except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
             if context.ok() and not self._stop.is_set():
-                self._owner.get_logger().error(f'{self.node_name} stopped: {exc!r}')
+                self._owner.get_logger().error(f'{self.node_name} stopped: {brief_repr(exc)}')
 
     def _on_incompatible_qos(self, event: Any) -> None:
         self.incompatible_qos = int(event.total_count)
@@ -170,7 +172,7 @@ class SubscriptionThread:
             callback(msg)
         except Exception as exc:  # noqa: BLE001 - one bad message must not end the intake
             self._owner.get_logger().error(
-                f'a {self.node_name} callback raised {exc!r}; the intake goes on',
+                f'a {self.node_name} callback raised {brief_repr(exc)}; the intake goes on',
                 throttle_duration_sec=1.0)
 
     def stop(self) -> None:

@@ -29,6 +29,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from dam_common.collector import ScheduledCollector
 from dam_common.config import DamConfig
+from dam_common.echo import brief_repr, brief_text
 from dam_common.errors import DamCommonError
 from dam_common.parameter_services import harden_parameter_services, list_parameters_hint
 from dam_common.shutdown import ShutdownRequest, StartupInterrupted, catch_signals
@@ -101,13 +102,14 @@ def declare_thread_priority(node: Node, default: int = 50,
 
 def failure_response(response: Any, reason: str) -> Any:
     """Mark a service ``response`` as failed where its type can say so (``ok``, ``success`` or
-    ``successful`` false; ``message`` or ``reason`` set); return it."""
+    ``successful`` false; ``message`` or ``reason`` set, cut to
+    :data:`~dam_common.echo.TEXT_LIMIT` characters); return it."""
     for name in _OK_FIELDS:
         if hasattr(response, name):
             setattr(response, name, False)
     for name in _REASON_FIELDS:
         if hasattr(response, name):
-            setattr(response, name, reason)
+            setattr(response, name, brief_text(reason))
     return response
 
 
@@ -121,8 +123,9 @@ def guard_service_callbacks(node: Node) -> None:
 
 def _guarded(node: Node, srv_name: str, callback: Callable[..., Any]) -> Callable[..., Any]:
     def report(exc: Exception, response: Any) -> Any:
-        node.get_logger().error(f'{srv_name}: the request raised {exc!r}; answered as failed')
-        return failure_response(response, f'internal error while answering: {exc!r}')
+        node.get_logger().error(f'{srv_name}: the request raised {brief_repr(exc)}; answered '
+                                'as failed')
+        return failure_response(response, f'internal error while answering: {brief_repr(exc)}')
 
     if inspect.iscoroutinefunction(callback):
         async def guarded_async(request: Any, response: Any) -> Any:
@@ -186,7 +189,7 @@ def spin_until_shutdown(node: Node, shutdown: ShutdownRequest, executor_threads:
         except Exception as exc:  # noqa: BLE001 - the node stays up
             if not node.context.ok():
                 return False
-            node.get_logger().error(f'a callback raised {exc!r}; the node goes on')
+            node.get_logger().error(f'a callback raised {brief_repr(exc)}; the node goes on')
         return True
 
     try:

@@ -19,6 +19,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from dam_common.echo import brief_repr, brief_text
+
 #: Type code -> the ParameterValue field that carries the value.
 _VALUE_FIELD = {
     ParameterType.PARAMETER_BOOL: 'bool_value',
@@ -48,21 +50,22 @@ def parameter_from_msg(msg: ParameterMsg) -> Parameter:
     name = str(msg.name)
     if not name:
         raise ValueError('parameter name is empty')
+    quoted = brief_repr(name)
     code = int(msg.value.type)
     if code == ParameterType.PARAMETER_NOT_SET:
-        raise ValueError(f'parameter {name!r}: value.type 0 (not set) would delete it; the '
+        raise ValueError(f'parameter {quoted}: value.type 0 (not set) would delete it; the '
                          f'parameters of this node cannot be deleted')
     if code not in _VALUE_FIELD:
-        raise ValueError(f'parameter {name!r}: value.type {code} is not a parameter type '
+        raise ValueError(f'parameter {quoted}: value.type {code} is not a parameter type '
                          f'(expected one of {_TYPE_NAMES})')
     try:
         return Parameter.from_parameter_msg(msg)
     except (ValueError, TypeError) as exc:
-        raise ValueError(f'parameter {name!r}: {exc}') from exc
+        raise ValueError(f'parameter {quoted}: {brief_text(str(exc))}') from exc
 
 
 def _refused(reason: str) -> SetParametersResult:
-    return SetParametersResult(successful=False, reason=reason)
+    return SetParametersResult(successful=False, reason=brief_text(reason))
 
 
 def list_parameters_hint(node: Node) -> str:
@@ -78,7 +81,7 @@ def _set(node: Node, parameters: list[Parameter]) -> SetParametersResult:
     """``node.set_parameters_atomically`` that answers any failure with a reason."""
     undeclared = [p.name for p in parameters if not node.has_parameter(p.name)]
     if undeclared:
-        return _refused(f'no parameter {", ".join(map(repr, undeclared))} on '
+        return _refused(f'no parameter {", ".join(map(brief_repr, undeclared))} on '
                         f'{node.get_fully_qualified_name()} ({list_parameters_hint(node)} '
                         f'lists them)')
     try:
@@ -86,8 +89,9 @@ def _set(node: Node, parameters: list[Parameter]) -> SetParametersResult:
     except ParameterException as exc:  # read-only, wrong type, out of range
         return _refused(str(exc))
     except Exception as exc:  # noqa: BLE001 - e.g. an on-set callback that raised
-        node.get_logger().error(f'setting {[p.name for p in parameters]} raised {exc!r}')
-        return _refused(f'internal error while setting the parameters: {exc!r}')
+        names = brief_repr([p.name for p in parameters])
+        node.get_logger().error(f'setting {names} raised {brief_repr(exc)}')
+        return _refused(f'internal error while setting the parameters: {brief_repr(exc)}')
 
 
 def harden_parameter_services(node: Node) -> None:

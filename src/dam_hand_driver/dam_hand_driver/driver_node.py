@@ -102,6 +102,7 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
+from dam_common.echo import brief_repr
 from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
@@ -198,7 +199,8 @@ def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: f
     out: list[CommandItem] = []
     for i, (name, mode, value) in enumerate(zip(names, modes, setpoints, strict=True)):
         if name not in index:
-            raise CommandRejected(f'unknown joint name {name!r} (known: {sorted(index)})')
+            raise CommandRejected(f'unknown joint name {brief_repr(name)} (known: '
+                                  f'{sorted(index)})')
         if name in seen:
             raise CommandRejected(f'joint {name!r} appears more than once')
         seen.add(name)

@@ -89,6 +89,7 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
+from dam_common.echo import brief_repr
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
@@ -265,10 +266,12 @@ class SimBridgeNode(Node):
         elif param.type_ == Parameter.Type.INTEGER_ARRAY:
             values = [int(v) for v in value]
         else:
-            return f'{param.name} takes a list of servo IDs (integers), got {value!r}'
+            return (f'{param.name} takes a list of servo IDs (integers), got '
+                    f'{brief_repr(value)}')
         if param.name == 'fault_hardware_error':
             if len(values) % 2:
-                return f'fault_hardware_error takes pairs [id, bits, ...], got {values!r}'
+                return (f'fault_hardware_error takes pairs [id, bits, ...], got '
+                        f'{brief_repr(values)}')
             pairs = list(zip(values[::2], values[1::2], strict=True))
             for servo_id, bits in pairs:
                 if servo_id not in known:
@@ -282,7 +285,7 @@ class SimBridgeNode(Node):
             return None
         unknown = sorted(set(values) - known)
         if unknown:
-            return f'{param.name}: no servo with ID {unknown} (IDs: {sorted(known)})'
+            return f'{param.name}: no servo with ID {brief_repr(unknown)} (IDs: {sorted(known)})'
         if param.name == 'fault_crc_error_ids':
             device.crc_error_ids = values
         else:
@@ -314,7 +317,7 @@ class SimBridgeNode(Node):
                     return SetParametersResult(
                         successful=False,
                         reason=f'pose_rate_hz must be in [{_POSE_RATE_RANGE[0]:g}, '
-                               f'{_POSE_RATE_RANGE[1]:g}] Hz, got {value!r}')
+                               f'{_POSE_RATE_RANGE[1]:g}] Hz, got {brief_repr(value)}')
         for param in params:
             if param.name == 'pose_rate_hz' and hasattr(self, '_timer'):
                 self._pose_rate_hz = float(param.value)

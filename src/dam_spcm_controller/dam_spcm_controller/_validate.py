@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from dam_common.echo import brief_repr
 from dam_spcm_controller.errors import InputError
 
 _ALL = np.logical_and.reduce  # ndarray.all without its Python wrapper
@@ -15,17 +16,17 @@ def finite_scalar(name: str, value: float, *, positive: bool = False,
                   nonnegative: bool = False) -> float:
     """Return ``value`` as a float; raise :class:`InputError` naming it when it is bad."""
     if isinstance(value, bool):
-        raise InputError(f'{name} must be a number, got {value!r}')
+        raise InputError(f'{name} must be a number, got {brief_repr(value)}')
     try:
         out = float(value)
     except (TypeError, ValueError):
-        raise InputError(f'{name} must be a number, got {value!r}') from None
+        raise InputError(f'{name} must be a number, got {brief_repr(value)}') from None
     if not math.isfinite(out):
-        raise InputError(f'{name} must be finite, got {value!r}')
+        raise InputError(f'{name} must be finite, got {brief_repr(value)}')
     if positive and out <= 0.0:
-        raise InputError(f'{name} must be positive, got {value!r}')
+        raise InputError(f'{name} must be positive, got {brief_repr(value)}')
     if nonnegative and out < 0.0:
-        raise InputError(f'{name} must be non-negative, got {value!r}')
+        raise InputError(f'{name} must be non-negative, got {brief_repr(value)}')
     return out
 
 
@@ -42,14 +43,14 @@ def finite_vector(name: str, value: object, length: int | None = None, *,
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InputError(f'{name} must be numeric, got {value!r}') from None
+        raise InputError(f'{name} must be numeric, got {brief_repr(value)}') from None
     if arr.ndim == 0 and length is not None:
         arr = np.full(length, float(arr))
     if arr.ndim != 1:
         raise InputError(f'{name} must be one-dimensional, got shape {arr.shape}')
     if length is not None and arr.shape[0] != length:
         raise InputError(f'{name} must have {length} values, got {arr.shape[0]}: '
-                         f'{arr.tolist()!r}')
+                         f'{brief_repr(arr)}')
     bad = ~np.isfinite(arr)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])

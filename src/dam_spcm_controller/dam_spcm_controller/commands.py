@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dam_common.echo import brief_repr
 from dam_spcm_controller._validate import finite_vector
 from dam_spcm_controller.errors import InputError
 
@@ -174,7 +175,8 @@ class HandLayout:
         where: dict[str, int] = {}
         for i, name in enumerate(names):
             if name in where:
-                raise InputError(f'joint name {name!r} appears twice (positions {where[name]} '
+                raise InputError(f'joint name {brief_repr(name)} appears twice (positions '
+                                 f'{where[name]} '
                                  f'and {i})')
             where[name] = i
         missing = [n for n in self.joint_names if n not in where]

@@ -80,6 +80,7 @@ from dam_analysis.analysis import check_delta_theta_p, check_k_theta
 from dam_analysis.errors import DamAnalysisError
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
+from dam_common.echo import brief_repr, brief_text
 from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
@@ -292,13 +293,15 @@ class SpcmControllerNode(Node):
                             or not math.isfinite(float(value)):
                         return SetParametersResult(
                             successful=False,
-                            reason=f'{param.name} must be a finite number, got {value!r}')
+                            reason=f'{param.name} must be a finite number, got '
+                                   f'{brief_repr(value)}')
                     values[param.name] = float(value)
                 elif param.name in _BOOL_PARAMETERS:
                     if not isinstance(param.value, bool):
                         return SetParametersResult(
                             successful=False,
-                            reason=f'{param.name} must be a bool, got {param.value!r}')
+                            reason=f'{param.name} must be a bool, got '
+                                   f'{brief_repr(param.value)}')
                     flags[param.name] = param.value
             try:
                 new_params = self._make_params(values, flags)
@@ -634,21 +637,22 @@ class SpcmControllerNode(Node):
             k = check_k_theta(list(goal.k_theta) or [task.k_theta_nm_per_rad], ratios)
             dp = check_delta_theta_p(list(goal.delta_theta_p) or [task.delta_theta_p_rad], n,
                                      task.delta_theta_p_max_rad)
-        except DamAnalysisError as exc:
-            raise InputError(str(exc)) from exc
+        except DamAnalysisError as exc:  # its quotes of the goal are cut already
+            raise InputError(brief_text(str(exc))) from exc
         expected = k[0] * ratios / ratios[0]
         if not np.allclose(k, expected, rtol=1e-9, atol=0.0):
-            raise InputError(f'k_theta {k.tolist()!r} does not follow the configured stiffness '
-                             f'ratios {ratios.tolist()!r}; the controller sets finger i to '
+            raise InputError(f'k_theta {brief_repr(k)} does not follow the configured '
+                             f'stiffness ratios {ratios.tolist()!r}; the controller sets finger '
+                             'i to '
                              'ratio_i * k_theta')
         if not np.allclose(dp, dp[0], rtol=0.0, atol=1e-12):
-            raise InputError(f'delta_theta_p {dp.tolist()!r} rad: the controller moves every '
+            raise InputError(f'delta_theta_p {brief_repr(dp)} rad: the controller moves every '
                              'position joint by the same displacement')
         if dp[0] <= 0.0:
             raise InputError(f'delta_theta_p must be positive, got {dp[0]!r} rad')
         k_max = float(self._config.device.max_stiffness_nm_per_rad)
         if self._flags['impedance_on_device'] and float(np.max(k)) > k_max:
-            raise InputError(f'k_theta {k.tolist()!r} N*m/rad: the device accepts impedance '
+            raise InputError(f'k_theta {brief_repr(k)} N*m/rad: the device accepts impedance '
                              f'stiffness up to device.max_stiffness_nm_per_rad = {k_max:g} '
                              'N*m/rad')
         return float(k[0]), float(dp[0])
@@ -782,13 +786,13 @@ class SpcmControllerNode(Node):
         try:
             return await self._run_goal(goal_handle, k, dp, t0)
         except Exception as exc:  # noqa: BLE001 - the node must stay up and accept goals
-            self.get_logger().error(f'internal error during the grasp: {exc!r}')
+            self.get_logger().error(f'internal error during the grasp: {brief_repr(exc)}')
             with self._lock:
                 self._goal_handle = None
                 self._run_done = None
-                self._seq.fail(f'internal error: {exc!r}')
+                self._seq.fail(f'internal error: {brief_repr(exc)}')
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_ABORTED,
-                                f'internal error: {exc!r}', t0)
+                                f'internal error: {brief_repr(exc)}', t0)
 
     async def _run_goal(self, goal_handle: ServerGoalHandle, k: float, dp: float, t0: float
                         ) -> DamGrasp.Result:
@@ -898,7 +902,7 @@ class SpcmControllerNode(Node):
                                 'grasp done, not classified: the controller is stopping', t0)
         except Exception as exc:  # noqa: BLE001 - the node must stay up whatever happens
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
-                                f'grasp done, classification failed: {exc!r}', t0)
+                                f'grasp done, classification failed: {brief_repr(exc)}', t0)
         outcome = _OUTCOME[c.outcome]
         lift_height = self._classifier.lift_height
         if outcome == DamGrasp.Result.OUTCOME_SUCCESS and not c.lift_m >= lift_height:
