@@ -62,6 +62,7 @@ from dam_common.config import DamConfig, load_config
 from dam_common.echo import brief_repr, brief_text
 from dam_common.errors import ConfigError
 from dam_common.node import declare_config_file, run_node
+from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import CheckLift, PlanLift
 
@@ -91,7 +92,8 @@ class CheckLiftServer(Node):
         self._default_friction_angle = float(
             self.get_parameter('default_friction_angle').value)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self._service = self.create_service(CheckLift, 'check_lift', self._on_request)
+        self._service = self.create_service(CheckLift, 'check_lift', self._on_request,
+                                            qos_profile=SERVICE_QOS)
         # /plan_lift in a callback group of its own, on the second executor thread
         # (run_node(executor_threads=2)): a first plan with a new position tolerance takes
         # seconds, and /check_lift goes on answering meanwhile. The planner keeps analyses of
@@ -99,7 +101,7 @@ class CheckLiftServer(Node):
         self._planners[self._config.object.name] = LiftPlanner(self._config)
         self._planning = threading.Lock()
         self._plan_service = self.create_service(
-            PlanLift, 'plan_lift', self._on_plan,
+            PlanLift, 'plan_lift', self._on_plan, qos_profile=SERVICE_QOS,
             callback_group=MutuallyExclusiveCallbackGroup())
         self.get_logger().info(
             f'serving {self._service.srv_name} and {self._plan_service.srv_name} with '

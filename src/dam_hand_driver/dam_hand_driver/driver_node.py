@@ -116,6 +116,7 @@ from dam_common.realtime import (
     die_with_parent,
     set_thread_priority,
 )
+from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.device import HandDevice, JointSample
 from dam_hand_driver.dynamixel_device import DynamixelDevice
@@ -360,7 +361,8 @@ class HandDriverNode(Node):
         self._intake = SubscriptionThread(self, 'hand_command')
         self._cmd_sub = self._intake.create_subscription(HandCommand, '/hand/command',
                                                          self._on_command, 10)
-        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset,
+                                              qos_profile=SERVICE_QOS)
         self._diag_timer = create_steady_timer(self, 1.0, self._publish_diagnostics)
 
         try:

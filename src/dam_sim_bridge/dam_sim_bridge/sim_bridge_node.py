@@ -99,6 +99,7 @@ from dam_common.node import (
 )
 from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_common.ros_args import strip_ros_args
+from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
@@ -194,9 +195,11 @@ class SimBridgeNode(Node):
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if self._publish_clock else None)
         self._timer = create_steady_timer(self, 1.0 / self._pose_rate_hz, self._on_timer)
-        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._reset_srv = self.create_service(Trigger, '~/reset', self._on_reset,
+                                              qos_profile=SERVICE_QOS)
         self._friction_srv = self.create_service(
-            SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle)
+            SetFrictionAngle, '~/set_friction_angle', self._on_set_friction_angle,
+            qos_profile=SERVICE_QOS)
         self._thread.start()
         dev = self._config.device
         if isinstance(self._device, DynamixelStandIn):

@@ -88,6 +88,7 @@ from dam_common.node import (
     declare_object,
     run_node,
 )
+from dam_common.service_qos import SERVICE_QOS, action_server_qos
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
@@ -248,10 +249,12 @@ class SpcmControllerNode(Node):
         self._check_lift = self.create_client(CheckLift, '/check_lift')
         self._action = ActionServer(
             self, DamGrasp, '/dam_grasp', execute_callback=self._execute,
-            goal_callback=self._on_goal, cancel_callback=self._on_cancel)
+            goal_callback=self._on_goal, cancel_callback=self._on_cancel,
+            **action_server_qos())  # every goal and cancel request answered, however many
         # A callback group of its own: the release awaits the motion, and an awaiting callback
         # holds its group (the default one would starve /joint_states meanwhile).
         self._release_srv = self.create_service(Trigger, '~/release', self._on_release,
+                                                qos_profile=SERVICE_QOS,
                                                 callback_group=MutuallyExclusiveCallbackGroup())
         self.add_on_set_parameters_callback(self._on_set_parameters)
         try:
