@@ -24,10 +24,10 @@ setup(
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
             'check_lift_server = dam_analysis.entry_points:check_lift_server',
-            'check_lift = dam_analysis.check_lift_client:entry_point',
+            'check_lift = dam_analysis.entry_points:check_lift',
             'lift_map = dam_analysis.lift_map:entry_point',
             'scale_map = dam_analysis.scale_map:entry_point',
-            'plan_lift = dam_analysis.plan_lift_client:entry_point',
+            'plan_lift = dam_analysis.entry_points:plan_lift',
         ],
     },
 )

@@ -11,7 +11,9 @@ Examples::
 Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). An option left out
 is left out of the request, so the server uses its configuration for it (``CheckLift.srv``).
 Exit status: 0 when the server answered ``ok`` (also "no lift" beyond the end of the SPCM
-branch), 2 when it rejected the request, 1 when no answer came.
+branch), 2 when it rejected the request, 1 when no answer came, 3 when SIGINT or SIGTERM
+stopped it first (at any moment: no traceback; the entry point is
+``dam_analysis.entry_points:check_lift``).
 """
 
 from __future__ import annotations
@@ -98,9 +100,5 @@ def main(args: Sequence[str] | None = None) -> int:
                           options.timeout, lambda response: format_response(request, response))
 
 
-def entry_point() -> None:
-    sys.exit(main())
-
-
 if __name__ == '__main__':
-    entry_point()
+    sys.exit(main())

@@ -7,9 +7,23 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
-from dam_common.shutdown import run_node_entry
+from dam_common.shutdown import run_client_entry, run_node_entry
+
+#: Exit status of a client stopped by SIGINT or SIGTERM before its answer
+#: (``dam_analysis.service_call.INTERRUPTED``, not imported here: it imports rclpy).
+CLIENT_INTERRUPTED = 3
 
 
 def check_lift_server() -> None:
     """``ros2 run dam_analysis check_lift_server``: the /check_lift server."""
     run_node_entry('dam_analysis.check_lift_server')
+
+
+def check_lift() -> None:
+    """``ros2 run dam_analysis check_lift``: one /check_lift request from the command line."""
+    run_client_entry('dam_analysis.check_lift_client', CLIENT_INTERRUPTED)
+
+
+def plan_lift() -> None:
+    """``ros2 run dam_analysis plan_lift``: one /plan_lift request from the command line."""
+    run_client_entry('dam_analysis.plan_lift_client', CLIENT_INTERRUPTED)

@@ -13,7 +13,9 @@ more often radians meant), masses in kilograms, the position tolerance with a un
 ``0.001m``; metres without one). An
 option left out is left out of the request, so the server uses its configuration for it
 (``PlanLift.srv``). Exit status: 0 when the server answered ``ok`` (whether or not a pair is
-guaranteed), 2 when it rejected the request or an argument is malformed, 1 when no answer came.
+guaranteed), 2 when it rejected the request or an argument is malformed, 1 when no answer came,
+3 when SIGINT or SIGTERM stopped it first (at any moment: no traceback; the entry point is
+``dam_analysis.entry_points:plan_lift``).
 """
 
 from __future__ import annotations
@@ -136,9 +138,5 @@ def main(args: Sequence[str] | None = None) -> int:
                           options.timeout, format_response)
 
 
-def entry_point() -> None:
-    sys.exit(main())
-
-
 if __name__ == '__main__':
-    entry_point()
+    sys.exit(main())

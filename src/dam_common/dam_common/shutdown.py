@@ -11,12 +11,18 @@ moment:
 - once it runs, a signal only records the request; :func:`~dam_common.node.run_node` looks at
   it between two callbacks, so no callback is interrupted half-way and no thread publishes on a
   context that is gone.
+
+A command-line client (``check_lift``, ``plan_lift``) follows the same rules through
+:func:`run_client_entry`: interrupted at once while it imports and parses its arguments, then
+(once it calls :meth:`ShutdownRequest.started`, before it creates its ROS context) it looks at
+the request in each of its waits, cleans up, and exits with its documented status for a stop.
 """
 
 from __future__ import annotations
 
 import importlib
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -148,3 +154,32 @@ def run_node_entry(module: str) -> None:
         main()
     except StartupInterrupted:
         return  # before the node took the signals over (e.g. while parsing arguments)
+
+
+def run_client_entry(module: str, interrupted_status: int) -> None:
+    """Entry point of a command-line client: catch SIGINT and SIGTERM, import ``module``, call
+    its ``main()`` and exit with the status it returns.
+
+    ``main()`` calls :meth:`ShutdownRequest.started` on :data:`SHUTDOWN` before it creates
+    anything of ROS (from then on a signal only records the request, and the client's waits
+    end on it) and returns ``interrupted_status`` when a stop was requested. A signal during
+    the import, or in ``main()`` before that (parsing the arguments), ends the process with
+    ``interrupted_status`` at once; either way no traceback.
+    """
+    catch_signals(interrupt_startup=True)
+    try:
+        try:
+            try:
+                main = importlib.import_module(module).main
+            except Exception:
+                if SHUTDOWN.requested:  # the interrupt surfaced as another error
+                    raise StartupInterrupted(SHUTDOWN.signal_name) from None
+                raise
+            status = main()
+        except SystemExit as exc:  # argparse: --help, or bad arguments
+            SHUTDOWN.started()
+            status = exc.code
+    except StartupInterrupted:
+        status = interrupted_status
+    SHUTDOWN.started()  # a signal now only records the request
+    sys.exit(status)
