@@ -181,3 +181,42 @@ def test_bad_fault_parameters_are_refused_with_the_reason(bus) -> None:
     assert not odd.successful and 'pairs' in odd.reason
     assert client.wait_state('ACTIVE', 5.0)
 
+
+
+def test_a_world_reset_power_cycles_the_hand_and_reset_arms_it_where_it_stands(bus) -> None:
+    """The stand-in's ~/reset power-cycles the emulated hand (torque off, goals at the reset
+    posture). The driver must not drive the fingers back to the goals it held before: it sees
+    the torque gone (ERROR, or on ~/reset) and arms again holding the posture it finds."""
+    from sensor_msgs.msg import JointState
+
+    from dam_interfaces.msg import HandCommand
+
+    client, driver = bus
+    latest: list = []
+    client.client.node.create_subscription(JointState, '/joint_states',
+                                           lambda m: latest.__setitem__(slice(None), [m]), 10)
+    pub = client.client.node.create_publisher(HandCommand, '/hand/command', 10)
+    joint = 'finger1_position_joint'
+
+    def angle() -> float:
+        return float(latest[0].position[list(latest[0].name).index(joint)])
+
+    assert client.client.spin_until(lambda: bool(latest), 5.0)
+    start = angle()
+    curled = start + 0.5
+    for _ in range(50):  # curl one finger by 0.5 rad
+        pub.publish(HandCommand(name=[joint], mode=[HandCommand.MODE_POSITION],
+                                setpoint=[curled]))
+        client.client.spin_until(lambda: False, 0.02)
+    assert client.client.spin_until(lambda: abs(angle() - curled) < 0.05, 5.0), angle()
+    reset = client.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request())
+    assert reset.success, reset.message
+    rearmed = client.reset()
+    assert rearmed.success, rearmed.message
+    assert client.wait_state('ACTIVE', 5.0), driver.output()[-2000:]
+    client.client.spin_until(lambda: False, 1.0)
+    held = angle()
+    assert held < curled - 0.3, (held, start, curled)  # not driven back to the old goal
+    client.client.spin_until(lambda: False, 1.0)
+    assert abs(angle() - held) < 0.01, (angle(), held)  # held where it was armed
+    assert client.diag['torque_enabled'] == 'True'

@@ -106,6 +106,11 @@ class HandDevice(abc.ABC):
     def disarm(self) -> None:  # noqa: B027 - optional for a backend
         """The driver entered ERROR: switch the actuators off, if the device can be told."""
 
+    def needs_rearm(self) -> str:
+        """Why an ACTIVE device must go through ``~/reset``'s re-arming (empty: it need not),
+        e.g. actuators that restarted with torque off."""
+        return ''
+
     def recover(self) -> str:
         """Prepare to leave ERROR (``~/reset``): clear what the device can clear. Returns what
         was done, for the reply (empty: nothing needed)."""

@@ -421,7 +421,8 @@ class HandDriverNode(Node):
 
         with SHUTDOWN.uninterrupted():
             self.device = DynamixelDevice(self.config, port, clock_hint_ns=clock_ns,
-                                          simulated=self._simulated_device)
+                                          simulated=self._simulated_device,
+                                          sim_time=self._sim_time)
         for cap in self.device.rate_report:
             self.get_logger().warning(f'Dynamixel bus rate: {cap}')
         dxl = self.config.dynamixel
@@ -752,11 +753,14 @@ class HandDriverNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
-        if self.state is DriverState.ACTIVE:
+        assert self.device is not None
+        rearm = self.device.needs_rearm() if self.state is DriverState.ACTIVE else ''
+        if self.state is DriverState.ACTIVE and not rearm:
             response.success = True
             response.message = 'already ACTIVE'
             return response
-        assert self.device is not None
+        if rearm:
+            self.get_logger().warning(f'~/reset while ACTIVE: {rearm}: arming again')
         self.device.restart_sequence()  # the device may have restarted its sequence numbers
         try:
             done = self.device.recover()

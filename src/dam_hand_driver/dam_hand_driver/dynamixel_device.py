@@ -62,8 +62,9 @@ ADDR_PRESENT_POSITION = 132
 STATE_START, STATE_LENGTH = ADDR_REALTIME_TICK, 16
 #: The block one sync write gives per cycle: Goal Current .. Goal Position.
 GOAL_START, GOAL_LENGTH = ADDR_GOAL_CURRENT, 18
-#: Hardware Error Status is read once every this many cycles.
+#: Torque Enable .. Hardware Error Status (64-70) is read once every this many cycles.
 HARDWARE_ERROR_EVERY = 25
+CHECK_START, CHECK_LENGTH = ADDR_TORQUE_ENABLE, ADDR_HARDWARE_ERROR - ADDR_TORQUE_ENABLE + 1
 #: Hardware Error Status bits (ROBOTIS e-manual, X series).
 HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
                        3: 'motor encoder error', 4: 'electrical shock error',
@@ -72,6 +73,11 @@ HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
 REBOOT_BITS = (1 << 2) | (1 << 5)
 #: Tries of one start-up, arming or recovery transaction before a servo counts as silent.
 _TRANSACTION_TRIES = 3
+#: The emulated bus on simulated time steps the world at each state read and answers when
+#: its Python process gets the CPU: on a loaded machine later than the SDK's packet timeout
+#: (34 ms). A read the host gave up on would advance the simulated clock unseen, so its
+#: timeouts get this much more [ms] (a simulated clock does not care how long a read takes).
+_EMULATED_PACKET_MARGIN_MS = 1000.0
 _KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
 #: Failed reads in a row after which the compliant (current) joints get zero current.
@@ -86,6 +92,20 @@ def hardware_error_names(bits: int) -> str:
     if unknown:
         names.append(f'unknown bits 0x{unknown:02x}')
     return ', '.join(names) if names else 'none'
+
+
+def _port_handler(sdk_module: object, port: str, margin_ms: float) -> object:
+    """The SDK's port handler, its packet timeouts longer by ``margin_ms`` [ms]."""
+    base = sdk_module.PortHandler  # type: ignore[attr-defined]
+    if margin_ms <= 0.0:
+        return base(port)
+
+    class _Patient(base):  # type: ignore[misc, valid-type]
+        def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 - the SDK's
+            super().setPacketTimeout(packet_length)
+            self.packet_timeout += margin_ms
+
+    return _Patient(port)
 
 
 def usb_latency_timer_ms(port: str) -> int | None:
@@ -112,6 +132,9 @@ class DynamixelDevice(HandDevice):
         when the first sample's stamp is taken (simulated time on the emulated bus).
     simulated
         The bus is the emulated one (its samples say so).
+    sim_time
+        ... on simulated time: the packet timeouts are :data:`_EMULATED_PACKET_MARGIN_MS`
+        longer.
 
     Raises
     ------
@@ -124,7 +147,7 @@ class DynamixelDevice(HandDevice):
 
     def __init__(self, config: DamConfig, port: str | None = None, *,
                  clock_hint_ns: Callable[[], int] | None = None,
-                 simulated: bool = False) -> None:
+                 simulated: bool = False, sim_time: bool = False) -> None:
         dxl = config.dynamixel
         if dxl is None:
             raise HandDriverError(f'backend dynamixel needs the dynamixel: section in the '
@@ -149,7 +172,7 @@ class DynamixelDevice(HandDevice):
         self.simulated = bool(simulated)
         self._clock_hint_ns = clock_hint_ns
         self._lock = threading.Lock()  # one transaction on the bus at a time
-        self._port = sdk.PortHandler(port)
+        self._port = _port_handler(sdk, port, _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0)
         try:
             opened = self._port.openPort() and self._port.setBaudRate(dxl.baud_rate)
         except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError
@@ -166,7 +189,7 @@ class DynamixelDevice(HandDevice):
             self._port.closePort()
             raise
         self._reader = sdk.GroupSyncRead(self._port, self._ph, STATE_START, STATE_LENGTH)
-        self._error_reader = sdk.GroupSyncRead(self._port, self._ph, ADDR_HARDWARE_ERROR, 1)
+        self._error_reader = sdk.GroupSyncRead(self._port, self._ph, CHECK_START, CHECK_LENGTH)
         self._writer = sdk.GroupSyncWrite(self._port, self._ph, GOAL_START, GOAL_LENGTH)
         for servo_id in self.table.ids:
             self._reader.addParam(servo_id)
@@ -179,6 +202,9 @@ class DynamixelDevice(HandDevice):
         self.commands_sent = 0
         self.hardware_errors = np.zeros(self.n, dtype=np.int64)  #: Hardware Error Status
         self._error_candidates = np.zeros(self.n, dtype=np.int64)
+        #: Servos found with torque off while armed (restarted).
+        self.torque_lost = np.zeros(self.n, dtype=bool)
+        self._torque_off_candidates = np.zeros(self.n, dtype=bool)
         self.armed = False
         self._seq = 0
         self._cycles = 0
@@ -388,12 +414,14 @@ class DynamixelDevice(HandDevice):
 
     def _read_hardware_errors(self) -> None:
         result = self._error_reader.txRxPacket()
-        if result != self._sdk.COMM_SUCCESS or self._complete(self._error_reader, 1):
+        if result != self._sdk.COMM_SUCCESS or self._complete(self._error_reader, CHECK_LENGTH):
             self._clear_input()  # the state reads count the bus's failures
             return
         bits = np.array([self._error_reader.getData(servo_id, ADDR_HARDWARE_ERROR, 1)
                          for servo_id in self.table.ids], dtype=np.int64)
-        if np.any(bits & ~_KNOWN_BITS):
+        torque = np.array([self._error_reader.getData(servo_id, ADDR_TORQUE_ENABLE, 1)
+                           for servo_id in self.table.ids], dtype=np.int64)
+        if np.any(bits & ~_KNOWN_BITS) or np.any(torque > 1):
             # Not a Hardware Error Status: an answer of an earlier transaction (the SDK
             # matches by ID only). Dropped, like the rest of the input.
             self.read_failures += 1
@@ -403,11 +431,34 @@ class DynamixelDevice(HandDevice):
         # A bit counts when two reads in a row show it.
         self.hardware_errors = bits & self._error_candidates
         self._error_candidates = bits
+        # Torque off while armed, without a hardware error: the servo restarted (a power dip,
+        # a reboot by someone else). Also two reads in a row.
+        off = (torque == 0) & (bits == 0)
+        self.torque_lost = (off & self._torque_off_candidates) if self.armed \
+            else np.zeros_like(off)
+        self._torque_off_candidates = off
 
     def _fault(self) -> str:
         bad = np.flatnonzero(self.hardware_errors)
-        return '; '.join(f'servo {self.table.label(j)}: hardware error '
-                         f'{hardware_error_names(int(self.hardware_errors[j]))}' for j in bad)
+        faults = [f'servo {self.table.label(j)}: hardware error '
+                  f'{hardware_error_names(int(self.hardware_errors[j]))}' for j in bad]
+        faults += [f'servo {self.table.label(j)}: torque went off (the servo restarted: power '
+                   f'dip or reboot)' for j in np.flatnonzero(self.torque_lost)]
+        return '; '.join(faults)
+
+    def needs_rearm(self) -> str:
+        """Why the armed hand must be armed again (empty: it need not): a servo whose torque
+        is off (read now, from the executor's thread)."""
+        if not self.armed:
+            return ''
+        off = []
+        with self._lock:
+            for j, servo_id in enumerate(self.table.ids):
+                value, result, _ = self._ph.read1ByteTxRx(self._port, servo_id,
+                                                          ADDR_TORQUE_ENABLE)
+                if result == self._sdk.COMM_SUCCESS and value == 0:
+                    off.append(self.table.label(j))
+        return f'torque off on servo {", ".join(off)}' if off else ''
 
     def send(self, sample: JointSample, modes: np.ndarray, setpoints: np.ndarray,
              stiffness: np.ndarray, damping: np.ndarray) -> None:
@@ -469,6 +520,8 @@ class DynamixelDevice(HandDevice):
                             'Bus Watchdog')
             self._goal_current, self._goal_position = current, position
             self.armed = True
+            self.torque_lost[:] = False
+            self._torque_off_candidates[:] = False
 
     def disarm(self) -> None:
         """Torque off and Bus Watchdog cleared on every servo that answers (best effort: the

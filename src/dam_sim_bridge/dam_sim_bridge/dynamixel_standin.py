@@ -245,11 +245,19 @@ class DynamixelStandIn:
             self.cycle()
 
     def reset_world(self) -> None:
-        """Reset the world to its initial state (the servos keep their tables and goals)."""
+        """Reset the world to its initial state, the hand power-cycled: every servo restarts
+        (torque off, RAM defaults, hardware errors cleared; EEPROM kept) with its goal at the
+        posture it then stands in. A host that held its old goals would otherwise drive the
+        reset fingers back to them; the driver notices the torque gone and re-arms on
+        ``~/reset``."""
         with self.lock:
             self.world.reset()
             self._applied = None
+            for servo in self.servos:
+                servo.reboot()
             self._refresh_present()
+            for servo in self.servos:
+                servo.set('goal_position', servo.get('present_position'))
 
     # ---------------------------------------------------------------------------------------
     # Running
