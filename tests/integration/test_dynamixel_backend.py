@@ -152,6 +152,22 @@ def test_crc_errors_publish_nothing_and_end_in_error(bus) -> None:
     assert client.wait_state('ACTIVE', 5.0)
 
 
+def test_late_status_packets_are_failed_reads_then_an_error(bus) -> None:
+    """Status packets later than the SDK waits for (50 ms; it waits about 34 ms): every read
+    fails, nothing stale is published, /diagnostics says so, and after the state timeout the
+    driver is in ERROR; back in time, ~/reset resumes."""
+    client, driver = bus
+    before = int(client.diag.get('bus_read_failures', '0'))
+    assert client.set_fault('fault_status_delay_s', 0.05).results[0].successful
+    assert client.wait_state('ERROR', 10.0), driver.output()[-3000:]
+    assert int(client.diag['bus_read_failures']) > before
+    assert 'last read: sync read' in client.diag['message'], client.diag['message']
+    _no_joint_states_while_in_error(client)
+    assert client.set_fault('fault_status_delay_s', 0.0).results[0].successful
+    assert client.reset().success
+    assert client.wait_state('ACTIVE', 5.0)
+
+
 def test_an_overload_is_an_error_named_and_reset_reboots_the_servo(bus) -> None:
     client, driver = bus
     assert client.set_fault('fault_hardware_error', [6, 1 << 5]).results[0].successful
