@@ -19,6 +19,7 @@ from dam_analysis.model import (
     table_clearance,
 )
 from dam_common.config import config_from_dict
+from dam_common.errors import ConfigError
 
 
 def test_forward_kinematics_closed_form(config):
@@ -104,8 +105,13 @@ def test_first_contact_failures():
         f['base_position_m'][2] = 0.090
     with pytest.raises(NoSolutionError, match='table'):
         build_hand_model(config_from_dict(low))
-    inside = copy.deepcopy(raw)
-    for f in inside['hand']['fingers']:
-        f['base_position_m'][0] = math.copysign(0.005, f['base_position_m'][0])
+    inside = copy.deepcopy(raw)  # the object moved under finger 1
+    inside['object']['position_m'] = [0.022, 0.0]
     with pytest.raises(NoSolutionError, match='overlaps'):
         build_hand_model(config_from_dict(inside))
+    # Finger bases closer together than the object is wide: the loader refuses it first.
+    narrow = copy.deepcopy(raw)
+    for f in narrow['hand']['fingers']:
+        f['base_position_m'][0] = math.copysign(0.005, f['base_position_m'][0])
+    with pytest.raises(ConfigError, match='fingers would stand inside it'):
+        config_from_dict(narrow)

@@ -156,6 +156,7 @@ ROSDEP_KEYS = {
     'rosbags': 'python3-rosbags-pip', 'mcap': 'python3-mcap-pip',
     'dask': 'python3-dask-pip', 'distributed': 'python3-distributed-pip',
     'dynamixel_sdk': 'python3-dynamixel-sdk-pip', 'serial': 'python3-serial',
+    'zstandard': 'python3-zstandard-pip', 'lz4': 'python3-lz4-pip',
 }
 #: ROS packages imported as Python modules (their name is their key).
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'sensor_msgs', 'std_srvs',

@@ -241,30 +241,36 @@ class TrialTable:
         self._handle.write(_row_line(self.columns, row))
         self._handle.flush()
 
-    def close(self) -> None:
-        """Close the file (rows stay as written)."""
+    def _close_file(self) -> None:
         if self._handle is not None:
             self._handle.close()
             self._handle = None
 
-    def release(self) -> None:
-        """Close the file and let another sweep have the directory (idempotent)."""
-        self.close()
+    def close(self) -> None:
+        """Close the file (rows stay as written) and let another sweep have the directory
+        (idempotent)."""
+        self._close_file()
         self._lock.release()
+
+    def release(self) -> None:
+        """The same as :meth:`close`."""
+        self.close()
 
     @property
     def complete(self) -> bool:
         return len(self.rows) == len(self.specs)
 
     def finalize(self) -> None:
-        """Rewrite the table in trial order and write ``cells.csv`` (a complete sweep)."""
-        self.close()
+        """Rewrite the table in trial order and write ``cells.csv`` (a complete sweep); then
+        :meth:`close`."""
+        self._close_file()
         self._rewrite()
         if self.complete:
             cells = cell_summary(self.rows[i] for i in sorted(self.rows))
             text = _row_line(CELL_COLUMNS, dict(zip(CELL_COLUMNS, CELL_COLUMNS, strict=True)))
             text += ''.join(_row_line(CELL_COLUMNS, c) for c in cells)
             _write_atomic(self.directory / CELLS_FILE, text)
+        self.close()
 
     def __enter__(self) -> TrialTable:
         self.open()
