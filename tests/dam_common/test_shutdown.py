@@ -99,3 +99,27 @@ def test_a_signal_during_the_import_of_a_node_module_exits_quietly(tmp_path) -> 
                           text=True, timeout=30)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout == '' and proc.stderr == ''
+
+
+def test_a_signal_inside_an_import_lock_callback_is_recorded_not_raised() -> None:
+    """An exception raised in the import machinery's weak-reference callback is only reported
+    ("Exception ignored", with a traceback) and the interrupt would be lost: there the
+    handler records the request and raises nothing; elsewhere it still raises."""
+    import signal as signal_module
+
+    from dam_common.shutdown import ShutdownRequest, StartupInterrupted
+
+    namespace: dict = {}
+    exec(compile('def cb():\n    import sys\n    return sys._getframe()\n',  # noqa: S102
+                 '<frozen importlib._bootstrap>', 'exec'), namespace)
+    import_frame = namespace['cb']()
+    request = ShutdownRequest()
+    request._interrupt = True  # noqa: SLF001 - starting, as install(interrupt_startup=True)
+    request._on_signal(signal_module.SIGTERM, import_frame)  # noqa: SLF001
+    assert request.requested and request.signal_name == 'SIGTERM'
+    with pytest.raises(StartupInterrupted):
+        request.raise_if_requested()  # the start-up's next check ends it
+    other = ShutdownRequest()
+    other._interrupt = True  # noqa: SLF001
+    with pytest.raises(StartupInterrupted):
+        other._on_signal(signal_module.SIGINT, sys._getframe())  # noqa: SLF001

@@ -118,12 +118,25 @@ class ShutdownRequest:
         self._installed = True
         return True
 
-    def _on_signal(self, signum: int, _frame: FrameType | None) -> None:
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
         first = not self._event.is_set()
         self.request(signum)
-        if first and self._interrupt:
+        if first and self._interrupt and not _swallows_exceptions(frame):
             self._interrupt = False
             raise StartupInterrupted(self.signal_name)
+
+
+def _swallows_exceptions(frame: FrameType | None) -> bool:
+    """The signal interrupted code whose exceptions the interpreter only reports ("Exception
+    ignored in ...", with a traceback) instead of raising them on: a weak-reference callback of
+    the import machinery (a module lock released during a garbage collection) or a
+    finalizer. Raising there would lose the interrupt: the request is only recorded, and the
+    start-up ends at its next check (``raise_if_requested``, or the spin loop at once)."""
+    if frame is None:
+        return False
+    code = frame.f_code
+    return (code.co_name == '__del__'
+            or (code.co_name == 'cb' and code.co_filename.startswith('<frozen importlib')))
 
 
 #: The one request of this process.
