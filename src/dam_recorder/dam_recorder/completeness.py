@@ -124,9 +124,8 @@ class Missing:
     Attributes
     ----------
     kind : str
-        ``result``, ``start_event``, ``end_event``, ``final_status``, ``short``, ``stopped``,
-        ``dropped`` (see the module) or ``unwritten`` (a write error, set by
-        :mod:`~dam_recorder.episodes`).
+        ``result``, ``start_event``, ``end_event``, ``final_status``, ``short``, ``stopped``
+        or ``dropped`` (see the module).
     topic : str
         The topic it concerns.
     detail : str
