@@ -86,7 +86,8 @@ def _diagnostics(client: RosClient, key: str = 'real_time_factor') -> dict[str, 
 
     sub = client.node.create_subscription(DiagnosticArray, '/diagnostics', take, 10)
     try:
-        assert client.spin_until(lambda: len(got) >= 2, 5.0), 'no /diagnostics of the driver'
+        # (the driver's start-up included: seconds on a loaded machine)
+        assert client.spin_until(lambda: len(got) >= 2, 15.0), 'no /diagnostics of the driver'
     finally:
         client.node.destroy_subscription(sub)
     return got[-1]
