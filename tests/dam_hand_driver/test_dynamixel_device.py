@@ -11,7 +11,6 @@ import copy
 import dataclasses
 import math
 import re
-import sys
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from dynamixel_testing import fast_gil_handoff
 
 from dam_common.config import DamConfig, config_from_dict, load_config
 from dam_common.dynamixel_config import POSITION_RAD_PER_COUNT
@@ -134,15 +134,13 @@ def test_torque_is_clipped_and_the_state_converts_back(cfg: DamConfig) -> None:
 def standin(cfg: DamConfig) -> Iterator[object]:
     from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
 
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)  # the SDK polls in a busy loop; the bus shares this process
-    bus = DynamixelStandIn(cfg, sim_time=True)
-    thread = threading.Thread(target=bus.run, daemon=True)
-    thread.start()
-    yield bus
-    bus.close()
-    thread.join(2.0)
-    sys.setswitchinterval(before)
+    with fast_gil_handoff():
+        bus = DynamixelStandIn(cfg, sim_time=True)
+        thread = threading.Thread(target=bus.run, daemon=True)
+        thread.start()
+        yield bus
+        bus.close()
+        thread.join(2.0)
 
 
 def _eventually(predicate, timeout_s: float = 2.0) -> bool:

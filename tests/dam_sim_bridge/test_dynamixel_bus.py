@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-import sys
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from dynamixel_testing import fast_gil_handoff
 
 from dam_sim_bridge.dynamixel_bus import DynamixelBus
 from dam_sim_bridge.dynamixel_packets import BROADCAST_ID, Instruction, build_instruction
@@ -25,13 +25,8 @@ NUMBER = {'XM430-W350': 1020, 'XC330-M288': 1240}
 
 @pytest.fixture(autouse=True)
 def _fast_gil_handoff() -> Iterator[None]:
-    """The host (the SDK polls the port in a busy loop) and the emulated bus share this
-    process's GIL here; with the default 5 ms switch interval a sync read can outlast the SDK's
-    ~34 ms packet timeout. (In use the bus runs in a process of its own.)"""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    yield
-    sys.setswitchinterval(before)
+    with fast_gil_handoff():
+        yield
 
 class _Host:
     """The SDK's side of the line."""

@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from dynamixel_testing import fast_gil_handoff
 
 from dam_common.config import DamConfig, load_config
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
@@ -42,13 +43,8 @@ def cfg() -> DamConfig:
 
 @pytest.fixture(autouse=True)
 def _fast_gil_handoff() -> Iterator[None]:
-    """The host (the SDK polls the port in a busy loop) and the emulated bus share this
-    process's GIL here; with the default 5 ms switch interval a sync read can outlast the SDK's
-    ~34 ms packet timeout. (In use the bus runs in a process of its own.)"""
-    before = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
-    yield
-    sys.setswitchinterval(before)
+    with fast_gil_handoff():
+        yield
 
 class _Rig:
     def __init__(self, standin: DynamixelStandIn) -> None:
