@@ -173,7 +173,11 @@ def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: 
                 time.sleep(0.01)
             procs[1].terminate()
             if replaced:
-                procs[1].wait(timeout=30)
+                try:  # a graceful close waits for the trial in hand (long on a busy machine)
+                    procs[1].wait(timeout=60)
+                except subprocess.TimeoutExpired:  # then it leaves the hard way
+                    procs[1].kill()
+                    procs[1].wait(timeout=30)
                 start_worker(2)
             _out, err = proc.communicate(timeout=120)
         finally:

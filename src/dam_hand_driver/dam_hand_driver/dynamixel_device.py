@@ -78,6 +78,13 @@ _TRANSACTION_TRIES = 3
 #: (34 ms). A read the host gave up on would advance the simulated clock unseen, so its
 #: timeouts get this much more [ms] (a simulated clock does not care how long a read takes).
 _EMULATED_PACKET_MARGIN_MS = 1000.0
+#: The SDK's packet timeout without the transfer time [ms]: twice its USB latency timer
+#: (16 ms) plus 2 ms. After a failed transaction the input is drained until the line has
+#: been quiet this long (plus the margin): an answer later than the SDK waited must not be
+#: taken for the next transaction's (the SDK matches status packets by ID only).
+_QUIET_MS = 2.0 * 16.0 + 2.0
+#: A drain ends after this many quiet times even if bytes keep coming.
+_DRAIN_LIMIT = 8
 _KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
 #: Failed reads in a row after which the compliant (current) joints get zero current.
@@ -172,7 +179,9 @@ class DynamixelDevice(HandDevice):
         self.simulated = bool(simulated)
         self._clock_hint_ns = clock_hint_ns
         self._lock = threading.Lock()  # one transaction on the bus at a time
-        self._port = _port_handler(sdk, port, _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0)
+        margin_ms = _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0
+        self._port = _port_handler(sdk, port, margin_ms)
+        self._quiet_s = (_QUIET_MS + margin_ms) / 1000.0
         try:
             opened = self._port.openPort() and self._port.setBaudRate(dxl.baud_rate)
         except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError
@@ -346,7 +355,6 @@ class DynamixelDevice(HandDevice):
         self.read_failures += 1
         self.last_read_failure = why
         self._failed_in_a_row += 1
-        time.sleep(min(0.005, self.period_s))
         self._clear_input()
         if self._failed_in_a_row == LIMP_AFTER_FAILED_READS and self.armed:
             # The host law has no state to run on: a current held from an old state would
@@ -356,9 +364,22 @@ class DynamixelDevice(HandDevice):
             self._write_goals(current, self._goal_position)
 
     def _clear_input(self) -> None:
-        """Drop what the port has received (nothing if the port is gone: the reads say so)."""
+        """Drop what the port receives until the line has been quiet for one packet timeout
+        (at most :data:`_DRAIN_LIMIT` of them): answers later than the SDK waited arrive
+        during the drain, not in the next transaction. Nothing if the port is gone (the
+        reads say so)."""
+        now = time.monotonic()
+        quiet_until = now + self._quiet_s
+        give_up = now + _DRAIN_LIMIT * self._quiet_s
         try:
-            self._port.clearPort()
+            while now < quiet_until and now < give_up:
+                waiting = self._port.getBytesAvailable()
+                if waiting:
+                    self._port.readPort(waiting)
+                    quiet_until = time.monotonic() + self._quiet_s
+                else:
+                    time.sleep(0.001)
+                now = time.monotonic()
         except Exception:  # noqa: BLE001 - termios.error, OSError: a port that went away
             pass
 
