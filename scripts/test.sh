@@ -46,8 +46,8 @@ if [ "$paths_given" = true ]; then
 fi
 
 # Every test, in two phases (each prints pytest's summary line):
-# 1. the unit tests (pure cores, installed executables without DDS timing), while the
-#    system-ROS setup test (two pip installs and a build in a copy) runs beside them;
+# 1. the unit tests (pure cores, installed executables without DDS timing) on every core,
+#    while the system-ROS setup test (two pip installs and a build in a copy) runs beside them;
 # 2. the integration tests over DDS with real-time nodes, one at a time.
 system_ros=tests/integration/test_system_ros_setup.py
 # Unit tests that measure real time wait for phase 2 (the build beside phase 1 takes the CPU).
@@ -64,7 +64,10 @@ run_pytest "$system_ros" "$@" >"$system_ros_log" 2>&1 &
 system_ros_pid=$!
 deselect=()
 for t in "${realtime_unit[@]}"; do deselect+=(--deselect "$t"); done
-run_pytest "${unit[@]}" "${deselect[@]}" "$@"
+# The unit tests on every core (pytest-xdist); those that talk DDS in the test process share
+# one worker (--dist loadgroup), so they never see each other's topics.
+workers=$(nproc 2>/dev/null || echo 2)
+run_pytest -n "$workers" --dist loadgroup "${unit[@]}" "${deselect[@]}" "$@"
 unit_status=$?
 wait "$system_ros_pid"
 system_ros_status=$?

@@ -15,6 +15,9 @@ from std_msgs.msg import Int64  # noqa: E402
 
 from dam_common.intake import SubscriptionThread  # noqa: E402
 
+#: DDS in this process: one pytest-xdist worker for all of them (scripts/test.sh).
+pytestmark = pytest.mark.xdist_group('dds')
+
 
 @pytest.fixture
 def context() -> Iterator[rclpy.Context]:
