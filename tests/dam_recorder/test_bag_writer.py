@@ -1,5 +1,6 @@
 """Bags written by BagWriter: read back by two readers, metadata.yaml as Jazzy requires it,
-files split by size, by time and on request, sqlite3, and what a flush makes durable."""
+files split by time and on request (by size: test_size_limit.py), sqlite3, and what a flush
+makes durable."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from bag_readers import read_with_mcap, read_with_rosbags
 from mcap.stream_reader import StreamReader
 from rosbag2_format import metadata_problems
 
-from dam_recorder.bag_writer import MIN_SPLIT_BYTES, BagWriter
+from dam_recorder.bag_writer import BagWriter
 from dam_recorder.errors import BagError, ConfigurationError
 from dam_recorder.qos import INFINITE_NS, OfferedQos, to_rosbags_qos
 from dam_recorder.type_description import load_message_type
@@ -104,45 +105,6 @@ def test_metadata_is_version_9_with_offered_qos_and_hashes(tmp_path: Path, prefi
     assert topics['/joint_states']['topic_metadata']['offered_qos_profiles'] == []
     assert (topics['/joint_states']['message_count'], topics['/dam/status']['message_count']) \
         == (10, 5)
-
-
-def test_split_by_size_keeps_every_message_in_order(tmp_path: Path, prefixes,
-                                                    typestore) -> None:
-    writer = BagWriter(tmp_path / 'bag', compression='none', max_file_bytes=MIN_SPLIT_BYTES)
-    ids = add_topics(writer, prefixes)
-    write_messages(writer, ids, typestore, 2000)
-    writer.close()
-    assert metadata_problems(tmp_path / 'bag') == []
-    info = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())[
-        'rosbag2_bagfile_information']
-    assert len(info['files']) >= 3
-    assert info['relative_file_paths'][:2] == ['bag_0.mcap', 'bag_1.mcap']
-    for path in info['relative_file_paths'][:-1]:
-        # At the limit, plus the last message and the summary (the definitions again) with
-        # its metadata record.
-        size = (tmp_path / 'bag' / path).stat().st_size
-        assert MIN_SPLIT_BYTES <= size < MIN_SPLIT_BYTES + 8_192
-    for read in (read_with_rosbags, read_with_mcap):
-        stamps = [r.values['header']['stamp']['sec'] for r in read(tmp_path / 'bag')[
-            '/joint_states']]
-        assert stamps == list(range(2000))
-
-
-def test_compressed_files_are_split_near_the_limit(tmp_path: Path, prefixes,
-                                                   typestore) -> None:
-    """zstd chunks: the pending chunk counts at the compression ratio seen so far, so a
-    file ends near the limit, not at the compressed size of that many raw bytes."""
-    limit = 200_000
-    writer = BagWriter(tmp_path / 'bag', max_file_bytes=limit)
-    ids = add_topics(writer, prefixes)
-    write_messages(writer, ids, typestore, 20_000)
-    writer.close()
-    paths = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())[
-        'rosbag2_bagfile_information']['relative_file_paths']
-    sizes = [(tmp_path / 'bag' / p).stat().st_size for p in paths]
-    assert len(sizes) >= 3, sizes
-    for size in sizes[1:-1]:  # the first file's ratio is not known until its first chunk
-        assert 0.7 * limit <= size <= 1.3 * limit, sizes
 
 
 def test_a_split_size_below_the_minimum_is_refused(tmp_path: Path) -> None:

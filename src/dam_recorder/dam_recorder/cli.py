@@ -33,7 +33,9 @@ start time and outcome (2026_11_29-18_05_12_success), with the goal, the /check_
 outcome, the controller's configuration and the software version in its metadata.
 
 Services while recording (std_srvs/srv/Trigger): ~/pause, ~/resume, ~/split.
-SIGINT or SIGTERM closes the bag. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
+SIGINT or SIGTERM closes the bag (exit status 0). A write error (a full or read-only file
+system, the bag directory removed) is logged once, the bag closed with what is on disk and the
+recorder exits with status 74. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
 Every option is also a parameter of the node (see the README, section Recording)."""
 
 
@@ -85,7 +87,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('-b', '--max-bag-size', type=_number(int, low=MIN_SPLIT_BYTES, off=True,
                                      low_reason=', the smallest split size'),
                         metavar='BYTES',
-                        help='start a new file when the current one reaches this size, at '
+                        help='no file is larger than this once closed: a new file starts '
+                             'before a message that could take the current one over; at '
                              f'least {MIN_SPLIT_BYTES} (default: 0, no limit)')
     parser.add_argument('-d', '--max-bag-duration', type=_number(float, off=True), metavar='S',
                         help='start a new file when the current one spans this many seconds '

@@ -124,8 +124,9 @@ class Missing:
     Attributes
     ----------
     kind : str
-        ``result``, ``start_event``, ``end_event``, ``final_status``, ``short``, ``stopped``
-        or ``dropped`` (see the module).
+        ``result``, ``start_event``, ``end_event``, ``final_status``, ``short``, ``stopped``,
+        ``dropped`` (see the module) or ``unwritten`` (a write error, set by
+        :mod:`~dam_recorder.episodes`).
     topic : str
         The topic it concerns.
     detail : str

@@ -32,6 +32,13 @@ Episode metadata (``custom_data`` of ``metadata.yaml``, strings):
 ``dam_recorder.lost_messages``, ``dam_recorder.dropped_messages``, ``dam_recorder.backlog``
     The recorder's counts of this episode's messages, and its backlog while the episode was
     open (:mod:`~dam_recorder.backlog`).
+``dam_recorder.unwritten_messages``
+    After a write error: the episode's messages that are not on disk (its bag counts them).
+
+A write error in one episode's bag (:class:`~dam_recorder.errors.BagWriteError`) is raised
+once every open episode has had the message, or once every episode is closed: an episode
+whose bag failed is closed with what is on disk and keeps its ``_recording`` name when the
+file system refuses the rename.
 """
 
 from __future__ import annotations
@@ -57,7 +64,7 @@ from dam_recorder.completeness import (
     Missing,
     completeness_custom_data,
 )
-from dam_recorder.errors import ConfigurationError
+from dam_recorder.errors import BagWriteError, ConfigurationError
 
 #: ``custom_data`` keys of an episode.
 SUMMARY_KEY = 'dam_episode.summary'
@@ -203,6 +210,7 @@ class EpisodeRecorder:
         self._newest_ns = 0  # the latest stamp handed over
         #: The finished episodes, oldest first.
         self.finished: list[Closed] = []
+        self._unwritten_closed = 0  # messages the finished episodes could not write
 
     # -- topics and messages -----------------------------------------------------------------
 
@@ -235,17 +243,28 @@ class EpisodeRecorder:
             self._ring.popleft()
         if self._topics[key].latched:
             self._latched[key] = (stamp_ns, data)
+        error: BagWriteError | None = None
         for episode in self._open.values():
             if backlog_ns is not None:
                 episode.backlog.add(backlog_ns)
             if stamp_ns < episode.window_start_ns:
                 continue  # taken late (a backlog): older than the episode's pre-roll
-            if episode.close_after_ns is None:
-                episode.held.append(message)
-                while episode.held and episode.held[0][1] < stamp_ns - HOLD_BACK_NS:
-                    self._write_to(episode, *episode.held.popleft())
-            elif stamp_ns <= episode.close_after_ns:
-                self._write_to(episode, *message)
+            try:
+                if episode.close_after_ns is None:
+                    episode.held.append(message)
+                    while episode.held and episode.held[0][1] < stamp_ns - HOLD_BACK_NS:
+                        self._write_to(episode, *episode.held.popleft())
+                elif stamp_ns <= episode.close_after_ns:
+                    self._write_to(episode, *message)
+            except BagWriteError as exc:
+                error = error or exc
+        if error is not None:
+            raise error
+
+    def unwritten_count(self) -> int:
+        """Messages the episodes (finished and open) could not write (write errors)."""
+        return self._unwritten_closed + sum(sum(e.bag.unwritten.values())
+                                            for e in self._open.values())
 
     def note_lost(self, key: int, count: int) -> None:
         """The middleware reports ``count`` messages of topic ``key`` lost."""
@@ -347,8 +366,16 @@ class EpisodeRecorder:
         default: the latest stamp handed over); a goal that has not ended gets the outcome
         :data:`UNFINISHED`. Their windows end at ``taken_ns`` (a post-roll is cut short)."""
         end_ns = self._newest_ns if taken_ns is None else taken_ns
-        return [self._close(goal_id, min(end_ns, e.close_after_ns or end_ns))
-                for goal_id, e in list(self._open.items())]
+        closed: list[Closed] = []
+        error: BagWriteError | None = None
+        for goal_id, episode in list(self._open.items()):
+            try:
+                closed.append(self._close(goal_id, min(end_ns, episode.close_after_ns or end_ns)))
+            except BagWriteError as exc:
+                error = error or exc
+        if error is not None:
+            raise error
+        return closed
 
     # -- helpers -----------------------------------------------------------------------------
 
@@ -406,7 +433,11 @@ class EpisodeRecorder:
     def _close(self, goal_id: str, window_end_ns: int) -> Closed:
         """Close the episode of ``goal_id``, its window ending at ``window_end_ns`` [ns]."""
         episode = self._open.pop(goal_id)
-        self._release_held(episode)
+        error: BagWriteError | None = None
+        try:
+            self._release_held(episode)
+        except BagWriteError as exc:
+            error = exc
         got_result = episode.summary is not None
         if episode.summary is None:
             episode.summary = unfinished_summary(goal_id, episode.started_ns)
@@ -414,12 +445,27 @@ class EpisodeRecorder:
         episode.missing = tuple(episode.account.judge(
             episode.window_start_ns, window_end_ns, [t.name for t in self._topics], got_result,
             episode.lost))
-        episode.bag.close()
+        if episode.bag.failure is not None:
+            episode.missing += (Missing(
+                'unwritten', '', f'{sum(episode.bag.unwritten.values())} message(s) could not '
+                f'be written: {episode.bag.failure.describe()}'),)
+        try:
+            episode.bag.close()
+        except BagWriteError as exc:
+            error = error or exc
         name = f'{episode.stem}_{outcome.lower()}'
         final = self._free_dir(name + (INCOMPLETE_SUFFIX if episode.missing else ''), goal_id)
-        episode.bag.bag_dir.rename(final)
+        try:
+            episode.bag.bag_dir.rename(final)
+        except OSError:
+            if episode.bag.failure is None:
+                raise
+            final = episode.bag.bag_dir  # (the file system refuses: it keeps its name)
         closed = Closed(final, outcome, episode.missing)
         self.finished.append(closed)
+        self._unwritten_closed += sum(episode.bag.unwritten.values())
+        if error is not None:
+            raise error
         return closed
 
 

@@ -26,6 +26,17 @@ class BagError(DamRecorderError):
     """A bag cannot be written: the output exists, the storage cannot be opened, ..."""
 
 
+class BagWriteError(BagError):
+    """Writing a bag failed (a full or read-only file system, its directory removed, an I/O
+    error): raised once, by the call that met the error; ``failure`` says what failed
+    (:class:`~dam_recorder.write_failure.WriteFailure`). The bag is closed with what is on
+    disk by then."""
+
+    def __init__(self, message: str, failure: object) -> None:
+        super().__init__(message)
+        self.failure = failure
+
+
 class RecoveryError(DamRecorderError):
     """A bag cannot be recovered: no bag directory, no storage file, no readable record."""
 

@@ -17,7 +17,9 @@ topics : string[]
 regex, exclude : string
     Also record the topics ``regex`` matches; never those ``exclude`` matches (empty: none).
 max_bag_size : int [bytes], max_bag_duration : double [s]
-    Start a new storage file at this size or time span; 0: no limit.
+    No storage file is larger than ``max_bag_size`` once closed (a new file starts before a
+    message that could take it over, :mod:`~dam_recorder.file_size`); a new file starts at
+    this time span; 0: no limit.
 chunk_interval : double [s]
     Longest time a received message waits in memory before it is in the file.
 discovery_period : double [s]
@@ -35,6 +37,13 @@ Messages are taken serialized (``raw=True``: never deserialized), cut at their C
 (:mod:`~dam_recorder.cdr_end`) and stamped with the time the middleware received them (the
 node's clock with ``use_sim_time:=true``). Services (``std_srvs/srv/Trigger``): ``~/pause``,
 ``~/resume``, ``~/split``. SIGINT and SIGTERM close the bag (``destroy_node``).
+
+The first error writing the bag (a full or read-only file system, the bag directory removed,
+an I/O error; :mod:`~dam_recorder.write_failure`) is logged once, naming the bag, the file and
+the errno; the bag is closed with what is on disk, every message not written is counted
+(``dam_recorder.unwritten_messages``, and in the last log line) and the recorder stops by
+itself with status :data:`~dam_recorder.write_failure.WRITE_ERROR_STATUS` (74), also when a
+SIGINT or SIGTERM comes meanwhile.
 
 The recorder runs with the normal scheduling policy, never ``SCHED_FIFO``: real-time threads
 of a job that has no deadline (a recorder, like the analysis server and the controller) count
@@ -93,6 +102,7 @@ from dam_recorder.episode_messages import (
 )
 from dam_recorder.episodes import EpisodeRecorder, TopicSpec
 from dam_recorder.errors import (
+    BagWriteError,
     CdrError,
     ConfigurationError,
     DamRecorderError,
@@ -102,6 +112,7 @@ from dam_recorder.qos import OfferedQos, request_for_offers, to_rosbags_qos
 from dam_recorder.selection import DEFAULT_TOPICS, TopicSelection
 from dam_recorder.taker import SerializedTaker
 from dam_recorder.type_description import install_prefix_of, load_message_type
+from dam_recorder.write_failure import WRITE_ERROR_STATUS, WriteFailure
 
 #: Longest time [s] a stop request waits for messages still arriving (see begin_shutdown).
 DRAIN_QUIET_S = 0.1
@@ -194,6 +205,8 @@ class RecorderNode(Node):
         self._writer: BagWriter | None = None
         self._episodes: EpisodeRecorder | None = None
         self._stopped = False
+        #: The first write error of a bag (then the recorder stops, status 74).
+        self.write_failure: WriteFailure | None = None
         self._taker: SerializedTaker | None = None
         #: What the taker's thread took, for the executor's thread to write: ('message',
         #: recorded, data, info) or ('lost', recorded, count). Only the executor's thread
@@ -294,7 +307,8 @@ class RecorderNode(Node):
             'exclude': ('', _descriptor('never record the topics this regular expression '
                                         'matches')),
             'max_bag_size': (0, _descriptor(
-                f'new file at this size [bytes], at least {MIN_SPLIT_BYTES}; 0: no limit',
+                f'no file larger than this once closed [bytes], at least {MIN_SPLIT_BYTES}; '
+                '0: no limit',
                 integer_range=[IntegerRange(from_value=0, to_value=2**62, step=1)])),
             'max_bag_duration': (0.0, _descriptor(
                 'new file at this time span [s]; 0: no limit',
@@ -324,7 +338,7 @@ class RecorderNode(Node):
     # -- topics ------------------------------------------------------------------------------
 
     def _discover(self) -> None:
-        if self._stopped:
+        if self._stopped or self.write_failure is not None:
             return
         for recorded in self._recorded.values():
             one = self.count_publishers(recorded.name) == 1
@@ -347,6 +361,9 @@ class RecorderNode(Node):
                 continue  # no publisher yet: its QoS decides the subscription's
             try:
                 self._record(name, types[0], offers)
+            except BagWriteError as exc:
+                self._on_write_error(exc)
+                return
             except DamRecorderError as exc:
                 self._refuse(name, str(exc))
                 continue
@@ -459,7 +476,10 @@ class RecorderNode(Node):
             if item[0] == 'message':
                 self._releasing = releasing > 0
                 releasing -= 1
-                self._write(writer, item[1], item[2], item[3])
+                try:
+                    self._write(writer, item[1], item[2], item[3])
+                except BagWriteError as exc:
+                    self._on_write_error(exc)
             elif item[0] == 'swept':
                 self._taken_ns = item[1]
             else:
@@ -579,20 +599,40 @@ class RecorderNode(Node):
     # -- services and timers -----------------------------------------------------------------
 
     def _flush(self) -> None:
-        if self._writer is not None and not self._writer.closed:
-            self._writer.flush()
-        if self._episodes is not None and not self._stopped:
-            self._episodes.flush()
+        try:
+            if self._writer is not None and not self._writer.closed:
+                self._writer.flush()
+            if self._episodes is not None and not self._stopped:
+                self._episodes.flush()
+        except BagWriteError as exc:
+            self._on_write_error(exc)
+
+    def _on_write_error(self, exc: BagWriteError) -> None:
+        """The first write error: log it once, stop (the executor ends the node, which closes
+        what is open, and ``main`` exits with :data:`WRITE_ERROR_STATUS`). Later ones (other
+        episode bags on the same file system) are counted by their bags, not logged."""
+        if self.write_failure is not None:
+            return
+        self.write_failure = exc.failure
+        self.get_logger().error(
+            f'{exc}: recording stopped; the bag is closed with the messages on disk, every '
+            f'message not written is counted (dam_recorder.unwritten_messages); the recorder '
+            f'exits with status {WRITE_ERROR_STATUS}')
+        SHUTDOWN.request()
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
     def _on_episode_event(self, msg: Any) -> None:
-        if self._stopped:
+        if self._stopped or self.write_failure is not None:
             return
         if msg.event == msg.EVENT_STARTED:
-            path = self._episodes.started(msg.goal_id, self._now_ns(), stamp_ns(msg.header.stamp),
-                                          start_info(msg))
+            try:
+                path = self._episodes.started(msg.goal_id, self._now_ns(),
+                                              stamp_ns(msg.header.stamp), start_info(msg))
+            except BagWriteError as exc:
+                self._on_write_error(exc)
+                return
             self.get_logger().info(f'episode of goal {msg.goal_id[:8]}: recording into {path}')
         elif msg.event == msg.EVENT_ENDED:
             summary = summary_from_event(msg)
@@ -610,10 +650,13 @@ class RecorderNode(Node):
         return self._now_ns() if self._use_sim_time else self._taken_ns
 
     def _close_due_episodes(self) -> None:
-        if self._stopped:
-            return
-        for closed in self._episodes.poll(self._taken_until_ns()):
-            self._log_episode(closed)
+        if self._stopped or self.write_failure is not None:
+            return  # (after a write error the episodes are closed as the node ends)
+        try:
+            for closed in self._episodes.poll(self._taken_until_ns()):
+                self._log_episode(closed)
+        except BagWriteError as exc:
+            self._on_write_error(exc)
 
     def _log_episode(self, closed: Any) -> None:
         # 'episode OUTCOME: PATH' alone on its line: scripts read the path from it.
@@ -644,6 +687,19 @@ class RecorderNode(Node):
         return response
 
     def _split(self, response: Trigger.Response) -> Any:
+        if self.write_failure is not None:
+            response.success = False
+            response.message = f'not recording: {self.write_failure.describe()}'
+            return response
+        try:
+            return self._split_files(response)
+        except BagWriteError as exc:
+            self._on_write_error(exc)
+            response.success = False
+            response.message = f'not recording: {exc}'
+            return response
+
+    def _split_files(self, response: Trigger.Response) -> Any:
         if self._episodes is not None:
             paths = self._episodes.split()
             response.success = True
@@ -688,22 +744,40 @@ class RecorderNode(Node):
 
     def _close_bags(self) -> None:
         if self._episodes is not None:
-            for closed in self._episodes.close_all(self._taken_until_ns()):
+            before = len(self._episodes.finished)
+            try:
+                self._episodes.close_all(self._taken_until_ns())
+            except BagWriteError as exc:  # (close_all closes every episode all the same)
+                self._on_write_error(exc)
+            for closed in self._episodes.finished[before:]:
                 self._log_episode(closed)
             incomplete = sum(1 for c in self._episodes.finished if c.missing)
-            self.get_logger().info(
-                f'{len(self._episodes.finished)} episode(s) recorded in '
-                f'{self._episodes.out_dir} ({incomplete} incomplete); backlog '
-                f'{self._backlog.describe()}; dropped {self._dropped_text()}')
+            unwritten = self._episodes.unwritten_count()
+            log = self.get_logger().warning if unwritten else self.get_logger().info
+            log(f'{len(self._episodes.finished)} episode(s) recorded in '
+                f'{self._episodes.out_dir} ({incomplete} incomplete); not written '
+                f'{unwritten}; backlog {self._backlog.describe()}; dropped '
+                f'{self._dropped_text()}')
         writer, self._writer = self._writer, None
-        if writer is not None and not writer.closed:
+        if writer is None:
+            return
+        try:
             writer.close()
-            count = sum(t.message_count for t in writer.topics)
-            lost = sum(r.lost for r in self._recorded.values())
-            self.get_logger().info(
-                f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
-                f'{len(writer.files)} file(s); the middleware reported {lost} lost; dropped '
-                f'{self._dropped_text()}; backlog {self._backlog.describe()}')
+        except BagWriteError as exc:
+            self._on_write_error(exc)
+        count = sum(t.message_count for t in writer.topics)
+        lost = sum(r.lost for r in self._recorded.values())
+        unwritten = sum(writer.unwritten.values())
+        text = (f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
+                f'{len(writer.files)} file(s); not written {unwritten}; the middleware reported '
+                f'{lost} lost; dropped {self._dropped_text()}; backlog '
+                f'{self._backlog.describe()}')
+        if writer.failure is None:
+            self.get_logger().info(text)
+            return
+        where = 'metadata.yaml says so' if writer.metadata_current else (
+            'metadata.yaml could not be written: run recover on the bag')
+        self.get_logger().warning(f'{text} ({writer.failure.errno_name}; {where})')
 
     def _dropped_text(self) -> str:
         dropped = {r.name: r.dropped for r in self._recorded.values() if r.dropped}
@@ -711,10 +785,17 @@ class RecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
+    """Run the recorder; exit with :data:`WRITE_ERROR_STATUS` after a write error."""
     argv = list(sys.argv if args is None else args)
     overrides = parameter_overrides(remove_ros_args(argv)[1:])
-    run_node(lambda: RecorderNode(overrides), 'recorder', argv,
-             startup_errors=(DamRecorderError,))
+    made: list[RecorderNode] = []
+
+    def make() -> RecorderNode:
+        made.append(RecorderNode(overrides))
+        return made[-1]
+    run_node(make, 'recorder', argv, startup_errors=(DamRecorderError,))
+    if made and made[-1].write_failure is not None:
+        raise SystemExit(WRITE_ERROR_STATUS)
 
 
 if __name__ == '__main__':
