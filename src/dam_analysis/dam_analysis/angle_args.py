@@ -13,6 +13,7 @@ import argparse
 import math
 import sys
 from collections.abc import Callable
+from typing import Any
 
 
 def parse_angle(text: str, bare: str = 'rad') -> float:
@@ -77,3 +78,25 @@ def parse_angle_range(text: str) -> tuple[float, float]:
     """``'3:6'``, ``'3deg:6deg'``, ``'0.05rad:0.1rad'`` or one angle -> (min, max) [rad]; bare
     numbers are degrees (:func:`parse_range` of :func:`parse_degrees`)."""
     return parse_range(text, parse_degrees, lambda v: f'{math.degrees(v):g} deg')
+
+
+def not_negative(parse: Callable[[str], Any]) -> Callable[[str], Any]:
+    """``parse``, refusing a negative value (or range end): in a ``CheckLift`` or ``PlanLift``
+    request a negative field means "the configuration's", which a person who typed ``-1mm``
+    did not ask for; leaving the option out does that.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        What ``parse`` raises, or a value below zero.
+    """
+
+    def checked(text: str) -> Any:
+        value = parse(text)
+        if min(value if isinstance(value, tuple) else (value,)) < 0.0:
+            raise argparse.ArgumentTypeError(
+                f'{text!r} is negative (leave the option out for the configured value)')
+        return value
+
+    checked.__name__ = getattr(parse, '__name__', 'value')  # argparse names it in errors
+    return checked

@@ -25,13 +25,14 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
-from dam_analysis.angle_args import parse_angle
+from dam_analysis.angle_args import not_negative, parse_angle
 from dam_analysis.service_call import call_and_print
+from dam_common.command_line import CommandLineParser
 from dam_interfaces.srv import CheckLift
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='check_lift',
         description='Ask /check_lift whether a (k_theta, delta_theta_p) pair lifts the object.')
     parser.add_argument('--k-theta', type=float, nargs='+', default=[], metavar='N*m/rad',
@@ -42,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar='ANGLE',
                         help='position-joint displacement: one for all fingers or one per finger '
                              '(default: the server\'s configured task.delta_theta_p_deg)')
-    parser.add_argument('--friction-angle', type=parse_angle, default=None, metavar='ANGLE',
+    parser.add_argument('--friction-angle', type=not_negative(parse_angle), default=None,
+                        metavar='ANGLE',
                         help='friction angle alpha (default: the server\'s configured value)')
     parser.add_argument('--object', default='', metavar='NAME',
                         help='column object of the configuration\'s object.library (default: '

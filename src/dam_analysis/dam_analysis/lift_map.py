@@ -32,6 +32,7 @@ import numpy as np
 from dam_analysis.analysis import LiftAnalyzer, unreachable_object
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.regions import Boundaries
+from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
 from dam_common.ros_args import strip_ros_args
@@ -46,7 +47,7 @@ CSV_COLUMNS = ('alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='lift_map',
         description='Plot the lift regions on the k_theta - delta_theta_p plane (Fig. 5(b)): '
                     'sufficient condition (eq. 18) and contact stiffness model.')

@@ -27,8 +27,9 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
-from dam_analysis.angle_args import parse_angle_range, parse_range
+from dam_analysis.angle_args import not_negative, parse_angle_range, parse_range
 from dam_analysis.service_call import call_and_print
+from dam_common.command_line import CommandLineParser
 from dam_interfaces.srv import PlanLift
 
 
@@ -47,28 +48,28 @@ def parse_length(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='plan_lift',
         description='Ask /plan_lift for the (k_theta, delta_theta_p) pair that lifts the '
                     'object over ranges of friction angle, mass and position.')
-    parser.add_argument('--friction-angle', type=parse_angle_range, default=None,
+    parser.add_argument('--friction-angle', type=not_negative(parse_angle_range), default=None,
                         metavar='ANGLE[:ANGLE]',
                         help='friction angle alpha range, degrees unless suffixed (3:6, '
                              '3deg:6deg, 0.05rad:0.1rad; default: the configured one)')
-    parser.add_argument('--mass', type=parse_range, default=None, metavar='KG[:KG]',
+    parser.add_argument('--mass', type=not_negative(parse_range), default=None, metavar='KG[:KG]',
                         help='object mass range [kg] (default: the configured one)')
-    parser.add_argument('--position-tolerance', type=parse_length, default=None,
+    parser.add_argument('--position-tolerance', type=not_negative(parse_length), default=None,
                         metavar='LENGTH',
                         help="the object's position along the fingers within +-this "
                              '(default: 0, the configured position)')
-    parser.add_argument('--k-theta-max', type=float, default=None, metavar='N*m/rad',
+    parser.add_argument('--k-theta-max', type=not_negative(float), default=None, metavar='N*m/rad',
                         help='largest finger-1 stiffness to propose (default: the largest '
                              'the device accepts)')
-    parser.add_argument('--delta-theta-p', type=parse_angle_range, default=None,
+    parser.add_argument('--delta-theta-p', type=not_negative(parse_angle_range), default=None,
                         metavar='ANGLE:ANGLE',
                         help='displacement range, degrees unless suffixed (default: all the '
                              'configuration allows)')
-    parser.add_argument('--min-margin', type=float, default=None, metavar='N',
+    parser.add_argument('--min-margin', type=not_negative(float), default=None, metavar='N',
                         help='smallest worst-case margin a guaranteed pair keeps [N] '
                              '(default: 0.01)')
     parser.add_argument('--object', default='', metavar='NAME',

@@ -37,6 +37,7 @@ import numpy as np
 from dam_analysis.angle_args import parse_degrees
 from dam_analysis.errors import DamAnalysisError
 from dam_analysis.scale_study import ScaleStudy, scale_study, size_name, working_ranges
+from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
 from dam_common.ros_args import strip_ros_args
@@ -84,7 +85,7 @@ def parse_radius_range(text: str) -> np.ndarray:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='scale_map',
         description='Lift boundaries k_theta* against the object size (scale-dependent '
                     'grasp): sufficient condition (eq. 18), contact stiffness model and the '

@@ -20,6 +20,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from dam_common.command_line import CommandLineParser
 from dam_recorder.errors import DamRecorderError
 
 PROG = 'bag'
@@ -35,7 +36,7 @@ def _topics(text: str) -> list[str]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``bag`` and its subcommands."""
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog=PROG,
         description='Look into bags the recorder wrote: describe them (info), draw a grasp '
                     '(plot), write their signals as CSV (export). BAG is a bag directory '

@@ -12,6 +12,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from dam_common.command_line import CommandLineParser
 from dam_recorder.bag_writer import (
     CHUNK_INTERVAL_RANGE_S,
     COMPRESSIONS,
@@ -66,7 +67,7 @@ def _number(kind: type, *, low: float = 0.0, high: float = math.inf, off: bool =
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``recorder``."""
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='recorder', formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Record topics into a rosbag2 bag (MCAP or sqlite3) that ros2 bag info '
                     'and ros2 bag play read.', epilog=EPILOG)

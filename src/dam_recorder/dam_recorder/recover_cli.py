@@ -13,13 +13,14 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from dam_common.command_line import CommandLineParser
 from dam_recorder.errors import RecoveryError
 from dam_recorder.recovery import recover_bag
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``recover``."""
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog='recover',
         description='Make a bag whose recorder was killed, or whose files were damaged, '
                     'readable again: rewrite damaged MCAP files from every record that can be '

@@ -53,6 +53,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING
 
+from dam_common.command_line import CommandLineParser
 from dam_hand_driver.protocol import JointMode
 from dam_sim_bridge.dynamixel_bus import BusStats, DynamixelBus
 from dam_sim_bridge.dynamixel_packets import Instruction, Packet, from_le
@@ -373,7 +374,7 @@ PROG = 'dynamixel_bus'
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandLineParser(
         prog=PROG, description='Serve the simulated hand as nine Dynamixel servos on a '
         'pseudo-terminal; print "DYNAMIXEL_PORT <path>" and run until SIGINT or SIGTERM.')
     parser.add_argument('--config', metavar='FILE', help='configuration file (default: the '

@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dam_common.command_line import CommandLineParser
 from dam_hand_driver.protocol import JointMode as WireMode
 from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
@@ -309,7 +310,7 @@ def _analysis_region(analyzer, k: float, dp: float, alpha: float) -> tuple[str, 
 
 
 def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CommandLineParser(
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
                     'grid; prints outcome and ground-truth lift, optionally writes a CSV.')

@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from dam_common.command_line import CommandLineParser
 from dam_sim_bridge.errors import SweepError
 from dam_sim_bridge.sweep import (
     MAX_FRICTION_ANGLE_DEG,
@@ -54,7 +55,7 @@ CONNECT_TIMEOUT_S = 10.0
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CommandLineParser(
         prog=PROG,
         description='DAM grasps in the lockstep simulator over friction angles x k_theta x '
                     'delta_theta_p (paper Fig. 7), optionally perturbed and repeated per '

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
 from dam_sim_bridge.errors import SweepPlotError
 from dam_sim_bridge.sweep import config_digest
@@ -440,7 +441,7 @@ def plot_sweep(sweep: SweepData | str | os.PathLike[str],
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CommandLineParser(
         prog=PROG,
         description='Draw a sweep directory as the paper\'s Fig. 7: per friction angle the '
                     'trials on the delta_theta_p - k_theta plane (x failure, triangle lifted '

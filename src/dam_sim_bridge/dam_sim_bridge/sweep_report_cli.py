@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
 from dam_sim_bridge.errors import SweepPlotError
 from dam_sim_bridge.sweep_plot import (
@@ -195,7 +196,7 @@ def summary_lines(report: SweepReport) -> list[str]:
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CommandLineParser(
         prog=PROG,
         description='Write the results document of a sweep: false guarantees of the '
                     'sufficient condition, the CSM boundary against the simulated lift '

@@ -23,6 +23,8 @@ import sys
 import time
 from collections.abc import Sequence
 
+from dam_common.command_line import CommandLineParser
+
 EXIT_SUCCESS = 0
 EXIT_NO_SERVER = 1
 EXIT_REJECTED = 2
@@ -48,6 +50,14 @@ def parse_angle(text: str) -> float:
     return math.radians(value) if m.group(2) == 'deg' else value
 
 
+def _positive_angle(text: str) -> float:
+    """:func:`parse_angle`, above zero (the position joints curl inward by it)."""
+    value = parse_angle(text)
+    if value <= 0.0:
+        raise argparse.ArgumentTypeError(f'{text!r} must be a positive angle')
+    return value
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -59,12 +69,12 @@ def _positive(text: str) -> float:
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CommandLineParser(
         prog='dam_grasp', description='Run one DAM grasp on /dam_grasp and print the result.')
     p.add_argument('--k-theta', type=_positive, default=None,
                    help='finger-1 compliant-joint stiffness [N*m/rad] (default: the '
                         "controller's configured one)")
-    p.add_argument('--delta-theta-p', type=parse_angle, default=None,
+    p.add_argument('--delta-theta-p', type=_positive_angle, default=None,
                    help='position-joint displacement, e.g. 40deg or 0.7rad (plain: rad; '
                         "default: the controller's configured one)")
     p.add_argument('--cancel-after', type=_positive, default=None, metavar='S',

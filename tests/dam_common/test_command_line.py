@@ -1,0 +1,95 @@
+"""Negative values on every command line are values, judged by their own option (issue: a
+negative value was taken for an option: ``expected at least one argument``)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dam_common.command_line import CommandLineParser
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from ros_testing import installed_executable  # noqa: E402
+
+
+def _parser() -> CommandLineParser:
+    parser = CommandLineParser(prog='t')
+    parser.add_argument('--many', nargs='+', default=[])
+    parser.add_argument('--one')
+    parser.add_argument('-v', '--verbose', action='store_true')
+    sub = parser.add_subparsers(dest='command')
+    plot = sub.add_parser('plot')
+    plot.add_argument('--start')
+    return parser
+
+
+@pytest.mark.parametrize('word', ['-1', '-0.5', '-.5', '-1deg', '-1mm', '-5:12:3', '-1e-3',
+                                  '-2rad:3rad'])
+def test_a_word_of_a_minus_and_a_digit_is_a_value(word: str) -> None:
+    options = _parser().parse_args(['--one', word, '--many', '3', word, '-v'])
+    assert options.one == word and options.many == ['3', word] and options.verbose
+
+
+def test_subcommands_read_negative_values_too() -> None:
+    options = _parser().parse_args(['plot', '--start', '-3s'])
+    assert (options.command, options.start) == ('plot', '-3s')
+
+
+def test_options_are_still_options() -> None:
+    options = _parser().parse_args(['--one', 'x', '--verbose'])
+    assert options.verbose and options.one == 'x'
+    with pytest.raises(SystemExit):
+        _parser().parse_args(['--one', '--verbose'])  # --verbose is no value
+
+
+def test_an_option_that_looks_like_a_negative_value_is_refused() -> None:
+    with pytest.raises(ValueError, match="'-1' looks like a negative value"):
+        CommandLineParser().add_argument('-1')
+
+
+def _run(package: str, executable: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(installed_executable(package, executable)), *args],
+                          capture_output=True, text=True, timeout=60)
+
+
+#: (package, executable, arguments, what the error says): each negative value reaches its
+#: option, which refuses it by name (before: "expected (at least) one argument").
+REFUSED = [
+    ('dam_analysis', 'check_lift', ['--friction-angle', '-1deg'],
+     "argument --friction-angle: '-1deg' is negative (leave the option out"),
+    ('dam_analysis', 'plan_lift', ['--position-tolerance', '-1mm'],
+     "argument --position-tolerance: '-1mm' is negative"),
+    ('dam_analysis', 'plan_lift', ['--mass', '-0.03:0.05'], "argument --mass: '-0.03:0.05' is "
+     'negative'),
+    ('dam_analysis', 'plan_lift', ['--delta-theta-p', '-5deg:10deg'],
+     "argument --delta-theta-p: '-5deg:10deg' is negative"),
+    ('dam_analysis', 'scale_map', ['--radius-range', '-5:12:3'],
+     "argument --radius-range: '-5:12:3': start -5 mm must be a positive radius"),
+    ('dam_spcm_controller', 'dam_grasp', ['--delta-theta-p', '-10deg'],
+     "argument --delta-theta-p: '-10deg' must be a positive angle"),
+    ('dam_recorder', 'recorder', ['-o', 'x', '--max-bag-duration', '-1.5e1'],
+     "argument -d/--max-bag-duration: '-1.5e1' is negative"),
+]
+
+
+@pytest.mark.parametrize(('package', 'executable', 'args', 'error'), REFUSED,
+                         ids=[f'{c[1]}{c[2][0]}' for c in REFUSED])
+def test_negative_values_are_refused_by_their_option(package: str, executable: str,
+                                                     args: list[str], error: str) -> None:
+    result = _run(package, executable, *args)
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert error in result.stderr, result.stderr
+    assert 'expected' not in result.stderr, result.stderr
+
+
+def test_a_negative_displacement_reaches_check_lift_s_server() -> None:
+    """``check_lift --delta-theta-p -1deg`` is a request the server judges (the option takes
+    it): with no server, the client says so instead of refusing the argument."""
+    result = _run('dam_analysis', 'check_lift', '--delta-theta-p', '-1deg', '2deg',
+                  '--timeout', '0.2', '--service', f'/no_check_lift_{os.getpid()}')
+    assert result.returncode == 1, (result.stdout, result.stderr)
+    assert 'is not available' in result.stderr + result.stdout
