@@ -189,3 +189,10 @@ def test_header_stamps_and_diagnostic_counts_are_read(typestore) -> None:
                 ('other', {'joint_states_published': 'many', 'joint_states_last_stamp_ns': '1'})]
     assert diagnostic_counts(statuses) == [('count', ('/joint_states', 120, 77)),
                                            ('count', ('/hand/command', 5, 9))]
+
+
+def test_an_item_of_the_whole_bag_is_described_without_an_empty_topic() -> None:
+    from dam_recorder.completeness import Missing, describe
+
+    item = Missing('unwritten', '', '3 message(s) could not be written')
+    assert describe([item]) == ['3 message(s) could not be written']

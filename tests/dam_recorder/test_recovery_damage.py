@@ -195,3 +195,17 @@ def test_a_truncated_file_keeps_its_whole_chunks_and_says_what_was_cut(
     assert 'cannot be read' in problem and size > (start + end) // 2
     assert report.message_count == 80
     every_reader_sees(bag, {'/joint_states': 80, '/dam/status': 0}, tmp_path, capsys)
+
+
+def test_a_file_without_its_summary_is_rebuilt_without_losses(tmp_path: Path, prefixes,
+                                                              typestore, capsys) -> None:
+    """Cut after the last chunk (a recorder that never closed the file): every message is
+    there, and the command must not say 'with losses' (it read 'nothing lost' as a loss)."""
+    bag = chunked_bag(tmp_path, prefixes, typestore)
+    file = bag / 'bag_0.mcap'
+    end = chunk_spans(file)[-1][1]
+    file.write_bytes(file.read_bytes()[:end])
+    assert recover_main([str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert 'bag_0.mcap: 160 messages (rebuilt)' in out, out
+    assert 'with losses' not in out, out

@@ -88,3 +88,12 @@ def test_a_full_disk_is_raised_once_and_the_bag_closed_with_what_is_on_disk(
         assert indices(bag, read_with_mcap) == recorded
     recover_bag(bag)
     assert indices(bag) == recorded
+
+
+def test_the_error_line_does_not_say_the_reason_twice(tmp_path: Path) -> None:
+    from dam_recorder.write_failure import WriteFailure
+
+    same = WriteFailure(tmp_path, tmp_path / 'b_0.mcap', errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert same.describe().endswith('b_0.mcap: ENOSPC (No space left on device)'), same.describe()
+    other = WriteFailure(tmp_path, tmp_path / 'b_0.db3', errno.ENOSPC, 'SQLITE_FULL: full')
+    assert other.describe().endswith('ENOSPC (No space left on device; SQLITE_FULL: full)')

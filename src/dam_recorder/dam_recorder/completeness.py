@@ -404,5 +404,6 @@ def _judge_dropped(name: str, account: _TopicAccount, lost: int) -> list[Missing
 
 
 def describe(missing: Sequence[Missing]) -> list[str]:
-    """One line per missing item: ``topic: detail``."""
-    return [f'{m.topic}: {m.detail}' for m in missing]
+    """One line per missing item: ``topic: detail`` (``detail`` alone for an item of the whole
+    bag, without a topic)."""
+    return [f'{m.topic}: {m.detail}' if m.topic else m.detail for m in missing]

@@ -45,8 +45,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not file.rebuilt:
             state = 'intact'
         elif file.problems:
-            state = 'rebuilt, with losses' if any('lost' in p for p in file.problems) \
-                else 'rebuilt'
+            lost = [p for p in file.problems if 'lost' in p and 'nothing lost' not in p]
+            state = 'rebuilt, with losses' if lost else 'rebuilt'
         else:
             state = 'rebuilt'
         print(f'{file.path}: {file.message_count} messages ({state})')

@@ -56,8 +56,10 @@ class WriteFailure:
 
     def describe(self) -> str:
         """One sentence naming the bag, the file and the errno."""
+        reason = os.strerror(self.errno)
+        said = '' if self.detail in ('', reason) else f'; {self.detail}'
         return (f'cannot write the bag {self.bag_dir}: {self.path.name}: {self.errno_name} '
-                f'({os.strerror(self.errno)}; {self.detail})')
+                f'({reason}{said})')
 
 
 def _probe_errno(directory: Path) -> int | None:
