@@ -328,6 +328,8 @@ class HandDriverNode(Node):
         self._error_reason = ''
         self._last_sample: JointSample | None = None
         self._startup_sample: JointSample | None = None  # the newest sample of the probe
+        #: ~/reset calls begun: a sample read while one began predates the recovery.
+        self._resets = 0
         self._rejected_commands = 0
         self._last_reject_reason = ''
         #: (joint states published, header stamp of the last one [ns])
@@ -614,9 +616,12 @@ class HandDriverNode(Node):
         assert device is not None
         while self._running:
             sample, self._startup_sample = self._startup_sample, None
+            resets = self._resets
             if sample is None:
                 sample = device.receive(min(0.01, self.state_timeout_s / 4.0))
             now = time.monotonic()
+            if sample is not None and self._resets != resets:
+                continue  # read before the recovery of a ~/reset: its fault is gone
             if sample is None:
                 if self.state is not DriverState.ACTIVE:
                     continue
@@ -761,6 +766,7 @@ class HandDriverNode(Node):
             return response
         if rearm:
             self.get_logger().warning(f'~/reset while ACTIVE: {rearm}: arming again')
+        self._resets += 1
         self.device.restart_sequence()  # the device may have restarted its sequence numbers
         try:
             done = self.device.recover()

@@ -588,6 +588,11 @@ class DynamixelDevice(HandDevice):
             except HandDriverError as exc:
                 done.append(str(exc))
             self.armed = False
+            # Torque is off until arm() on purpose: a loss seen before this recovery (a read
+            # of the state thread between two of its transactions) is no fault of the hand
+            # that is about to be armed.
+            self.torque_lost[:] = False
+            self._torque_off_candidates[:] = False
             self._next_deadline = None
         return '; '.join(done)
 
