@@ -209,3 +209,27 @@ def test_a_file_without_its_summary_is_rebuilt_without_losses(tmp_path: Path, pr
     out = capsys.readouterr().out
     assert 'bag_0.mcap: 160 messages (rebuilt)' in out, out
     assert 'with losses' not in out, out
+
+
+def test_a_damaged_sqlite3_page_is_not_called_intact(tmp_path: Path, typestore, prefixes,
+                                                     capsys) -> None:
+    """Bytes changed in a page the counting queries do not read (a table of their own: the
+    message definitions) made every reader fail while recover said 'intact'."""
+    import sqlite3
+
+    bag, _counts = grasp_bag(tmp_path, typestore, prefixes, storage='sqlite3')
+    [file] = bag.glob('*.db3')
+    with sqlite3.connect(file) as conn:
+        pages = dict(conn.execute("SELECT name, rootpage FROM sqlite_master WHERE type='table'"))
+        size = conn.execute('PRAGMA page_size').fetchone()[0]
+    conn.close()
+    unread = next(n for n in ('message_definitions', 'schema', 'metadata') if n in pages)
+    start = (pages[unread] - 1) * size
+    data = bytearray(file.read_bytes())
+    for at in range(start, start + 24):  # the page header and its first cell pointers
+        data[at] ^= 0xA5
+    file.write_bytes(bytes(data))
+    assert recover_main([str(bag)]) == 1
+    captured = capsys.readouterr()
+    assert '(intact)' not in captured.out
+    assert f'recover: cannot read {file}: ' in captured.err, captured.err

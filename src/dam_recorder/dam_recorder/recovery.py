@@ -13,7 +13,8 @@ schemas (the type names and definitions) and channels (topics, offered QoS). Eac
 read record by record (:mod:`dam_recorder.mcap_salvage`), every chunk decompressed and checked;
 a file that is whole, with its summary and every chunk readable, is left as it is; any other is
 rewritten with what could be read (the same writer the recorder uses), a chunk that cannot be
-read skipped whole. A sqlite3 file is opened once (which rolls a hot journal back). Then
+read skipped whole. A sqlite3 file is opened once (which rolls a hot journal back) and checked
+whole (``PRAGMA integrity_check``): recovery stops at a damaged one, naming it. Then
 ``metadata.yaml`` is written anew from what the files hold: files, counts, times, and each
 topic's type and offered QoS from the files, its type hash computed from the stored definition
 (else kept from the old metadata when its type is the files' type); the old ``custom_data`` is
@@ -338,6 +339,12 @@ def _read_sqlite3(path: Path, topics: _Topics) -> tuple[FileReport, FileInfo]:
     try:
         conn = sqlite3.connect(path)  # read-write: rolls a hot journal back
         try:
+            # Damage the queries below would not meet (a page of a table or an index they do
+            # not read) would still stop every reader: the whole file is checked first.
+            verdict = [row[0] for row in conn.execute('PRAGMA integrity_check(5)')]
+            if verdict != ['ok']:
+                raise RecoveryError(f'cannot read {path}: the SQLite integrity check fails: '
+                                    f'{"; ".join(str(v) for v in verdict)}')
             columns = {row[1] for row in conn.execute('PRAGMA table_info(topics)')}
             hash_column = ('t.type_description_hash' if 'type_description_hash' in columns
                            else "''")
