@@ -430,3 +430,24 @@ def test_a_killed_sweep_leaves_no_stale_lock(tmp_path: Path) -> None:
     lock = SweepLock(tmp_path)
     lock.acquire()  # the kernel dropped the killed holder's lock
     lock.release()
+
+
+def test_an_object_the_analysis_cannot_answer_for_is_refused_before_any_trial(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 1 mm rod: the loader takes it, no finger reaches it; every trial failed the same way
+    and a rerun 'retried' them (exit 1). Refused at once, exit 2, the object named."""
+    import yaml
+
+    data = yaml.safe_load(CONFIG.read_text(encoding='utf-8'))
+    data['object']['library']['rod_1mm'] = {'shape': 'circle', 'radius_m': 0.001,
+                                            'length_m': 0.1, 'mass_kg': 0.002}
+    data['object']['default'] = 'rod_1mm'
+    config = tmp_path / 'dam.yaml'
+    config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    out = tmp_path / 'out'
+    assert main(['--k-theta', '10', '--delta-theta-p', '10', '--out', str(out), '--workers',
+                 '1', '--config', str(config)]) == 2
+    err = capsys.readouterr().err
+    assert "object 'rod_1mm' cannot be analysed with this hand" in err, err
+    assert 'does not reach the object' in err, err
+    assert not (out / TABLE_FILE).exists()

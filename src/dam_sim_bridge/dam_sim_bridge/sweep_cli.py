@@ -41,6 +41,7 @@ from dam_sim_bridge.sweep import (
     SweepSpec,
     TrialResult,
     TrialSpec,
+    analyzer_for,
     run_trial,
 )
 from dam_sim_bridge.sweep_axes import parse_axis
@@ -243,6 +244,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         sweep = build_sweep(args, config)
     except (SweepError, DamCommonError, OSError) as exc:
         return fail(str(exc))
+    # An object the loader takes but the analysis cannot (a finger that never reaches it)
+    # fails every trial the same way: refused before anything runs, naming the object.
+    from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415 - slow import
+
+    try:
+        analyzer_for(config)
+    except DamAnalysisError as exc:
+        return fail(f'object {config.object.name!r} cannot be analysed with this hand, so no '
+                    f'trial can run: {exc}')
     client = None
     if args.scheduler:  # before any file is written: a wrong address leaves nothing behind
         try:
