@@ -219,6 +219,7 @@ class RecorderNode(Node):
         self._no_clock = False
         self._before_clock = 0
         self._releasing = False  # writing the messages held for the first /clock
+        self._to_release = 0  # of those, how many are still to be written
         #: Topics found by the first discovery: the recording begins with them. A topic found
         #: later appeared while recording, and what it published before it was found is
         #: missing (counted: :meth:`_follow_sequence`).
@@ -456,6 +457,7 @@ class RecorderNode(Node):
             if self.get_clock().now().nanoseconds > 0:
                 self._clock_started = True
                 self._before_clock = held
+                self._to_release = held
                 if held:
                     self.get_logger().info(
                         f'{held} message(s) arrived before the first /clock: written now, '
@@ -470,12 +472,11 @@ class RecorderNode(Node):
             else:
                 return  # held until the clock runs
         writer = self._writer if self._episodes is None else self._episodes
-        releasing = self._before_clock if self._releasing else 0
         while inbox and not self._stopped:
             item = inbox.popleft()
             if item[0] == 'message':
-                self._releasing = releasing > 0
-                releasing -= 1
+                self._releasing = self._to_release > 0
+                self._to_release = max(self._to_release - 1, 0)
                 try:
                     self._write(writer, item[1], item[2], item[3])
                 except BagWriteError as exc:
