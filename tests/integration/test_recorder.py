@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from dam_recorder.recorder_node import STARTUP_DISCOVERY_S
 from ros_testing import (
     RosClient,
     fixture_command,
@@ -339,7 +340,9 @@ def test_a_topic_that_appears_late_counts_what_it_sent_before_it_was_found(
         wait_for(rec, f'recording {bag}')
         client = RosClient()
         try:
-            client.spin_until(lambda: False, 1.5)  # the recording has begun without it
+            # The recording has begun without it (the topics found in the first
+            # STARTUP_DISCOVERY_S were there when it began).
+            client.spin_until(lambda: False, STARTUP_DISCOVERY_S + 0.5)
             pub = client.node.create_publisher(Int64, '/dam_test_late', 1000)
             for i in range(1, sent + 1):  # at once, 200 Hz: nobody listens yet
                 pub.publish(Int64(data=i))
@@ -356,6 +359,38 @@ def test_a_topic_that_appears_late_counts_what_it_sent_before_it_was_found(
     assert missed.get('/dam_test_late', 0) > 0, (missed, log[-1500:])
     assert values == list(range(missed['/dam_test_late'] + 1, sent + 1)), values[:5]
     assert 'appeared while recording' in log and 'not in the bag' in log
+
+
+def test_a_topic_there_before_the_recording_counts_nothing_before_it(tmp_path: Path) -> None:
+    """A publisher that runs before the recorder starts: what it sent before the start was
+    never asked for, however long discovery takes on a busy machine (it was counted as sent
+    before the subscription when the first discovery had not found it yet)."""
+    from std_msgs.msg import Int64
+
+    bag = tmp_path / 'there'
+    client = RosClient()
+    try:
+        pub = client.node.create_publisher(Int64, '/dam_test_there', 1000)
+        count = 0
+
+        def publish_for(seconds: float) -> None:
+            nonlocal count
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                count += 1
+                pub.publish(Int64(data=count))
+                client.spin_until(lambda: False, 0.005)
+
+        publish_for(0.1)
+        with node_process([RECORDER, '-o', str(bag), '/dam_test_there']) as rec:
+            publish_for(STARTUP_DISCOVERY_S + 2.0)  # the recorder starts meanwhile
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+    finally:
+        client.close()
+    custom = metadata(bag)['custom_data']
+    assert json.loads(custom['dam_recorder.before_subscription_messages']) == {}, log[-1500:]
+    assert 'appeared while recording' not in log
 
 
 @pytest.mark.parametrize('clock', [True, False])

@@ -124,6 +124,11 @@ WRITE_PERIOD_S = 0.02
 MAX_ALIGNMENT_PADDING = 3
 #: A message handed to the bag longer than this after its receipt is logged (throttled) [ns].
 BACKLOG_WARNING_NS = 1_000_000_000
+#: Topics found this long after the recorder started [s] were there when it began: DDS
+#: discovery of the publishers already running takes a while (seconds on a loaded machine),
+#: and what they sent before the start was never asked for. Later ones appeared while
+#: recording (their messages before the subscription are counted).
+STARTUP_DISCOVERY_S = 3.0
 #: The types whose messages an episode reads facts from (:mod:`dam_recorder.completeness`).
 FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
               EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
@@ -188,6 +193,8 @@ class _Recorded:
     #: publisher (rclpy does not say which publisher sent a message).
     one_publisher: bool = False
     last_sequence: int | None = None
+    #: A sequence number of the topic was seen.
+    followed: bool = False
     #: What an episode reads from a message (None: nothing).
     facts: Any = None
 
@@ -220,10 +227,11 @@ class RecorderNode(Node):
         self._before_clock = 0
         self._releasing = False  # writing the messages held for the first /clock
         self._to_release = 0  # of those, how many are still to be written
-        #: Topics found by the first discovery: the recording begins with them. A topic found
-        #: later appeared while recording, and what it published before it was found is
-        #: missing (counted: :meth:`_follow_sequence`).
-        self._found_first: set[str] | None = None
+        #: Topics found in the first :data:`STARTUP_DISCOVERY_S`: the recording begins with
+        #: them. A topic found later appeared while recording, and what it published before
+        #: it was found is missing (counted: :meth:`_follow_sequence`).
+        self._found_first: set[str] = set()
+        self._started_at = time.monotonic()
         self._refused: set[str] = set()
         self._paused = False
         self._last_message = time.monotonic()
@@ -347,9 +355,8 @@ class RecorderNode(Node):
                 recorded.last_sequence = None  # a new sequence to follow
             recorded.one_publisher = one
         topics = self.get_topic_names_and_types()
-        first = self._found_first is None
-        if first:
-            self._found_first = {name for name, _types in topics}
+        if time.monotonic() - self._started_at < STARTUP_DISCOVERY_S:
+            self._found_first.update(name for name, _types in topics)
         for name, types in topics:
             if name in self._recorded or name in self._refused \
                     or not self._selection.selects(name):
@@ -368,7 +375,7 @@ class RecorderNode(Node):
             except DamRecorderError as exc:
                 self._refuse(name, str(exc))
                 continue
-            self._recorded[name].appeared_late = name not in (self._found_first or set())
+            self._recorded[name].appeared_late = name not in self._found_first
 
     def _refuse(self, name: str, reason: str) -> None:
         self._refused.add(name)
@@ -540,9 +547,11 @@ class RecorderNode(Node):
         if not sequence:
             return
         last, recorded.last_sequence = recorded.last_sequence, sequence
+        first, recorded.followed = not recorded.followed, True
         if last is None:
-            if recorded.appeared_late and recorded.one_publisher and sequence > 1 \
-                    and not recorded.before_subscription:
+            # Only the topic's first message tells what came before the subscription: a
+            # sequence followed anew (a second publisher came and went) does not.
+            if first and recorded.appeared_late and recorded.one_publisher and sequence > 1:
                 # Published before the topic was found and subscribed to: a volatile topic
                 # keeps nothing for a late subscriber.
                 recorded.before_subscription = sequence - 1
