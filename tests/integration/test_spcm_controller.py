@@ -634,10 +634,13 @@ def test_a_controller_stopped_mid_grasp_aborts_the_goal_for_its_client(signum: s
 
 
 
-def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path) -> None:
+@pytest.mark.parametrize('server', [True, False], ids=['check_lift_up', 'check_lift_down'])
+def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path,
+                                                              server: bool) -> None:
     """An object the loader takes but the analysis cannot answer for (a 2 mm rod: the distal
     links reach no first contact with it) gets no grasp, whatever ``require_lift_guarantee``
-    says: ABORTED at once with the analysis' reason, and the hand is never commanded."""
+    says: ABORTED at once with the analysis' reason, and the hand is never commanded; also
+    when /check_lift is not there to say so (the controller went on after its timeout)."""
     import yaml
     from action_msgs.msg import GoalStatus
 
@@ -653,12 +656,13 @@ def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path) ->
                                           os.environ.get('PYTHONPATH', '')])}
     with ExitStack() as es:
         es.enter_context(node_process(fixture_command('spcm_plant_node.py'), env))
-        es.enter_context(node_process(
-            [str(installed_executable('dam_analysis', 'check_lift_server'))], env))
+        if server:
+            es.enter_context(node_process(
+                [str(installed_executable('dam_analysis', 'check_lift_server'))], env))
         ctl = es.enter_context(node_process(controller_command('-p', 'object:=thin_rod'), env))
         h = Harness()
         es.callback(h.close)
-        h.wait_ready()
+        h.wait_ready(check_lift=server)
         # The controller holds the posture it finds with one command at its first joint
         # state (on a loaded machine after the harness saw its own): that one is not a grasp.
         assert h.ros.spin_until(lambda: len(h.commands) > 0, 30.0), 'no holding command'
@@ -673,6 +677,7 @@ def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path) ->
         assert 'APPROACH' not in h.phases()
         assert len(h.commands) == n_commands, 'the hand was commanded'
         assert ctl.alive(), ctl.output()
+        assert 'every grasp goal will be refused' in ctl.output()
 
 
 if __name__ == '__main__':  # pragma: no cover

@@ -76,8 +76,13 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from dam_analysis.analysis import check_delta_theta_p, check_k_theta
-from dam_analysis.errors import DamAnalysisError
+from dam_analysis.analysis import (
+    LiftAnalyzer,
+    check_delta_theta_p,
+    check_k_theta,
+    unreachable_object,
+)
+from dam_analysis.errors import DamAnalysisError, NoSolutionError
 from dam_common.clock import create_steady_timer
 from dam_common.config import load_config
 from dam_common.echo import brief_repr, brief_text
@@ -163,6 +168,14 @@ class SpcmControllerNode(Node):
         #: Simulated time: the grasp runs on the stamps of /joint_states (fixed at start-up).
         self._sim_time = bool(self.get_parameter('use_sim_time').value)
         self._config = declare_object(self, load_config(config_file or None))
+        #: Why the analysis cannot answer for the object ('' when it can): then every goal is
+        #: refused, also when /check_lift is not there to say so (the object is fixed at
+        #: start-up; building the analysis takes a few tenths of a second).
+        self._unanalysable = ''
+        try:
+            LiftAnalyzer(self._config)
+        except NoSolutionError as exc:
+            self._unanalysable = unreachable_object(self._config, exc)
         self._base_params = SequenceParams.from_config(self._config)
         self._layout = self._base_params.layout
         self._geometry = HandGeometry.from_config(self._config)
@@ -264,6 +277,9 @@ class SpcmControllerNode(Node):
                                    f'{obj.name} ({obj.section.describe()}); joints '
                                    f'{list(self._layout.joint_names)}; '
                                    f'{"simulated" if self._sim_time else "steady"} time')
+            if self._unanalysable:
+                self.get_logger().warning(f'{self._unanalysable}: every grasp goal will be '
+                                          f'refused')
         except BaseException:  # e.g. a stop request: the node is not handed out to stop it
             self._intake.stop()
             raise
@@ -812,6 +828,10 @@ class SpcmControllerNode(Node):
         self._publish_status()
         feedback = DamGrasp.Feedback()
         feedback.phase = 'CHECK_LIFT'
+        if self._unanalysable:
+            return self._finish(goal_handle, 'abort', aborted,
+                                f'the analysis cannot answer for this grasp, so it is not '
+                                f'attempted: {self._unanalysable}', t0)
         answer = await self._ask_check_lift(k, dp, goal_handle)
         self._episodes.checked(goal_handle.goal_id.uuid, answer)
         if goal_handle.is_cancel_requested:
