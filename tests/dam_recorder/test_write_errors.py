@@ -97,3 +97,18 @@ def test_the_error_line_does_not_say_the_reason_twice(tmp_path: Path) -> None:
     assert same.describe().endswith('b_0.mcap: ENOSPC (No space left on device)'), same.describe()
     other = WriteFailure(tmp_path, tmp_path / 'b_0.db3', errno.ENOSPC, 'SQLITE_FULL: full')
     assert other.describe().endswith('ENOSPC (No space left on device; SQLITE_FULL: full)')
+
+
+def test_a_write_after_the_file_was_released_is_a_write_error(tmp_path: Path) -> None:
+    """A write that reaches a stream already released is an OSError (so the writer ends the
+    recording as for any write error), not a ValueError that only a generic handler sees."""
+    from dam_recorder.storage_stream import StorageStream
+
+    path = tmp_path / 'b_0.mcap'
+    stream = StorageStream(path, os.open(path, os.O_WRONLY | os.O_CREAT), 0)
+    stream.write(b'abc')
+    stream.release()
+    stream.write(b'def')
+    with pytest.raises(OSError) as raised:
+        stream.flush()
+    assert raised.value.errno == errno.EBADF and raised.value.filename == str(path)

@@ -14,6 +14,7 @@ no free space).
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -69,9 +70,16 @@ class StorageStream:
         return self.durable + len(self._buffer)
 
     def fileno(self) -> int:
-        """The file descriptor."""
+        """The file descriptor.
+
+        Raises
+        ------
+        OSError
+            ``EBADF`` once it was released: a write after the file was closed is a write
+            error like the others (the recorder stops, counts what it could not write).
+        """
         if self._fd is None:
-            raise ValueError(f'{self.path} is closed')
+            raise OSError(errno.EBADF, f'{self.path.name} was already closed', str(self.path))
         return self._fd
 
     def flush(self) -> None:
