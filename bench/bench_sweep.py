@@ -33,12 +33,12 @@ from pathlib import Path
 from ros_testing import installed_executable
 
 #: The grid of the ``--grid`` measurement (480 trials).
-GRID_ARGS = ('--friction-angles', '5', '30', '--k-theta', '0.05:20:20:log',
-             '--delta-theta-p', '5:60:12')
+GRID_ARGS = ('--friction-angles', '5deg', '30deg', '--k-theta', '0.05:20:20:log',
+             '--delta-theta-p', '5deg:60deg:12')
 GRID_TRIALS = 2 * 20 * 12
 #: A part of it for the parallel efficiency, run with one and with two workers (96 trials).
-EFFICIENCY_ARGS = ('--friction-angles', '5', '30', '--k-theta', '0.05:20:6:log',
-                   '--delta-theta-p', '5:60:8')
+EFFICIENCY_ARGS = ('--friction-angles', '5deg', '30deg', '--k-theta', '0.05:20:6:log',
+                   '--delta-theta-p', '5deg:60deg:8')
 EFFICIENCY_TRIALS = 2 * 6 * 8
 
 

@@ -25,6 +25,6 @@ set -u
 cd "$REPO_ROOT"
 mkdir -p "$(dirname "$SWEEP_DIR")"
 bin=ros2_ws/install/dam_sim_bridge/lib/dam_sim_bridge
-"$bin/sweep" --friction-angles 5 30 --k-theta 0.05:20:20:log --delta-theta-p 5:60:12 \
+"$bin/sweep" --friction-angles 5deg 30deg --k-theta 0.05:20:20:log --delta-theta-p 5deg:60deg:12 \
   --config config/dam.yaml --out "$SWEEP_DIR" "$@"
 "$bin/sweep_report" "$SWEEP_DIR" -o "$RESULTS" --config config/dam.yaml

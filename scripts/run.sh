@@ -62,16 +62,8 @@ set +u
 source "$REPO_ROOT/scripts/env.sh"
 set -u
 
-# A name outside the library is refused here, before anything starts.
-DAM_RUN_OBJECT=$object python -c '
-import os, sys
-from dam_common.config import load_config
-from dam_common.errors import ConfigError
-try:
-    load_config().with_object(os.environ["DAM_RUN_OBJECT"])
-except ConfigError as exc:
-    sys.exit(f"run.sh: --object: {exc}")' || exit 2
-
+# A name outside the library, or a pair the controller would refuse, is refused here, before
+# anything starts. A bare angle is radians, as in every command (dam_common.quantities).
 if [ -z "$k_theta" ] || [ -z "$delta_theta_p" ]; then
   read -r cfg_k cfg_dp < <(python -c '
 import math
@@ -81,6 +73,26 @@ print(task.k_theta_nm_per_rad, repr(math.degrees(task.delta_theta_p_rad)) + "deg
   k_theta=${k_theta:-$cfg_k}
   delta_theta_p=${delta_theta_p:-$cfg_dp}
 fi
+DAM_RUN_OBJECT=$object DAM_RUN_K=$k_theta DAM_RUN_DP=$delta_theta_p python -c '
+import argparse, os, sys
+from dam_common.config import load_config
+from dam_common.errors import ConfigError
+from dam_common.quantities import ANGLE, argument, number_argument
+try:
+    config = load_config().with_object(os.environ["DAM_RUN_OBJECT"])
+except ConfigError as exc:
+    sys.exit(f"run.sh: --object: {exc}")
+dp_max = config.task.delta_theta_p_max_rad
+for option, parse, text in (
+        ("--k-theta", number_argument(low=0.0, unit="N*m/rad"), os.environ["DAM_RUN_K"]),
+        ("--delta-theta-p", argument(ANGLE, low=0.0, low_inclusive=False, high=dp_max),
+         os.environ["DAM_RUN_DP"])):
+    try:
+        value = parse(text)
+    except argparse.ArgumentTypeError as exc:
+        sys.exit(f"run.sh: {option}: {exc}")
+    if option == "--k-theta" and value <= 0.0:
+        sys.exit(f"run.sh: --k-theta: {text!r} must be a positive stiffness [N*m/rad]")' || exit 2
 
 bringup_args=(--backend "$backend" ${params[@]+"${params[@]}"})
 [ -z "$port" ] || bringup_args+=(--port "$port")

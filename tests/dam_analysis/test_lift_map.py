@@ -42,7 +42,7 @@ def installed_run(tmp_path_factory):
     exe = installed_executable('dam_analysis', 'lift_map')
     assert exe.is_file(), f'{exe} missing: build the workspace with scripts/setup.sh'
     proc = subprocess.run(
-        [str(exe), '--friction-angles', *[f'{a:g}' for a in ALPHAS_DEG],
+        [str(exe), '--friction-angles', *[f'{a:g}deg' for a in ALPHAS_DEG],
          '--n-delta-theta-p', str(N_DP), '--out', str(out)],
         capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
@@ -117,8 +117,8 @@ def test_alpha_30_sufficient_region_empty_csm_not(installed_run, analyzer):
 
 def test_main_in_process_with_explicit_csv_and_range(tmp_path, analyzer):
     png, table_path = tmp_path / 'five.png', tmp_path / 'table.csv'
-    code = lift_map.main(['--friction-angles', '5', '--n-delta-theta-p', '5',
-                          '--delta-theta-p-max', '20', '--k-max', '12', '--out', str(png),
+    code = lift_map.main(['--friction-angles', '5deg', '--n-delta-theta-p', '5',
+                          '--delta-theta-p-max', '20deg', '--k-max', '12', '--out', str(png),
                           '--csv', str(table_path)])
     assert code == 0
     _assert_png(png)
@@ -131,13 +131,15 @@ def test_main_in_process_with_explicit_csv_and_range(tmp_path, analyzer):
 
 
 @pytest.mark.parametrize(('argv', 'needle'), [
-    (['--friction-angles', '95'], '95'),
-    (['--friction-angles', '90'], '90'),
-    (['--friction-angles', '-1'], '-1'),
+    (['--friction-angles', '95deg'], '95'),
+    (['--friction-angles', '90deg'], '90'),
+    (['--friction-angles', '-1deg'], '-1'),
     ([], '--friction-angles'),
-    (['--friction-angles', '5', '--n-delta-theta-p', '1'], '1'),
-    (['--friction-angles', '5', '--delta-theta-p-max', '80'], '80'),
-    (['--friction-angles', '5', '--k-max', '0'], '--k-max'),
+    (['--friction-angles', '5deg', '--n-delta-theta-p', '1'], '1'),
+    (['--friction-angles', '5deg', '--delta-theta-p-max', '80deg'], '80'),
+    (['--friction-angles', '5deg', '--k-max', '0'], '--k-max'),
+    (['--friction-angles', '5'], 'did you mean 5deg?'),
+    (['--friction-angles', '5deg', '--delta-theta-p-max', '20'], 'did you mean 20deg?'),
 ])
 def test_bad_arguments_exit_2_naming_the_value(argv, needle, tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
@@ -150,7 +152,7 @@ def test_bad_arguments_exit_2_naming_the_value(argv, needle, tmp_path, capsys):
 
 def test_bad_angle_via_installed_executable_exits_2():
     proc = subprocess.run([str(installed_executable('dam_analysis', 'lift_map')),
-                           '--friction-angles', '1', '91.5'],
+                           '--friction-angles', '1deg', '91.5deg'],
                           capture_output=True, text=True, timeout=30)
     assert proc.returncode == 2
     assert '91.5 deg' in proc.stderr

@@ -116,13 +116,15 @@ def test_bad_input_is_refused_with_the_value(config) -> None:
 
 
 def test_radius_ranges() -> None:
-    np.testing.assert_allclose(parse_radius_range('3:20:18'), np.arange(3, 21) * 1e-3)
-    np.testing.assert_allclose(parse_radius_range('7:7:1'), [7e-3])
+    np.testing.assert_allclose(parse_radius_range('3mm:20mm:18'), np.arange(3, 21) * 1e-3)
+    np.testing.assert_allclose(parse_radius_range('7mm:0.007:1'), [7e-3])
+    np.testing.assert_allclose(parse_radius_range('0.003:0.02:18'), np.arange(3, 21) * 1e-3)
     import argparse
-    for bad, words in (('3:20', 'start:stop:count'), ('a:2:3', 'must be numbers'),
-                       ('3:20:x', 'not a whole number'), ('0:20:3', 'positive radius'),
-                       ('3:nan:3', 'positive radius'), ('20:3:3', 'below start'),
-                       ('3:4:0', 'must be in'), ('3:4:1', 'start == stop')):
+    for bad, words in (('3mm:20mm', 'START:STOP:COUNT'), ('a:2mm:3', 'is not a length'),
+                       ('3mm:20mm:x', 'not a whole number'), ('0:20mm:3', 'must be above 0'),
+                       ('3mm:nan:3', 'not a finite length'), ('20mm:3mm:3', 'below START'),
+                       ('3mm:4mm:0', 'must be in'), ('3mm:4mm:1', 'START == STOP'),
+                       ('3:20:18', 'did you mean 3mm?')):
         with pytest.raises(argparse.ArgumentTypeError, match=words):
             parse_radius_range(bad)
 
@@ -130,8 +132,8 @@ def test_radius_ranges() -> None:
 def test_the_command_writes_the_table_the_picture_and_the_summary(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / 'scale.png'
-    assert main(['--radius-range', '2:14:4', '--delta-theta-p', '10', '20',
-                 '--friction-angle', '5', '--out', str(out),
+    assert main(['--radius-range', '2mm:14mm:4', '--delta-theta-p', '10deg', '20deg',
+                 '--friction-angle', '5deg', '--out', str(out),
                  '--config', str(REPO_ROOT / 'config' / 'dam.yaml')]) == 0
     printed = capsys.readouterr().out
     assert out.stat().st_size > 20_000
@@ -149,14 +151,14 @@ def test_angles_take_units_and_a_missing_directory_is_refused_before_the_work(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     config = str(REPO_ROOT / 'config' / 'dam.yaml')
     out = tmp_path / 'a.png'
-    assert main(['--radius-range', '10:10:1', '--delta-theta-p', '0.17453292519943295rad',
+    assert main(['--radius-range', '10mm:10mm:1', '--delta-theta-p', '0.17453292519943295',
                  '--friction-angle', '5deg', '--out', str(out), '--config', config]) == 0
     with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
         [row] = list(csv.DictReader(stream))
     assert row['delta_theta_p_deg'] == '10' and row['k_theta_sufficient'] != ''
     capsys.readouterr()
     with pytest.raises(SystemExit) as exit_info:
-        main(['--radius-range', '3:20:18', '--delta-theta-p', '10',
+        main(['--radius-range', '3mm:20mm:18', '--delta-theta-p', '10deg',
               '--out', str(tmp_path / 'nowhere' / 'b.png'), '--config', config])
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
@@ -164,9 +166,10 @@ def test_angles_take_units_and_a_missing_directory_is_refused_before_the_work(
 
 
 @pytest.mark.parametrize(('args', 'words'), [
-    (['--radius-range', '3:1:2', '--delta-theta-p', '10'], 'below start'),
-    (['--radius-range', '3:5:2', '--delta-theta-p', '80'], 'delta_theta_p: 80 deg'),
-    (['--radius-range', '3:5:2'], 'the following arguments are required: --delta-theta-p'),
+    (['--radius-range', '3mm:1mm:2', '--delta-theta-p', '10deg'], 'below START'),
+    (['--radius-range', '3mm:5mm:2', '--delta-theta-p', '80deg'], 'delta_theta_p: 80 deg'),
+    (['--radius-range', '3mm:5mm:2'], 'the following arguments are required: --delta-theta-p'),
+    (['--radius-range', '3mm:5mm:2', '--delta-theta-p', '10'], 'did you mean 10deg?'),
 ])
 def test_bad_arguments_exit_2_with_one_line(args: list[str], words: str,
                                             capsys: pytest.CaptureFixture[str]) -> None:
@@ -210,13 +213,13 @@ def test_another_column_is_scaled_uniformly_by_its_half_height(config) -> None:
 def test_the_command_scales_a_named_object(tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / 'pencil.png'
-    assert main(['--object', 'hex_pencil', '--radius-range', '3:9:3', '--delta-theta-p', '10',
-                 '--out', str(out)]) == 0
+    assert main(['--object', 'hex_pencil', '--radius-range', '3mm:9mm:3', '--delta-theta-p',
+                 '10deg', '--out', str(out)]) == 0
     printed = capsys.readouterr().out
     with open(out.with_suffix('.csv'), encoding='utf-8') as stream:
         rows = list(csv.DictReader(stream))
     assert [float(r['half_height_mm']) for r in rows] == [3.0, 6.0, 9.0]
     assert 'guaranteed (eq. 18) at 9 mm' in printed, printed
-    assert main(['--object', 'pencil', '--radius-range', '3:9:3', '--delta-theta-p', '10',
-                 '--out', str(out)]) == 2
+    assert main(['--object', 'pencil', '--radius-range', '3mm:9mm:3', '--delta-theta-p',
+                 '10deg', '--out', str(out)]) == 2
     assert "'pencil' is not in the object library" in capsys.readouterr().err

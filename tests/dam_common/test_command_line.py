@@ -60,17 +60,17 @@ def _run(package: str, executable: str, *args: str) -> subprocess.CompletedProce
 #: option, which refuses it by name (before: "expected (at least) one argument").
 REFUSED = [
     ('dam_analysis', 'check_lift', ['--friction-angle', '-1deg'],
-     "argument --friction-angle: '-1deg' is negative (leave the option out"),
+     "argument --friction-angle: '-1deg': -1 deg must be at least 0 deg (leave the option out"),
     ('dam_analysis', 'plan_lift', ['--position-tolerance', '-1mm'],
-     "argument --position-tolerance: '-1mm' is negative"),
-    ('dam_analysis', 'plan_lift', ['--mass', '-0.03:0.05'], "argument --mass: '-0.03:0.05' is "
-     'negative'),
+     "argument --position-tolerance: '-1mm': -1 mm must be at least 0 mm (leave"),
+    ('dam_analysis', 'plan_lift', ['--mass', '-0.03:0.05'],
+     "argument --mass: '-0.03:0.05': -30 g must be at least 0 g (leave"),
     ('dam_analysis', 'plan_lift', ['--delta-theta-p', '-5deg:10deg'],
-     "argument --delta-theta-p: '-5deg:10deg' is negative"),
-    ('dam_analysis', 'scale_map', ['--radius-range', '-5:12:3'],
-     "argument --radius-range: '-5:12:3': start -5 mm must be a positive radius"),
+     "argument --delta-theta-p: '-5deg:10deg': -5 deg must be at least 0 deg"),
+    ('dam_analysis', 'scale_map', ['--radius-range', '-5mm:12mm:3', '--delta-theta-p', '5deg'],
+     "argument --radius-range: '-5mm:12mm:3': -5 mm must be above 0 mm"),
     ('dam_spcm_controller', 'dam_grasp', ['--delta-theta-p', '-10deg'],
-     "argument --delta-theta-p: '-10deg' must be a positive angle"),
+     "argument --delta-theta-p: '-10deg': -10 deg must be above 0 deg"),
     ('dam_recorder', 'recorder', ['-o', 'x', '--max-bag-duration', '-1.5e1'],
      "argument -d/--max-bag-duration: '-1.5e1' is negative"),
 ]

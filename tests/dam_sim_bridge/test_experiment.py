@@ -114,12 +114,12 @@ def test_bad_arguments(cfg: DamConfig) -> None:
         run_experiment(cfg, 1.0, DP, latency_cycles=0)
     with pytest.raises(ValueError, match='max_time'):
         run_experiment(cfg, 1.0, DP, max_time=math.nan)
-    assert main(['--k-theta', '-1', '--delta-theta-p', '10']) == 2
+    assert main(['--k-theta', '-1', '--delta-theta-p', '10deg']) == 2
 
 
 def test_command_line_writes_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / 'grid.csv'
-    assert main(['--k-theta', '0.5', '--delta-theta-p', '10', '--max-time', '3',
+    assert main(['--k-theta', '0.5', '--delta-theta-p', '10deg', '--max-time', '3',
                  '--out', str(out)]) == 0
     text = out.read_text(encoding='utf-8').splitlines()
     assert text[0].startswith('alpha_deg,k_theta_nm_per_rad,delta_theta_p_deg,phase')

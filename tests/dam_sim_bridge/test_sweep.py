@@ -76,6 +76,21 @@ def test_bad_ranges_are_refused_with_the_field_and_the_value(token: str,
         assert word in message, message
 
 
+def test_angle_axes_take_units_and_a_bare_number_is_radians() -> None:
+    from dam_common.quantities import ANGLE
+
+    degree = math.pi / 180.0
+    assert parse_axis('--delta-theta-p', ['5deg:60deg:12'], lower=0.0, quantity=ANGLE,
+                      unit_si=degree) == tuple(range(5, 65, 5))  # no float noise
+    assert parse_axis('--delta-theta-p', ['0.5', '10deg'], lower=0.0, quantity=ANGLE,
+                      unit_si=degree) == pytest.approx((math.degrees(0.5), 10.0))
+    with pytest.raises(SweepError) as info:
+        parse_axis('--delta-theta-p', ['5:60:12'], lower=0.0, quantity=ANGLE, unit_si=degree)
+    message = str(info.value)
+    assert message.startswith("--delta-theta-p: '5' has no unit, so it reads as 5 rad"), message
+    assert "did you mean 5deg?" in message and "in '5:60:12'" in message, message
+
+
 def test_axis_bounds_and_duplicates() -> None:
     with pytest.raises(SweepError, match=r"--delta-theta-p: -5 deg \(from '-5:5:3'\) is "
                                          r'outside \(0, inf\]'):

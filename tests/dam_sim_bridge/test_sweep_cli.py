@@ -30,9 +30,9 @@ from ros_testing import installed_executable
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CONFIG = REPO_ROOT / 'config' / 'dam.yaml'
 #: 2 friction angles x 2 k_theta x 1 delta_theta_p x 2 repeats, every perturbation on.
-SWEEP = ['--friction-angles', '5', '30', '--k-theta', '0.5', '10', '--delta-theta-p', '10',
-         '--repeats', '2', '--mass-rel', '0.2', '--position-sd', '1',
-         '--table-friction-rel', '0.2', '--friction-angle-sd', '2', '--max-time', '0.6',
+SWEEP = ['--friction-angles', '5deg', '30deg', '--k-theta', '0.5', '10', '--delta-theta-p',
+         '10deg', '--repeats', '2', '--mass-rel', '0.2', '--position-sd', '1mm',
+         '--table-friction-rel', '0.2', '--friction-angle-sd', '2deg', '--max-time', '0.6',
          '--config', str(CONFIG), '--quiet']
 N_TRIALS = 8
 
@@ -293,15 +293,16 @@ def test_sigint_stops_a_background_sweep_on_local_workers(tmp_path: Path) -> Non
 
 @pytest.mark.parametrize('args, words', [
     (['--k-theta', '0.05:20:0:log'], ['--k-theta', 'count 0', "'0.05:20:0:log'"]),
-    (['--delta-theta-p', '5:70:14'], ['--delta-theta-p: 70 deg exceeds']),
-    (['--friction-angles', '5', '95'], ['--friction-angles: 95 deg', 'outside [0, 90)']),
+    (['--delta-theta-p', '5deg:70deg:14'], ['--delta-theta-p: 70 deg exceeds']),
+    (['--friction-angles', '5deg', '95deg'], ['--friction-angles: 95 deg', 'outside [0, 90)']),
+    (['--delta-theta-p', '5:60:12'], ["--delta-theta-p: '5' has no unit", 'did you mean 5deg?']),
     (['--k-theta', '1', '--mass-rel', '1.5'], ['--mass-rel (mass_rel): 1.5']),
     (['--repeats', '0'], ['--repeats (repeats): 0']),
     (['--workers', '0'], ['--workers: 0']),
 ])
 def test_bad_arguments_are_refused(args: list[str], words: list[str], tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
-    base = {'--k-theta': ['1'], '--delta-theta-p': ['10']}
+    base = {'--k-theta': ['1'], '--delta-theta-p': ['10deg']}
     flat = [a for k, v in base.items() if k not in args for a in (k, *v)]
     assert main([*flat, *args, '--out', str(tmp_path / 'x'), '--config', str(CONFIG)]) == 2
     err = capsys.readouterr().err
@@ -369,6 +370,19 @@ def test_another_sweep_in_the_same_directory_is_refused(reference: str, tmp_path
     (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': 1, 'sweep': {'seed': 5}}))
     assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
     assert 'holds a different sweep' in capsys.readouterr().err
+
+
+def test_a_bare_perturbation_is_in_si_units_and_an_implausible_one_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    base = ['--k-theta', '1', '--delta-theta-p', '10deg', '--out', str(tmp_path / 'x')]
+    for option, word, meant in (('--position-sd', '1', '1mm'),
+                                ('--friction-angle-sd', '2', '2deg')):
+        with pytest.raises(SystemExit) as info:
+            main([*base, option, word])
+        assert info.value.code == 2
+        err = capsys.readouterr().err
+        assert f'argument {option}: ' in err and f'did you mean {meant}?' in err, err
+    assert not (tmp_path / 'x').exists()
 
 
 def test_installed_command() -> None:
@@ -445,7 +459,7 @@ def test_an_object_the_analysis_cannot_answer_for_is_refused_before_any_trial(
     config = tmp_path / 'dam.yaml'
     config.write_text(yaml.safe_dump(data), encoding='utf-8')
     out = tmp_path / 'out'
-    assert main(['--k-theta', '10', '--delta-theta-p', '10', '--out', str(out), '--workers',
+    assert main(['--k-theta', '10', '--delta-theta-p', '10deg', '--out', str(out), '--workers',
                  '1', '--config', str(config)]) == 2
     err = capsys.readouterr().err
     assert "object 'rod_1mm' cannot be analysed with this hand" in err, err

@@ -269,8 +269,9 @@ def test_an_incomplete_sweep_says_so_at_the_top(tmp_path: Path, config: Any,
 # ------------------------------------------------------------------------------------------
 # A real sweep and an independent check of the document's numbers
 
-REAL_SWEEP = ['--friction-angles', '5', '30', '--k-theta', '0.5', '3', '10',
-              '--delta-theta-p', '10', '25', '--trajectory-duration', '1', '--max-time', '4',
+REAL_SWEEP = ['--friction-angles', '5deg', '30deg', '--k-theta', '0.5', '3', '10',
+              '--delta-theta-p', '10deg', '25deg', '--trajectory-duration', '1', '--max-time',
+              '4',
               '--config', str(CONFIG), '--workers', '1', '--quiet']
 
 

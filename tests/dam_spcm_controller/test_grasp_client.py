@@ -42,7 +42,8 @@ def test_the_pair_defaults_to_the_configured_one() -> None:
     ['--k-theta', '0', '--delta-theta-p', '40deg'],
     ['--k-theta', '-1', '--delta-theta-p', '40deg'],
     ['--k-theta', '7', '--delta-theta-p', 'x'],
-    ['--k-theta', '7', '--delta-theta-p', '40deg', '--cancel-after', '-1']])
+    ['--k-theta', '7', '--delta-theta-p', '40deg', '--cancel-after', '-1'],
+    ['--k-theta', '7', '--delta-theta-p', '10']])  # 10 rad: 10deg meant, refused
 def test_bad_arguments_exit_2(argv: list[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         _parse(argv)

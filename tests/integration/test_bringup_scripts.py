@@ -196,6 +196,27 @@ def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
     assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
 
 
+@pytest.mark.parametrize(('args', 'says'), [
+    (['--delta-theta-p', '10'], "'10' has no unit, so it reads as 10 rad (573 deg)"),
+    (['--delta-theta-p', '80deg'], '80 deg must be at most 65 deg'),
+    (['--delta-theta-p', '-5deg'], '-5 deg must be above 0 deg'),
+    (['--k-theta', 'soft'], "'soft' is not a number"),
+    (['--k-theta', '0'], "'0' must be a positive stiffness"),
+])
+def test_run_sh_checks_the_pair_before_anything_starts(tmp_path: Path, args: list[str],
+                                                       says: str) -> None:
+    """``run.sh --delta-theta-p 10`` brought the suite up for 21 s, then the goal was refused
+    as 573 deg and a 'rejected' episode bag was written; now it is refused at once."""
+    env = _env(tmp_path)
+    refused = _script('run.sh', *args, env=env)
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    option = args[0]
+    assert f'run.sh: {option}: ' in refused.stderr and says in refused.stderr, refused.stderr
+    assert 'bringing up' not in refused.stdout.lower(), refused.stdout
+    assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
+    assert not (tmp_path / 'bags').exists() or not any((tmp_path / 'bags').rglob('*'))
+
+
 @pytest.mark.parametrize('sim_time', [True, False])
 def test_record_sh_follows_the_clock_the_bring_up_chose(tmp_path: Path, sim_time: bool) -> None:
     from ros_testing import node_process

@@ -158,21 +158,27 @@ def _run(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_command_line_client(server: object) -> None:
-    done = _run('--friction-angle', '3:6', '--mass', '0.03:0.05', '--position-tolerance', '1mm')
+    done = _run('--friction-angle', '3deg:6deg', '--mass', '30g:50g', '--position-tolerance',
+                '1mm')
     assert done.returncode == 0, done.stderr
     assert 'guaranteed (eq. 18)       : k_theta ' in done.stdout
     assert 'contact stiffness model   : k_theta ' in done.stdout
     assert 'method: friction: worst case at alpha_max = 6 deg' in done.stdout
-    suffixed = _run('--friction-angle', '3deg:0.10471975511965977rad', '--mass', '0.03:0.05',
-                    '--position-tolerance', '0.001m')
+    # the same request in SI units, bare or suffixed: a bare number is SI in every command
+    suffixed = _run('--friction-angle', '3deg:0.10471975511965977', '--mass', '0.03kg:0.05',
+                    '--position-tolerance', '0.001')
     assert suffixed.returncode == 0 and suffixed.stdout == done.stdout, suffixed.stderr
-    radians = _run('--friction-angle', '0.0873')  # 5 deg meant, read as 0.0873 deg: named
-    assert radians.returncode == 0 and "'0.0873' is read in degrees" in radians.stderr
-    capped = _run('--friction-angle', '5', '--k-theta-max', '3')
+    for option, word, meant in (('--friction-angle', '3:6', '3deg'), ('--mass', '30:50', '30g'),
+                                ('--position-tolerance', '1', '1mm')):
+        implausible = _run(option, word)  # refused before any request, with the meaning
+        assert implausible.returncode == 2, implausible.stdout
+        assert f'did you mean {meant}?' in implausible.stderr, implausible.stderr
+        assert 'REJECTED' not in implausible.stdout
+    capped = _run('--friction-angle', '5deg', '--k-theta-max', '3')
     assert capped.returncode == 0, capped.stderr
     assert 'guaranteed (eq. 18)       : none' in capped.stdout
     assert 'is above the cap there' in capped.stdout
-    rejected = _run('--friction-angle', '95')
+    rejected = _run('--friction-angle', '89deg:95deg')
     assert rejected.returncode == 2 and 'REJECTED' in rejected.stdout
     bad = _run('--mass', '0.05:0.03')
     assert bad.returncode == 2 and 'empty range' in bad.stderr

@@ -8,7 +8,8 @@ Examples::
     ros2 run dam_analysis check_lift        # the server's configured task pair
     ros2 run dam_analysis check_lift --object square_bar --delta-theta-p 20deg
 
-Angles take a unit suffix ``deg`` or ``rad`` (radians when there is none). An option left out
+Angles take a unit suffix ``deg`` or ``rad``; a bare number is radians, as in every command of
+the suite (:mod:`dam_common.quantities`). An option left out
 is left out of the request, so the server uses its configuration for it (``CheckLift.srv``).
 Exit status: 0 when the server answered ``ok`` (also "no lift" beyond the end of the SPCM
 branch), 2 when it rejected the request, 1 when no answer came, 3 when SIGINT or SIGTERM
@@ -25,9 +26,9 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
-from dam_analysis.angle_args import not_negative, parse_angle
 from dam_analysis.service_call import call_and_print
 from dam_common.command_line import CommandLineParser
+from dam_common.quantities import ANGLE, LEAVE_OUT, argument
 from dam_interfaces.srv import CheckLift
 
 
@@ -39,13 +40,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help='compliant-joint stiffness: one value (finger 1, the others from '
                              'the configured ratios) or one per finger (default: the server\'s '
                              'configured task.k_theta_nm_per_rad)')
-    parser.add_argument('--delta-theta-p', type=parse_angle, nargs='+', default=[],
+    parser.add_argument('--delta-theta-p', type=argument(ANGLE), nargs='+', default=[],
                         metavar='ANGLE',
-                        help='position-joint displacement: one for all fingers or one per finger '
-                             '(default: the server\'s configured task.delta_theta_p_deg)')
-    parser.add_argument('--friction-angle', type=not_negative(parse_angle), default=None,
-                        metavar='ANGLE',
-                        help='friction angle alpha (default: the server\'s configured value)')
+                        help='position-joint displacement (40deg, 0.7rad; bare: rad): one for '
+                             'all fingers or one per finger (default: the server\'s configured '
+                             'task.delta_theta_p_deg)')
+    parser.add_argument('--friction-angle', type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT),
+                        default=None, metavar='ANGLE',
+                        help='friction angle alpha (5deg, 0.09rad; bare: rad; default: the '
+                             'server\'s configured value)')
     parser.add_argument('--object', default='', metavar='NAME',
                         help='column object of the configuration\'s object.library (default: '
                              'the server\'s object.default)')

@@ -5,12 +5,14 @@ For each friction angle the tool draws both lower region boundaries ``k_theta*(d
 of eq. (18) as a thick line with its region hatched, and the contact stiffness model (CSM) as a
 thin dashed line, one colour per friction angle. Examples::
 
-    ros2 run dam_analysis lift_map --friction-angles 1 5 30 --out map.png
-    ros2 run dam_analysis lift_map --friction-angles 5 --n-delta-theta-p 400 \\
-        --delta-theta-p-max 30 --k-max 20 --out map5.png --csv map5.csv
-    ros2 run dam_analysis lift_map --object square_bar --friction-angles 5 --out bar.png
+    ros2 run dam_analysis lift_map --friction-angles 1deg 5deg 30deg --out map.png
+    ros2 run dam_analysis lift_map --friction-angles 5deg --n-delta-theta-p 400 \\
+        --delta-theta-p-max 30deg --k-max 20 --out map5.png --csv map5.csv
+    ros2 run dam_analysis lift_map --object square_bar --friction-angles 5deg --out bar.png
 
-Friction angles and ``--delta-theta-p-max`` are in degrees. The CSV has the columns
+Friction angles and ``--delta-theta-p-max`` take their unit (``5deg``, ``0.09rad``); a bare number
+is radians, as in every command of the suite, and one implausible as radians (``5``) is refused
+with what was probably meant. The CSV has the columns
 ``alpha_deg, delta_theta_p_deg, k_theta_sufficient, k_theta_csm`` [deg, deg, N m/rad, N m/rad];
 an empty cell means that no stiffness lifts the object there (including displacements beyond the
 end of the SPCM branch). Exit status: 0 on success, 2 on bad arguments or configuration.
@@ -35,6 +37,7 @@ from dam_analysis.regions import Boundaries
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.quantities import ANGLE, argument, in_degrees
 from dam_common.ros_args import strip_ros_args
 
 #: Smallest default top of the k_theta axis (and the value when nothing lifts) [N m/rad].
@@ -51,16 +54,20 @@ def build_parser() -> argparse.ArgumentParser:
         prog='lift_map',
         description='Plot the lift regions on the k_theta - delta_theta_p plane (Fig. 5(b)): '
                     'sufficient condition (eq. 18) and contact stiffness model.')
-    parser.add_argument('--friction-angles', type=float, nargs='+', required=True,
-                        metavar='DEG', help='friction angles alpha [deg], 0 <= alpha < 90')
+    parser.add_argument('--friction-angles', type=in_degrees(argument(ANGLE)), nargs='+',
+                        required=True, metavar='ANGLE',
+                        help='friction angles alpha, 0 <= alpha < 90 deg (5deg, 0.09rad; '
+                             'bare: rad)')
     parser.add_argument('--out', type=Path, default=Path('lift_map.png'), metavar='PNG',
                         help='output image (default: %(default)s)')
     parser.add_argument('--csv', type=Path, default=None, metavar='CSV',
                         help='output table of the boundaries (default: --out with .csv)')
     parser.add_argument('--n-delta-theta-p', type=int, default=200, metavar='N',
                         help='number of delta_theta_p samples (default: %(default)s)')
-    parser.add_argument('--delta-theta-p-max', type=float, default=None, metavar='DEG',
-                        help='largest delta_theta_p [deg] (default: the configured maximum)')
+    parser.add_argument('--delta-theta-p-max', type=in_degrees(argument(ANGLE)), default=None,
+                        metavar='ANGLE',
+                        help='largest delta_theta_p (30deg; bare: rad; default: the configured '
+                             'maximum)')
     parser.add_argument('--k-max', type=float, default=None, metavar='N*m/rad',
                         help='top of the k_theta axis (default: from the boundaries, at least '
                              f'{DEFAULT_K_MAX:g}, see default_k_max)')

@@ -2,20 +2,20 @@
 
 Examples::
 
-    ros2 run dam_analysis plan_lift --friction-angle 3:6 --mass 0.03:0.05 \\
+    ros2 run dam_analysis plan_lift --friction-angle 3deg:6deg --mass 30g:50g \\
         --position-tolerance 1mm
-    ros2 run dam_analysis plan_lift --friction-angle 5 --k-theta-max 8 --delta-theta-p 5:30
+    ros2 run dam_analysis plan_lift --friction-angle 5deg --k-theta-max 8 \\
+        --delta-theta-p 5deg:30deg
     ros2 run dam_analysis plan_lift          # the configured friction angle, mass, position
 
-Ranges are ``MIN:MAX`` or one value; friction angles and displacements in degrees unless
-suffixed (``3deg:6deg``, ``0.05rad:0.1rad``; a bare number below 1 is named in a note, as it is
-more often radians meant), masses in kilograms, the position tolerance with a unit (``1mm``,
-``0.001m``; metres without one). An
-option left out is left out of the request, so the server uses its configuration for it
-(``PlanLift.srv``). Exit status: 0 when the server answered ``ok`` (whether or not a pair is
-guaranteed), 2 when it rejected the request or an argument is malformed, 1 when no answer came,
-3 when SIGINT or SIGTERM stopped it first (at any moment: no traceback; the entry point is
-``dam_analysis.entry_points:plan_lift``).
+Ranges are ``MIN:MAX`` or one value. Every angle, length and mass takes its unit
+(``3deg``, ``0.05rad``, ``30g``, ``1mm``); a bare number is in SI units (rad, kg, m), as in every
+command of the suite, and a bare number implausible for this hand is refused with what was
+probably meant (:mod:`dam_common.quantities`). An option left out is left out of the request,
+so the server uses its configuration for it (``PlanLift.srv``). Exit status: 0 when the server
+answered ``ok`` (whether or not a pair is guaranteed), 2 when it rejected the request or an
+argument is malformed, 1 when no answer came, 3 when SIGINT or SIGTERM stopped it first (at any
+moment: no traceback; the entry point is ``dam_analysis.entry_points:plan_lift``).
 """
 
 from __future__ import annotations
@@ -27,24 +27,10 @@ from collections.abc import Sequence
 
 from rclpy.utilities import remove_ros_args
 
-from dam_analysis.angle_args import not_negative, parse_angle_range, parse_range
 from dam_analysis.service_call import call_and_print
 from dam_common.command_line import CommandLineParser
+from dam_common.quantities import ANGLE, LEAVE_OUT, LENGTH, MASS, argument, number_argument
 from dam_interfaces.srv import PlanLift
-
-
-def parse_length(text: str) -> float:
-    """``'1mm'``, ``'0.001m'`` or ``'0.001'`` (metres) -> metres."""
-    value = text.strip().lower()
-    try:
-        if value.endswith('mm'):
-            return float(value[:-2]) * 1e-3
-        if value.endswith('m'):
-            return float(value[:-1])
-        return float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f'{text!r} is not a length (examples: 1mm, 0.001m, 0.001)') from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,24 +38,30 @@ def build_parser() -> argparse.ArgumentParser:
         prog='plan_lift',
         description='Ask /plan_lift for the (k_theta, delta_theta_p) pair that lifts the '
                     'object over ranges of friction angle, mass and position.')
-    parser.add_argument('--friction-angle', type=not_negative(parse_angle_range), default=None,
-                        metavar='ANGLE[:ANGLE]',
-                        help='friction angle alpha range, degrees unless suffixed (3:6, '
-                             '3deg:6deg, 0.05rad:0.1rad; default: the configured one)')
-    parser.add_argument('--mass', type=not_negative(parse_range), default=None, metavar='KG[:KG]',
-                        help='object mass range [kg] (default: the configured one)')
-    parser.add_argument('--position-tolerance', type=not_negative(parse_length), default=None,
-                        metavar='LENGTH',
-                        help="the object's position along the fingers within +-this "
-                             '(default: 0, the configured position)')
-    parser.add_argument('--k-theta-max', type=not_negative(float), default=None, metavar='N*m/rad',
+    parser.add_argument('--friction-angle',
+                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range'),
+                        default=None, metavar='ANGLE[:ANGLE]',
+                        help='friction angle alpha range (3deg:6deg, 0.05rad:0.1rad; bare: rad; '
+                             'default: the configured one)')
+    parser.add_argument('--mass', type=argument(MASS, low=0.0, why_low=LEAVE_OUT, form='range'),
+                        default=None, metavar='MASS[:MASS]',
+                        help='object mass range (30g:50g, 0.03kg:0.05kg; bare: kg; default: '
+                             'the configured one)')
+    parser.add_argument('--position-tolerance', type=argument(LENGTH, low=0.0, why_low=LEAVE_OUT),
+                        default=None, metavar='LENGTH',
+                        help="the object's position along the fingers within +-this (1mm, "
+                             '0.001m; bare: m; default: 0, the configured position)')
+    parser.add_argument('--k-theta-max', type=number_argument(low=0.0, why_low=LEAVE_OUT),
+                        default=None, metavar='N*m/rad',
                         help='largest finger-1 stiffness to propose (default: the largest '
                              'the device accepts)')
-    parser.add_argument('--delta-theta-p', type=not_negative(parse_angle_range), default=None,
-                        metavar='ANGLE:ANGLE',
-                        help='displacement range, degrees unless suffixed (default: all the '
+    parser.add_argument('--delta-theta-p',
+                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range'),
+                        default=None, metavar='ANGLE:ANGLE',
+                        help='displacement range (5deg:40deg; bare: rad; default: all the '
                              'configuration allows)')
-    parser.add_argument('--min-margin', type=not_negative(float), default=None, metavar='N',
+    parser.add_argument('--min-margin', type=number_argument(low=0.0, why_low=LEAVE_OUT),
+                        default=None, metavar='N',
                         help='smallest worst-case margin a guaranteed pair keeps [N] '
                              '(default: 0.01)')
     parser.add_argument('--object', default='', metavar='NAME',

@@ -6,17 +6,19 @@ chosen displacements (:mod:`dam_analysis.scale_study`): the sufficient condition
 a solid line, the contact stiffness model dashed, and dotted the stiffness above which the
 hand cannot give the SPCM torque. Examples::
 
-    ros2 run dam_analysis scale_map --radius-range 3:20:35 --delta-theta-p 10 20 30 \\
-        --friction-angle 5 --out scale.png
-    ros2 run dam_analysis scale_map --radius-range 5:15:11 --delta-theta-p 15 \\
+    ros2 run dam_analysis scale_map --radius-range 3mm:20mm:35 \\
+        --delta-theta-p 10deg 20deg 30deg --friction-angle 5deg --out scale.png
+    ros2 run dam_analysis scale_map --radius-range 5mm:15mm:11 --delta-theta-p 15deg \\
         --constant-mass --csv scale.csv
-    ros2 run dam_analysis scale_map --object hex_pencil --radius-range 3:12:10 \\
-        --delta-theta-p 10 --out pencil.png
+    ros2 run dam_analysis scale_map --object hex_pencil --radius-range 3mm:12mm:10 \\
+        --delta-theta-p 10deg --out pencil.png
 
-Radii are in millimetres (``start:stop:count``), displacements and the friction angle in
-degrees. The CSV has the columns ``radius_mm`` (``half_height_mm`` for a column that is not a
-cylinder)``, mass_kg, delta_theta_p_deg, k_theta_sufficient,
-k_theta_csm, k_theta_torque_limit, no_first_contact`` [mm, kg, deg, N m/rad x 3, text]; an
+Radii are ``START:STOP:COUNT``; lengths and angles take their units (``3mm``, ``10deg``), and a
+bare number is in SI units (m, rad) as in every command of the suite; one implausible for this
+hand (a radius of 3 m) is refused with what was probably meant. The CSV has the columns
+``radius_mm`` (``half_height_mm`` for a column that is not a cylinder)``, mass_kg,
+delta_theta_p_deg, k_theta_sufficient, k_theta_csm, k_theta_torque_limit, no_first_contact``
+[mm, kg, deg, N m/rad x 3, text]; an
 empty stiffness cell means none lifts there (or no first contact, then the last column says
 why). The summary printed at the end gives, per displacement, the radii at which the
 sufficient condition (and the CSM) lifts within the hand's torque. Exit status: 0 written, 1
@@ -34,54 +36,33 @@ from pathlib import Path
 
 import numpy as np
 
-from dam_analysis.angle_args import parse_degrees
 from dam_analysis.errors import DamAnalysisError
 from dam_analysis.scale_study import ScaleStudy, scale_study, size_name, working_ranges
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.quantities import ANGLE, LENGTH, argument
 from dam_common.ros_args import strip_ros_args
 
 CSV_COLUMNS = ('radius_mm', 'mass_kg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm',
                'k_theta_torque_limit', 'no_first_contact')
 #: Most radii one run takes (each builds the analysis, about 0.5 s).
 MAX_RADII = 400
+_RADII = argument(LENGTH, low=0.0, low_inclusive=False, form='linspace', max_count=MAX_RADII)
 
 
 def parse_radius_range(text: str) -> np.ndarray:
-    """``'3:20:35'`` [mm] -> radii [m]: ``count`` values evenly from ``start`` to ``stop``.
+    """``'3mm:20mm:35'`` -> radii [m]: ``COUNT`` values evenly from START to STOP, each a
+    positive length (a bare number is metres, :mod:`dam_common.quantities`).
 
     Raises
     ------
     argparse.ArgumentTypeError
-        Not three numbers, a non-positive or non-finite radius, ``count`` not a whole number
-        in [1, MAX_RADII], ``stop < start``, or ``count`` 1 with ``start != stop``.
+        Not START:STOP:COUNT, a radius that is not a positive length (or a bare number
+        implausible in metres), ``COUNT`` not a whole number in [1, MAX_RADII], ``STOP <
+        START``, or ``COUNT`` 1 with ``START != STOP``.
     """
-    parts = text.split(':')
-    if len(parts) != 3:
-        raise argparse.ArgumentTypeError(f'{text!r} is not start:stop:count [mm]')
-    try:
-        start, stop = float(parts[0]), float(parts[1])
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r}: start and stop must be numbers [mm]'
-                                         ) from None
-    try:
-        count = int(parts[2])
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r}: count {parts[2]!r} is not a whole number'
-                                         ) from None
-    for name, value in (('start', start), ('stop', stop)):
-        if not (math.isfinite(value) and value > 0.0):
-            raise argparse.ArgumentTypeError(f'{text!r}: {name} {value:g} mm must be a '
-                                             'positive radius')
-    if not 1 <= count <= MAX_RADII:
-        raise argparse.ArgumentTypeError(f'{text!r}: count {count} must be in [1, {MAX_RADII}]')
-    if stop < start:
-        raise argparse.ArgumentTypeError(f'{text!r}: stop {stop:g} mm is below start '
-                                         f'{start:g} mm')
-    if count == 1 and start != stop:
-        raise argparse.ArgumentTypeError(f'{text!r}: one value needs start == stop')
-    return np.linspace(start, stop, count) * 1e-3
+    return _RADII(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -92,17 +73,17 @@ def build_parser() -> argparse.ArgumentParser:
                     "hand's torque limit.")
     parser.add_argument('--radius-range', type=parse_radius_range, required=True,
                         metavar='START:STOP:COUNT',
-                        help='sizes [mm]: cylinder radii, or half heights of another column '
-                             '(its centroid\'s height on the table)')
+                        help='sizes (3mm:20mm:35; bare: m): cylinder radii, or half heights '
+                             'of another column (its centroid\'s height on the table)')
     parser.add_argument('--object', default='', metavar='NAME',
                         help='column object of the configuration\'s object.library to scale '
                              '(default: object.default)')
-    parser.add_argument('--delta-theta-p', type=parse_degrees, nargs='+', required=True,
+    parser.add_argument('--delta-theta-p', type=argument(ANGLE, low=0.0, low_inclusive=False),
+                        nargs='+', required=True, metavar='ANGLE',
+                        help='position-joint displacements (10deg, 0.1745rad; bare: rad)')
+    parser.add_argument('--friction-angle', type=argument(ANGLE, low=0.0), default=None,
                         metavar='ANGLE',
-                        help='position-joint displacements, degrees unless suffixed (10, '
-                             '10deg, 0.1745rad)')
-    parser.add_argument('--friction-angle', type=parse_degrees, default=None, metavar='ANGLE',
-                        help='friction angle alpha, degrees unless suffixed (default: the '
+                        help='friction angle alpha (5deg, 0.09rad; bare: rad; default: the '
                              'configured one)')
     parser.add_argument('--constant-mass', action='store_true',
                         help='keep the configured mass (default: scale it with the '

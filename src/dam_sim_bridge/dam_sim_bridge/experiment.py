@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from dam_common.command_line import CommandLineParser
+from dam_common.quantities import ANGLE, argument, in_degrees
 from dam_hand_driver.protocol import JointMode as WireMode
 from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
@@ -314,12 +315,16 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
                     'grid; prints outcome and ground-truth lift, optionally writes a CSV.')
-    p.add_argument('--alpha', type=float, nargs='+', default=None,
-                   help='friction angles [deg] (default: the configured one)')
+    p.add_argument('--alpha', type=in_degrees(argument(ANGLE)), nargs='+', default=None,
+                   metavar='ANGLE',
+                   help='friction angles (5deg, 0.09rad; bare: rad; default: the configured '
+                        'one)')
     p.add_argument('--k-theta', type=float, nargs='+', default=[0.5, 2.0, 7.0, 15.0],
                    help='finger-1 stiffness values [N*m/rad]')
-    p.add_argument('--delta-theta-p', type=float, nargs='+', default=[5.0, 10.0, 25.0, 40.0],
-                   help='position-joint displacements [deg]')
+    p.add_argument('--delta-theta-p', type=in_degrees(argument(ANGLE)), nargs='+',
+                   default=[5.0, 10.0, 25.0, 40.0], metavar='ANGLE',
+                   help='position-joint displacements (10deg, 0.17rad; bare: rad; default: '
+                        '5deg 10deg 25deg 40deg)')
     p.add_argument('--out', type=Path, default=None, help='CSV file to write')
     p.add_argument('--config', default=None, help='configuration file (default: DAM_CONFIG '
                    'or the installed config/dam.yaml)')

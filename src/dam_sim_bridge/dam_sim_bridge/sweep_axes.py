@@ -1,25 +1,36 @@
 """Axes of a sweep on the command line: values and ranges ``start:stop:count[:log]``.
 
 ``--k-theta 0.05:20:24:log`` is 24 values from 0.05 to 20 with a constant ratio
-(``numpy.geomspace``), ``--delta-theta-p 5:60:12`` is 5, 10, ..., 60 (``numpy.linspace``, both
-ends included); plain numbers and ranges mix freely. A bad token is refused with the option and
+(``numpy.geomspace``), ``--delta-theta-p 5deg:60deg:12`` is 5, 10, ..., 60 deg
+(``numpy.linspace``, both ends included); plain numbers and ranges mix freely. An angle takes
+its unit, and a bare one is radians, as in every command of the suite
+(:mod:`dam_common.quantities`). A bad token is refused with the option and
 the token named (:class:`~dam_sim_bridge.errors.SweepError`).
 """
 
 from __future__ import annotations
 
+import argparse
 import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from dam_common.quantities import Quantity, parse_quantity
 from dam_sim_bridge.errors import SweepError
 
 #: Significant digits kept of a value computed from a range (``0.05:20:24:log``).
 _RANGE_DIGITS = 12
 
 
-def _number(field_name: str, text: str, token: str) -> float:
+def _number(field_name: str, text: str, token: str, quantity: Quantity | None = None,
+            unit_si: float = 1.0) -> float:
+    if quantity is not None:
+        try:
+            return parse_quantity(text, quantity) / unit_si
+        except argparse.ArgumentTypeError as exc:
+            where = '' if text.strip() == token.strip() else f' in {token!r}'
+            raise SweepError(f'{field_name}: {exc}{where}') from None
     try:
         value = float(text)
     except ValueError:
@@ -29,7 +40,8 @@ def _number(field_name: str, text: str, token: str) -> float:
     return value
 
 
-def parse_range(field_name: str, token: str) -> tuple[float, ...]:
+def parse_range(field_name: str, token: str, quantity: Quantity | None = None,
+                unit_si: float = 1.0) -> tuple[float, ...]:
     """Values of one axis token: a number, ``start:stop:count[:lin]`` or
     ``start:stop:count:log``.
 
@@ -42,6 +54,12 @@ def parse_range(field_name: str, token: str) -> tuple[float, ...]:
         (``numpy.geomspace``: 24 values with equal ratios, both ends included). ``:lin`` says
         linear explicitly; the suffix is case-blind. ``start > stop`` gives the values in
         descending order. A count of 1 needs ``start == stop``.
+    quantity
+        The physical quantity of the values (:data:`dam_common.quantities.ANGLE`): each of
+        ``start`` and ``stop`` then takes its unit, a bare one is in SI units. None: plain
+        numbers.
+    unit_si
+        The returned values' unit in SI units (``math.pi / 180`` for degrees).
 
     Returns
     -------
@@ -55,13 +73,13 @@ def parse_range(field_name: str, token: str) -> tuple[float, ...]:
     """
     parts = token.strip().split(':')
     if len(parts) == 1:
-        return (_number(field_name, parts[0], token),)
+        return (float(f'{_number(field_name, parts[0], token, quantity, unit_si):.12g}'),)
     if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3].strip().lower() not in
                                     ('log', 'lin')):
         raise SweepError(f'{field_name}: {token!r} is neither a number nor a range '
                          f'start:stop:count[:lin] or start:stop:count:log')
-    start = _number(field_name, parts[0], token)
-    stop = _number(field_name, parts[1], token)
+    start = _number(field_name, parts[0], token, quantity, unit_si)
+    stop = _number(field_name, parts[1], token, quantity, unit_si)
     try:
         count = int(parts[2])
     except ValueError:
@@ -80,7 +98,8 @@ def parse_range(field_name: str, token: str) -> tuple[float, ...]:
 
 def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
                upper: float = math.inf, lower_open: bool = False,
-               upper_open: bool = False, unit: str = '') -> tuple[float, ...]:
+               upper_open: bool = False, unit: str = '', quantity: Quantity | None = None,
+               unit_si: float = 1.0) -> tuple[float, ...]:
     """All values of an axis given as tokens (:func:`parse_range`), checked against bounds.
 
     Parameters
@@ -95,6 +114,8 @@ def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
         Exclude the bound itself.
     unit
         Unit for the messages (``'deg'``).
+    quantity, unit_si
+        As for :func:`parse_range`.
 
     Raises
     ------
@@ -104,7 +125,7 @@ def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
     values: list[float] = []
     seen: set[float] = set()  # a list's ``in`` made 100 000 values take minutes (user test)
     for token in tokens:
-        for v in parse_range(field_name, token):
+        for v in parse_range(field_name, token, quantity, unit_si):
             low_bad = v <= lower if lower_open else v < lower
             high_bad = v >= upper if upper_open else v > upper
             if low_bad or high_bad:

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from dam_common.command_line import CommandLineParser
+from dam_common.quantities import ANGLE, LENGTH, argument, in_degrees
 from dam_sim_bridge.errors import SweepError
 from dam_sim_bridge.sweep import (
     MAX_FRICTION_ANGLE_DEG,
@@ -51,8 +52,20 @@ from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, Tria
 PROG = 'sweep'
 #: Longest wait for the first worker of a ``--scheduler`` cluster [s].
 WORKER_WAIT_S = 60.0
+#: One degree [rad]: the sweep's angle axes are in degrees.
+DEGREE = math.pi / 180.0
 #: Longest wait for a ``--scheduler`` to answer [s].
 CONNECT_TIMEOUT_S = 10.0
+
+
+def _millimetres(parse: Callable[[str], Any]) -> Callable[[str], float]:
+    """An argparse ``type=``: the length ``parse`` reads [m] in millimetres (12 digits)."""
+
+    def millimetres(text: str) -> float:
+        return float(f'{float(parse(text)) * 1e3:.12g}')
+
+    millimetres.__name__ = 'length'
+    return millimetres
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
@@ -61,16 +74,18 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
         description='DAM grasps in the lockstep simulator over friction angles x k_theta x '
                     'delta_theta_p (paper Fig. 7), optionally perturbed and repeated per '
                     'cell; one CSV row per trial. Axes take values and ranges '
-                    'start:stop:count (linear) or start:stop:count:log; angles in degrees.',
+                    'start:stop:count (linear) or start:stop:count:log; angles take their '
+                    'unit (5deg:60deg:12; a bare number is radians).',
         epilog='Rerun the same command to resume an interrupted sweep: finished trials are '
                'kept. Exit status: 0 done, 1 trials failed, 2 bad arguments, 130 interrupted.')
     g = p.add_argument_group('the grid')
-    g.add_argument('--friction-angles', '--alpha', nargs='+', metavar='DEG', default=None,
-                   help='finger-object friction angles [deg] (default: the configured one)')
+    g.add_argument('--friction-angles', '--alpha', nargs='+', metavar='ANGLE', default=None,
+                   help='finger-object friction angles, e.g. 5deg 30deg (default: the '
+                        'configured one)')
     g.add_argument('--k-theta', nargs='+', metavar='K', required=True,
                    help='finger-1 compliant stiffness [N*m/rad], e.g. 0.05:20:24:log')
-    g.add_argument('--delta-theta-p', nargs='+', metavar='DEG', required=True,
-                   help='position-joint displacement [deg], e.g. 5:60:12')
+    g.add_argument('--delta-theta-p', nargs='+', metavar='ANGLE', required=True,
+                   help='position-joint displacement, e.g. 5deg:60deg:12')
     g.add_argument('--out', type=Path, required=True, metavar='DIR',
                    help=f'output directory ({TABLE_FILE}, {PARAMS_FILE}, {CELLS_FILE})')
     g.add_argument('--repeats', type=int, default=1, metavar='N',
@@ -80,12 +95,14 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
         'perturbations, drawn per trial from its seed (default: none)')
     d.add_argument('--mass-rel', type=float, default=0.0, metavar='FRAC',
                    help='object mass m_B (1 + FRAC u), u ~ U(-1, 1)')
-    d.add_argument('--position-sd', type=float, default=0.0, metavar='MM',
-                   help='object start offset in x and y, each ~ N(0, MM^2) [mm]')
+    d.add_argument('--position-sd', type=_millimetres(argument(LENGTH, low=0.0)), default=0.0,
+                   metavar='LENGTH',
+                   help='object start offset in x and y, each ~ N(0, SD^2) (0.5mm; bare: m)')
     d.add_argument('--table-friction-rel', type=float, default=0.0, metavar='FRAC',
                    help='table friction mu_t (1 + FRAC u), u ~ U(-1, 1)')
-    d.add_argument('--friction-angle-sd', type=float, default=0.0, metavar='DEG',
-                   help=f'friction angle alpha + N(0, DEG^2), clipped to '
+    d.add_argument('--friction-angle-sd', type=in_degrees(argument(ANGLE, low=0.0)),
+                   default=0.0, metavar='ANGLE',
+                   help=f'friction angle alpha + N(0, SD^2) (1deg; bare: rad), clipped to '
                         f'[0, {MAX_FRICTION_ANGLE_DEG:g}] deg')
     t = p.add_argument_group('each trial')
     t.add_argument('--max-time', type=float, default=8.0, metavar='S',
@@ -119,7 +136,7 @@ def build_sweep(args: argparse.Namespace, config: Any) -> SweepSpec:
         A bad range or option, naming the option and the value.
     """
     alphas = (parse_axis('--friction-angles', args.friction_angles, lower=0.0, upper=90.0,
-                         upper_open=True, unit='deg')
+                         upper_open=True, unit='deg', quantity=ANGLE, unit_si=DEGREE)
               if args.friction_angles else
               (round(math.degrees(float(config.contact.friction_angle_rad)), 9),))
     sweep = SweepSpec(
@@ -127,7 +144,8 @@ def build_sweep(args: argparse.Namespace, config: Any) -> SweepSpec:
         k_theta=parse_axis('--k-theta', args.k_theta, lower=0.0, lower_open=True,
                            unit='N*m/rad'),
         delta_theta_p_deg=parse_axis('--delta-theta-p', args.delta_theta_p, lower=0.0,
-                                     lower_open=True, unit='deg'),
+                                     lower_open=True, unit='deg', quantity=ANGLE,
+                                     unit_si=DEGREE),
         repeats=args.repeats, seed=args.seed,
         perturbations=Perturbations(
             mass_rel=args.mass_rel, position_sd_mm=args.position_sd,

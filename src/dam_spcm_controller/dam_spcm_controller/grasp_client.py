@@ -18,44 +18,27 @@ from __future__ import annotations
 
 import argparse
 import math
-import re
 import sys
 import time
 from collections.abc import Sequence
 
 from dam_common.command_line import CommandLineParser
+from dam_common.quantities import ANGLE, argument, parse_quantity
 
 EXIT_SUCCESS = 0
 EXIT_NO_SERVER = 1
 EXIT_REJECTED = 2
 EXIT_OTHER_OUTCOME = 3
 
-_ANGLE = re.compile(r'^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(deg|rad)?\s*$')
+#: The displacement: a positive angle (the position joints curl inward by it); a bare number
+#: is radians, as in every command of the suite (:mod:`dam_common.quantities`).
+_DELTA_THETA_P = argument(ANGLE, low=0.0, low_inclusive=False)
 
 
 def parse_angle(text: str) -> float:
-    """An angle in radians from ``'40deg'``, ``'0.7rad'`` or ``'0.7'`` (radians).
-
-    Raises
-    ------
-    argparse.ArgumentTypeError
-        Not a number with an optional ``deg``/``rad`` unit, or not finite.
-    """
-    m = _ANGLE.match(text)
-    if m is None:
-        raise argparse.ArgumentTypeError(f'{text!r} is not an angle (e.g. 40deg, 0.7rad, 0.7)')
-    value = float(m.group(1))
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f'{text!r} is not finite')
-    return math.radians(value) if m.group(2) == 'deg' else value
-
-
-def _positive_angle(text: str) -> float:
-    """:func:`parse_angle`, above zero (the position joints curl inward by it)."""
-    value = parse_angle(text)
-    if value <= 0.0:
-        raise argparse.ArgumentTypeError(f'{text!r} must be a positive angle')
-    return value
+    """An angle [rad] from ``'40deg'``, ``'0.7rad'`` or ``'0.7'`` (radians;
+    :func:`dam_common.quantities.parse_quantity`)."""
+    return parse_quantity(text, ANGLE)
 
 
 def _positive(text: str) -> float:
@@ -74,8 +57,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--k-theta', type=_positive, default=None,
                    help='finger-1 compliant-joint stiffness [N*m/rad] (default: the '
                         "controller's configured one)")
-    p.add_argument('--delta-theta-p', type=_positive_angle, default=None,
-                   help='position-joint displacement, e.g. 40deg or 0.7rad (plain: rad; '
+    p.add_argument('--delta-theta-p', type=_DELTA_THETA_P, default=None,
+                   help='position-joint displacement, e.g. 40deg or 0.7rad (bare: rad; '
                         "default: the controller's configured one)")
     p.add_argument('--cancel-after', type=_positive, default=None, metavar='S',
                    help='cancel the goal this many seconds after it was accepted')
