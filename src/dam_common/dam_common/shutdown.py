@@ -149,11 +149,20 @@ def catch_signals(interrupt_startup: bool = False) -> ShutdownRequest:
     return SHUTDOWN
 
 
-def run_node_entry(module: str) -> None:
+def run_node_entry(module: str, own_help: bool = False) -> None:
     """Entry point of a node executable: catch SIGINT and SIGTERM, then import ``module`` and
     call its ``main()`` (which runs :func:`~dam_common.node.run_node`). A signal during the
     import, or in ``main()`` before the node takes the signals over, ends the process quietly
-    with status 0."""
+    with status 0.
+
+    ``-h`` or ``--help`` (outside ``--ros-args``) prints the node's usage, parameters and
+    topics (:mod:`dam_common.node_help`) and exits with status 0 before anything of ROS
+    starts, unless the node parses its own options (``own_help``: the recorder)."""
+    if not own_help:
+        from dam_common.node_help import answer_help  # noqa: PLC0415 - no rclpy
+
+        if answer_help(module):
+            return
     catch_signals(interrupt_startup=True)
     try:
         main = importlib.import_module(module).main

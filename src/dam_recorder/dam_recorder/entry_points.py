@@ -12,4 +12,4 @@ from dam_common.shutdown import run_node_entry
 
 def recorder() -> None:
     """``ros2 run dam_recorder recorder``: the bag recorder."""
-    run_node_entry('dam_recorder.recorder_node')
+    run_node_entry('dam_recorder.recorder_node', own_help=True)  # its options: cli.py
