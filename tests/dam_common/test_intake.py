@@ -69,7 +69,14 @@ def test_every_message_reaches_the_callback_in_order_in_the_intake_thread(contex
     intake.create_subscription(Int64, topic, on_message, 300)
     intake.start()
     try:
-        assert intake.node_name == 'intake_owner_numbers'
+        # The subscription is the owner's in the graph (``ros2 node info /intake_owner`` lists
+        # it; a side node without parameter services made ``ros2 param list`` time out), and
+        # no executor of the owner sees it.
+        assert intake.node_name == 'intake_owner'
+        assert _wait(lambda: topic in dict(owner.get_subscriber_names_and_types_by_node(
+            'intake_owner', owner.get_namespace())))
+        assert not any(name.startswith('intake_owner_') for name in owner.get_node_names())
+        assert list(owner.subscriptions) == []
         _publish_until_matched(talker, topic, 300)
         assert _wait(lambda: len(got) == 300), len(got)
         assert got == list(range(300))
@@ -129,18 +136,24 @@ def test_a_raising_callback_is_logged_and_the_intake_goes_on(context) -> None:
         owner.destroy_node()
 
 
-def test_stop_ends_the_thread_at_once_and_removes_the_side_node(context) -> None:
+def test_stop_ends_the_thread_at_once_and_removes_the_subscription(context) -> None:
     owner = rclpy.create_node('intake_owner', context=context)
     intake = SubscriptionThread(owner, 'numbers')
-    intake.create_subscription(Int64, _topic(), lambda _m: None, 1)
+    topic = _topic()
+    intake.create_subscription(Int64, topic, lambda _m: None, 1)
     intake.start()
-    assert _wait(lambda: 'intake_owner_numbers' in owner.get_node_names())
+
+    def subscribed() -> bool:
+        return topic in dict(owner.get_subscriber_names_and_types_by_node(
+            'intake_owner', owner.get_namespace()))
+
+    assert _wait(subscribed)
     started = time.monotonic()
     intake.stop()
     assert time.monotonic() - started < 0.5  # woken by its guard condition, not a time-out
     assert not intake._thread.is_alive()
     intake.stop()  # idempotent
-    assert _wait(lambda: 'intake_owner_numbers' not in owner.get_node_names())
+    assert _wait(lambda: not subscribed())
     owner.destroy_node()
 
 

@@ -92,6 +92,29 @@ def _assert_all_stopped(tmp_path: Path, pids: dict[str, int]) -> None:
     assert all(map(process_gone, pids.values())), pids
 
 
+def _assert_the_graph_is_what_ros2_tools_expect(client: RosClient) -> None:
+    """What ``ros2 param list`` and ``ros2 node info`` do: every node in the graph answers
+    its list_parameters service (side nodes without parameter services made ``ros2 param
+    list`` wait 13 s and print "Wait for service timed out"), and the driver and the
+    controller are the subscribers of their high-rate topics (``ros2 node info`` listed no
+    subscriber at all)."""
+    from rcl_interfaces.srv import ListParameters
+
+    own = client.node.get_name()
+    nodes = [(n, ns) for n, ns in client.node.get_node_names_and_namespaces()
+             if n != own and not n.startswith('_')]
+    assert {'check_lift_server', 'hand_driver', 'spcm_controller'} <= {n for n, _ in nodes}
+    for name, namespace in nodes:
+        service = f'{namespace.rstrip("/")}/{name}/list_parameters'
+        listed = client.call(ListParameters, service, ListParameters.Request(), timeout=5.0,
+                             wait=5.0)
+        assert 'use_sim_time' in listed.result.names, (name, listed.result.names)
+    subscribed = {node: dict(client.node.get_subscriber_names_and_types_by_node(node, '/'))
+                  for node in ('hand_driver', 'spcm_controller')}
+    assert '/hand/command' in subscribed['hand_driver'], subscribed
+    assert '/joint_states' in subscribed['spcm_controller'], subscribed
+
+
 @pytest.mark.parametrize('object_args', [(), ('--object', 'hex_bar')])
 def test_bringup_returns_serving_the_object_and_stop_stops_it(
         tmp_path: Path, object_args: tuple[str, ...]) -> None:
@@ -107,6 +130,8 @@ def test_bringup_returns_serving_the_object_and_stop_stops_it(
             answer = client.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=10.0,
                                  wait=2.0)
             state = _first_driver_state(client)
+            if not object_args:
+                _assert_the_graph_is_what_ros2_tools_expect(client)
         finally:
             client.close()
         assert answer.ok and answer.object == 'cylinder', answer.message

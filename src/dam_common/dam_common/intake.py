@@ -7,25 +7,25 @@ action server, parameter services and timers costs most of a core, and even an e
 own about half a core, on this project's two-core reference machine. Beside the real-time
 stand-in and driver that load delays everything else (the middleware's threads, the recorder).
 
-:class:`SubscriptionThread` puts the high-rate subscription on a side node that no executor
-spins. Its thread waits on a wait set that holds only that subscription and a guard condition
-(to stop), takes every message queued and calls the callback at once, as
-``rclpy.wait_for_message`` does for one message (with the same ``rclpy_implementation`` wait
-set).
+:class:`SubscriptionThread` creates the high-rate subscription on the owner node itself but
+keeps it out of the owner's list of subscriptions, so that no executor waits on it. Its thread
+waits on a wait set that holds only that subscription and a guard condition (to stop), takes
+every message queued and calls the callback at once, as ``rclpy.wait_for_message`` does for one
+message (with the same ``rclpy_implementation`` wait set).
 
-The side node is named ``<owner>_<suffix>`` in the owner's namespace and is what
-``ros2 topic info -v`` lists as the subscriber. Topic names are resolved with the owner's
-expansion and remapping rules (``--ros-args -r joint_states:=...`` applies as if the owner
-subscribed), while the side node itself takes no command-line arguments (a ``__node`` remapping
-would give it the owner's name).
+The subscription belongs to the owner in the ROS graph: ``ros2 node info /<owner>`` lists it
+and ``ros2 topic info -v`` names the owner as the subscriber; the topic name is resolved with
+the owner's expansion and remapping rules (``--ros-args -r joint_states:=...``). (It was on a
+side node ``<owner>_<suffix>`` without parameter services: ``ros2 param list`` timed out on it
+and ``ros2 node info`` of the owner listed no subscriber.)
 
 The callback runs concurrently with the owner's executor: it must protect the state it shares
 (the controller takes its lock).
 
-No executor spins the side node, so the subscription's QoS events are served by the same
-thread: a publisher that offers an incompatible QoS (a best-effort publisher to a reliable
-subscription: none of its messages would arrive) or an incompatible type is logged once per
-topic by the owner's logger, naming the policy, and counted (:attr:`incompatible_qos`,
+No executor sees the subscription, so its QoS events are served by the same thread: a
+publisher that offers an incompatible QoS (a best-effort publisher to a reliable subscription:
+none of its messages would arrive) or an incompatible type is logged once per topic by the
+owner's logger, naming the policy, and counted (:attr:`incompatible_qos`,
 :attr:`incompatible_type`), which the owners report in ``/diagnostics``.
 """
 
@@ -35,12 +35,14 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.guard_condition import GuardCondition
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_policy_name_from_kind
 from rclpy.subscription import Subscription
+from rclpy.type_support import check_is_valid_msg_type
 
 from dam_common.echo import brief_repr
 
@@ -56,10 +58,11 @@ class SubscriptionThread:
     Parameters
     ----------
     owner : Node
-        The node the subscription belongs to logically: its context, namespace, name
-        (``<owner>_<suffix>`` for the side node), logger and remapping rules are used.
+        The node the subscription belongs to: its context, remapping rules and logger are
+        used.
     suffix : str
-        Appended to the owner's name for the side node.
+        Names the thread (``<suffix>_thread``) and the intake in messages
+        (``<owner>_<suffix>``).
 
     Notes
     -----
@@ -70,9 +73,7 @@ class SubscriptionThread:
 
     def __init__(self, owner: Node, suffix: str = 'intake') -> None:
         self._owner = owner
-        self._node = Node(f'{owner.get_name()}_{suffix}', namespace=owner.get_namespace(),
-                          context=owner.context, use_global_arguments=False,
-                          start_parameter_services=False, enable_rosout=False)
+        self._name = f'{owner.get_name()}_{suffix}'
         self._wake = GuardCondition(None, None, owner.context)
         self._subscription: Subscription | None = None
         self._callback: Callable[[Any], None] | None = None
@@ -88,8 +89,8 @@ class SubscriptionThread:
 
     @property
     def node_name(self) -> str:
-        """The side node's name (what ``ros2 topic info -v`` shows as the subscriber)."""
-        return self._node.get_name()
+        """The owner's name (what ``ros2 topic info -v`` shows as the subscriber)."""
+        return self._owner.get_name()
 
     def create_subscription(self, msg_type: type, topic: str,
                             callback: Callable[[Any], None], qos: QoSProfile | int
@@ -109,8 +110,18 @@ class SubscriptionThread:
         events = SubscriptionEventCallbacks(incompatible_qos=self._on_incompatible_qos,
                                             incompatible_type=self._on_incompatible_type,
                                             use_default_callbacks=False)
-        self._subscription = self._node.create_subscription(
-            msg_type, resolved, lambda _msg: None, qos, event_callbacks=events)
+        profile = qos if isinstance(qos, QoSProfile) else QoSProfile(depth=int(qos))
+        check_is_valid_msg_type(msg_type)  # imports the type support
+        with self._owner.handle:
+            handle = _rclpy.Subscription(self._owner.handle, msg_type, resolved,
+                                         profile.get_c_qos_profile())
+        try:
+            self._subscription = Subscription(
+                handle, msg_type, resolved, lambda _msg: None,
+                MutuallyExclusiveCallbackGroup(), profile, False, event_callbacks=events)
+        except Exception:
+            handle.destroy_when_not_in_use()
+            raise
         self._callback = callback
         return self._subscription
 
@@ -147,7 +158,7 @@ class SubscriptionThread:
                         self._call(callback, taken[0])
         except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile
             if context.ok() and not self._stop.is_set():
-                self._owner.get_logger().error(f'{self.node_name} stopped: {brief_repr(exc)}')
+                self._owner.get_logger().error(f'{self._name} stopped: {brief_repr(exc)}')
 
     def _on_incompatible_qos(self, event: Any) -> None:
         self.incompatible_qos = int(event.total_count)
@@ -172,12 +183,12 @@ class SubscriptionThread:
             callback(msg)
         except Exception as exc:  # noqa: BLE001 - one bad message must not end the intake
             self._owner.get_logger().error(
-                f'a {self.node_name} callback raised {brief_repr(exc)}; the intake goes on',
+                f'a {self._name} callback raised {brief_repr(exc)}; the intake goes on',
                 throttle_duration_sec=1.0)
 
     def stop(self) -> None:
-        """Stop the thread (waits up to :data:`JOIN_TIMEOUT_S`) and destroy the side node.
-        Idempotent."""
+        """Stop the thread (waits up to :data:`JOIN_TIMEOUT_S`) and destroy the subscription
+        (before the owner is destroyed). Idempotent."""
         if self._stopped:
             return
         self._stopped = True
@@ -189,4 +200,5 @@ class SubscriptionThread:
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=JOIN_TIMEOUT_S)
         self._wake.destroy()
-        self._node.destroy_node()
+        if self._subscription is not None:
+            self._subscription.destroy()

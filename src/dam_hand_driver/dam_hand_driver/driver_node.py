@@ -14,7 +14,7 @@ Topics
     The hand's URDF generated from the configuration (:mod:`dam_hand_driver.urdf`), for
     ``robot_state_publisher``, RViz and Foxglove; ``hand_urdf`` prints the same document.
 /hand/command : dam_interfaces/HandCommand (subscribed)
-    Taken in a thread of its own by the side node ``hand_driver_hand_command``
+    Taken in a thread of its own, outside the node's executor
     (:mod:`dam_common.intake`; the node's remapping rules apply).
     Mode and setpoint per named joint (and, for MODE_IMPEDANCE, stiffness and damping); joints
     not named keep their command. A malformed message (unknown or duplicate name, length
