@@ -156,6 +156,7 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                 compliant_torque=np.array([0.1 * k, 0.05 * k, 0.05 * k]),
                 delta_theta_s=np.array([], dtype=np.float64),
                 outcome=1 if phase == 'DONE' else 0,
+                outcome_name='SUCCESS' if phase == 'DONE' else 'UNKNOWN',
                 message='grasp done: enveloped' if phase == 'DONE' else '')
             pending.append((T0 + STATUS_OFFSET_NS + k * STATUS_STEP_NS, '/dam/status', msg))
     if '/sim/object_pose' in topics:
@@ -172,7 +173,8 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
             lift, worst, csm, csm_margin = FEEDBACK_MARGINS if checked else (
                 False, math.nan, False, math.nan)
             feedback = t['dam_interfaces/msg/DamGrasp_Feedback'](
-                phase='CHECK_LIFT' if n == 0 else 'APPROACH', progress=0.1 * n,
+                phase='CHECK_LIFT' if n == 0 else 'APPROACH', outcome=0, outcome_name='',
+                progress=0.1 * n,
                 lift_checked=checked, lift_guaranteed=lift, worst_case_margin=worst,
                 csm_lift=csm, csm_margin=csm_margin, compliant_torque=np.array([0.3, 0.15]))
             msg = t['dam_interfaces/action/DamGrasp_FeedbackMessage'](

@@ -75,7 +75,8 @@ def test_status_pose_and_feedback_fields(exported) -> None:
     assert [r['pose.orientation.w'] for r in poses] == ['1.0'] * gb.POSE_COUNT
     assert poses[3]['header.frame_id'] == 'world' and poses[3]['pose.position.x'] == '0.003'
     header, feedback = read_csv(out / 'dam_grasp-_action-feedback.csv')
-    assert header[2:] == ['goal_id.uuid', 'feedback.phase', 'feedback.progress',
+    assert header[2:] == ['goal_id.uuid', 'feedback.phase', 'feedback.outcome',
+                          'feedback.outcome_name', 'feedback.progress',
                           'feedback.lift_checked', 'feedback.lift_guaranteed',
                           'feedback.worst_case_margin', 'feedback.csm_lift',
                           'feedback.csm_margin', 'feedback.compliant_torque.0',

@@ -41,7 +41,7 @@ def dam_status(store, i: int) -> bytes:
                                         frame_id=''),
         phase=f'PHASE_{i}', progress=i / 10, finger_names=['f1', 'f2'][: i % 3],
         compliant_torque=np.array([1.0, 2.0]), delta_theta_s=np.array([]), outcome=i % 6,
-        message='m')
+        outcome_name='SUCCESS' if i % 6 == 1 else '', message='m')
     return bytes(store.serialize_cdr(message, 'dam_interfaces/msg/DamStatus'))
 
 

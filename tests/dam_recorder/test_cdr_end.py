@@ -42,7 +42,8 @@ def dam_status(store, rng: random.Random):
         finger_names=[f'f{k}' for k in range(rng.randrange(0, 4))],
         compliant_torque=np.array([rng.random() for _ in range(rng.randrange(0, 4))]),
         delta_theta_s=np.array([rng.random() for _ in range(rng.randrange(0, 4))]),
-        outcome=rng.randrange(6), message='m' * rng.randrange(0, 7))
+        outcome=rng.randrange(6), outcome_name='o' * rng.randrange(0, 9),
+        message='m' * rng.randrange(0, 7))
 
 
 def diagnostics(store, rng: random.Random):
@@ -63,7 +64,8 @@ def feedback(store, rng: random.Random):
         goal_id=types['unique_identifier_msgs/msg/UUID'](
             uuid=np.array([rng.randrange(256) for _ in range(16)], dtype=np.uint8)),
         feedback=types['dam_interfaces/msg/DamGrasp_Feedback'](
-            phase='P' * rng.randrange(4), progress=0.5, lift_checked=True,
+            phase='P' * rng.randrange(4), outcome=rng.randrange(6),
+            outcome_name='o' * rng.randrange(0, 9), progress=0.5, lift_checked=True,
             lift_guaranteed=False, worst_case_margin=1.0, csm_lift=True, csm_margin=2.0,
             compliant_torque=np.array([rng.random() for _ in range(rng.randrange(4))])))
 

@@ -77,7 +77,8 @@ def test_action_feedback_message_is_found_in_the_action_description(prefixes) ->
     store.register(get_types_from_msg(message_type.definition(), message_type.name))
     feedback = [name for name, _ in
                 store.fielddefs['dam_interfaces/action/DamGrasp_Feedback'][1]]
-    assert feedback == ['phase', 'progress', 'lift_checked', 'lift_guaranteed',
+    assert feedback == ['phase', 'outcome', 'outcome_name', 'progress', 'lift_checked',
+                        'lift_guaranteed',
                         'worst_case_margin', 'csm_lift', 'csm_margin', 'compliant_torque']
     assert store.hash_rihs01(message_type.name) == message_type.type_hash
 

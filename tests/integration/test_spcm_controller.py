@@ -194,9 +194,24 @@ def test_full_grasp_second_goal_and_parameters(stack) -> None:
     success = res.result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
     expected_status = GoalStatus.STATUS_SUCCEEDED if success else GoalStatus.STATUS_ABORTED
     assert res.status == expected_status, (res.result.outcome_name, res.result.message)
+    # The last feedback shows the phase the grasp ended in with its outcome beside it
+    # (it may reach us just after the result).
+    h.ros.spin_until(lambda: h.feedback and h.feedback[-1].feedback.outcome != 0, 2.0)
+    last = h.feedback[-1].feedback
+    assert (last.phase, last.outcome, last.outcome_name) == (
+        'DONE', res.result.outcome, res.result.outcome_name), last
     phases = h.phases()
-    for phase in ('APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE'):
+    for phase in ('APPROACH', 'ROLLING_UP', 'ENVELOPE', 'CLASSIFYING', 'DONE'):
         assert phase in phases, phases
+    assert all(f.feedback.outcome == 0 for f in h.feedback[:-1])  # decided at the end only
+    # /dam/status never shows an end phase without the outcome (a failed grasp ended 'DONE'
+    # with outcome 3, a number, beside it), and it ends with the result's.
+    h.ros.spin_until(lambda: h.statuses and h.statuses[-1].outcome != 0, 2.0)
+    ends = [st for st in h.statuses if st.phase in ('DONE', 'ABORTED', 'FAILED')]
+    assert ends and all(st.outcome == res.result.outcome for st in ends), \
+        [(st.phase, st.outcome) for st in ends]
+    assert (h.statuses[-1].phase, h.statuses[-1].outcome_name) == (
+        'DONE', res.result.outcome_name)
     # no IDLE tick between CHECK_LIFT and APPROACH (nor anywhere else)
     assert phases[:2] == ['CHECK_LIFT', 'APPROACH'] and 'IDLE' not in phases, phases
     assert phases.index('APPROACH') < phases.index('ROLLING_UP') < phases.index('ENVELOPE')
@@ -538,6 +553,10 @@ def test_release_lets_go_and_stops_commanding(stack) -> None:
     assert len(h.commands) == n_after, 'commands after the release'
     assert any(s.phase == 'RELEASING' for s in h.statuses)
     assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'IDLE', 2.0)
+    # The grasp's outcome went with it: releasing and IDLE show none (IDLE showed the
+    # previous outcome still set).
+    assert all(st.outcome == 0 for st in h.statuses if st.phase == 'RELEASING')
+    assert (h.statuses[-1].outcome, h.statuses[-1].outcome_name) == (0, 'UNKNOWN')
     # A new grasp starts from there.
     again = h.send([INSIDE[0]], [INSIDE[1]])
     assert again.accepted

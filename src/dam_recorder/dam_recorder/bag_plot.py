@@ -45,7 +45,8 @@ PLOTTED_ROLES: tuple[str, ...] = tuple(r for r in JOINT_ROLES if r != 'locked')
 #: Fill colour of each phase span (``IDLE`` is not shaded).
 PHASE_COLOURS: dict[str, str] = {
     'APPROACH': '#9ecae1', 'ROLLING_UP': '#fdd0a2', 'ENVELOPE': '#a1d99b', 'DONE': '#d9d9d9',
-    'ABORTED': '#fcbba1', 'FAILED': '#fb6a4a', 'RELEASING': '#dadaeb', 'CHECK_LIFT': '#fff7bc'}
+    'ABORTED': '#fcbba1', 'FAILED': '#fb6a4a', 'RELEASING': '#dadaeb', 'CHECK_LIFT': '#fff7bc',
+    'CLASSIFYING': '#f0f0f0', 'STOPPING': '#fdd49e'}
 _JOINT_NAME = re.compile(r'^(?P<finger>.+)_(?P<role>' + '|'.join(JOINT_ROLES) + r')_joint$')
 
 

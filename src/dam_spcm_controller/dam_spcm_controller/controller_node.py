@@ -7,7 +7,7 @@ Topics and services
 /joint_states : sensor_msgs/JointState, subscribed
     Measured angles [rad], velocities [rad/s] and torques [N*m], reordered by joint name.
     Messages with missing names, wrong array lengths or NaN/inf are dropped (throttled log).
-    Taken in a thread of its own by the side node ``spcm_controller_joint_states``
+    Taken in a thread of its own, outside the node's executor
     (:mod:`dam_common.intake`; the node's remapping rules apply), the control step included.
 /hand/command : dam_interfaces/HandCommand, published
     One command per received joint state while a grasp runs or its result is held (DONE keeps
@@ -461,6 +461,7 @@ class SpcmControllerNode(Node):
             self._release_done = Future()
             self._publishing = True
             self._state_timed_out = False
+            self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN  # the grasp is over: releasing
             done = self._release_done
         self.get_logger().info('releasing: torques to zero, then opening the hand')
         self._publish_status()
@@ -615,7 +616,7 @@ class SpcmControllerNode(Node):
                     feedback = True
             phase = seq.phase
             fb = self._feedback
-            fb.phase = _phase_name(phase)
+            fb.phase = self._shown_phase()
             fb.progress = float(seq.progress)
             fb.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
             ended = phase is Phase.DONE or (
@@ -630,16 +631,34 @@ class SpcmControllerNode(Node):
             seq = self._seq
             msg = DamStatus()
             msg.header.stamp = self.get_clock().now().to_msg()
-            msg.phase = ('RELEASING' if self._release is not None else
-                         self._pre_phase or _phase_name(seq.phase))
+            msg.phase = self._shown_phase()
             msg.progress = float(seq.progress)
             msg.finger_names = [self._layout.finger_name(i)
                                 for i in range(self._layout.n_fingers)]
             msg.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
             msg.delta_theta_s = [float(v) for v in np.nan_to_num(seq.delta_theta_s)]
             msg.outcome = self._outcome
+            msg.outcome_name = _OUTCOME_NAME[self._outcome]
             msg.message = self._status_message
         self._status_pub.publish(msg)
+
+    def _shown_phase(self) -> str:
+        """The phase /dam/status and the feedback show (call with the lock held).
+
+        A phase a grasp ends in (DONE, ABORTED, FAILED) is shown only with the grasp's
+        outcome beside it: while the goal still decides it, the phase is CLASSIFYING (DONE:
+        the classifier fits the final posture) or STOPPING (ABORTED, FAILED: the torque ramps
+        to zero).
+        """
+        if self._release is not None:
+            return 'RELEASING'
+        if self._pre_phase:
+            return self._pre_phase
+        phase = self._seq.phase
+        if phase.terminal and self._busy and \
+                self._outcome == DamGrasp.Result.OUTCOME_UNKNOWN:
+            return 'CLASSIFYING' if phase is Phase.DONE else 'STOPPING'
+        return _phase_name(phase)
 
     # ------------------------------------------------------------------------------------
     # Action
@@ -760,12 +779,22 @@ class SpcmControllerNode(Node):
         result.message = message
         result.duration = time.monotonic() - t0
         result.object_rise = float(object_rise)
+        last_feedback = None
         with self._lock:
             self._status_message = message
             if owns_run:
                 self._pre_phase = ''
-                self._outcome = outcome
+                # The status shows the outcome beside the phase the grasp ended in; a goal
+                # that ended before the hand moved leaves the hand IDLE (its result says why).
+                moved = self._seq.phase.terminal
+                self._outcome = outcome if moved else DamGrasp.Result.OUTCOME_UNKNOWN
                 self._busy = False
+                last_feedback = self._feedback
+                last_feedback.phase = _phase_name(self._seq.phase) if moved else 'ABORTED'
+                last_feedback.outcome = outcome
+                last_feedback.outcome_name = _OUTCOME_NAME[outcome]
+        if last_feedback is not None:  # the end phase with the outcome beside it
+            goal_handle.publish_feedback(last_feedback)
         if status == 'succeed':
             goal_handle.succeed()
         elif status == 'canceled':
@@ -828,6 +857,8 @@ class SpcmControllerNode(Node):
         self._publish_status()
         feedback = DamGrasp.Feedback()
         feedback.phase = 'CHECK_LIFT'
+        with self._lock:
+            self._feedback = feedback  # this goal's, also for its last feedback (_finish)
         if self._unanalysable:
             return self._finish(goal_handle, 'abort', aborted,
                                 f'the analysis cannot answer for this grasp, so it is not '

@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
             return
         last['phase'] = fb.phase
         line = f'[{time.monotonic() - t0:7.2f} s] phase {fb.phase:<10} progress {fb.progress:.2f}'
+        if fb.outcome:  # the last feedback: the phase the goal ended in, with its outcome
+            line += f'  outcome {fb.outcome_name}'
         if fb.lift_checked:
             line += (f'  check_lift: guaranteed={fb.lift_guaranteed} '
                      f'(margin {fb.worst_case_margin:.3g} N), csm={fb.csm_lift} '
