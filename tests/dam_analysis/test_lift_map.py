@@ -21,12 +21,9 @@ N_DP = 27  # 2.5 deg steps on [0, 65] deg
 def _read_csv(path):
     with open(path, newline='') as stream:
         rows = list(csv.reader(stream))
-    assert rows[0] == ['alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm']
-    out = []
-    for alpha, dp, ks, kc in rows[1:]:
-        out.append((float(alpha), float(dp), float(ks) if ks else math.nan,
-                    float(kc) if kc else math.nan))
-    return np.array(out)
+    assert rows[0] == ['alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm',
+                       'k_theta_torque_limit']
+    return np.array([[float(cell) if cell else math.nan for cell in row] for row in rows[1:]])
 
 
 def _assert_png(path):
@@ -76,7 +73,7 @@ def test_installed_executable_writes_png_csv_and_progress(installed_run):
     out, proc = installed_run
     _assert_png(out)
     table = _read_csv(out.with_suffix('.csv'))
-    assert table.shape == (len(ALPHAS_DEG) * N_DP, 4)
+    assert table.shape == (len(ALPHAS_DEG) * N_DP, 5)
     for alpha in ALPHAS_DEG:
         rows = table[table[:, 0] == alpha]
         np.testing.assert_allclose(rows[:, 1], np.linspace(0.0, 65.0, N_DP), atol=1e-9)
@@ -90,7 +87,7 @@ def test_csv_boundaries_agree_with_bisection_on_check_lift(installed_run, analyz
     for alpha in ALPHAS_DEG:
         rows = table[table[:, 0] == alpha]
         picks = rng.choice(len(rows), size=7, replace=False)
-        for alpha_deg, dp_deg, k_suff, k_csm in rows[picks]:
+        for alpha_deg, dp_deg, k_suff, k_csm, _ in rows[picks]:
             dp, a = math.radians(dp_deg), math.radians(alpha_deg)
             for field, value in (('lift_guaranteed', k_suff), ('csm_lift', k_csm)):
                 k_hi = 100.0 if math.isnan(value) else max(100.0, 2.0 * value)
@@ -113,6 +110,78 @@ def test_alpha_30_sufficient_region_empty_csm_not(installed_run, analyzer):
     end_deg = math.degrees(min(path.valid_until for path in analyzer.table.paths))
     beyond = table[table[:, 1] > end_deg]
     assert beyond.size and np.all(np.isnan(beyond[:, 2:]))
+
+
+def test_the_torque_ceiling_is_where_check_lift_says_the_limit_is_exceeded(installed_run,
+                                                                          analyzer):
+    """The map hatched the sufficient region up to 18 N*m/rad at 10 deg where check_lift said
+    the torque limit is exceeded from 15: the ceiling is where check_lift's own verdict flips,
+    the same for every friction angle."""
+    table = _read_csv(installed_run[0].with_suffix('.csv'))
+    checked = 0
+    for alpha_deg, dp_deg, _ks, _kc, k_torque in table[::5]:
+        if dp_deg == 0.0 or not math.isfinite(k_torque):
+            continue
+        dp, a = math.radians(dp_deg), math.radians(alpha_deg)
+        assert analyzer.check_lift(0.99 * k_torque, dp, a).within_torque_limit, dp_deg
+        assert not analyzer.check_lift(1.01 * k_torque, dp, a).within_torque_limit, dp_deg
+        same = table[(table[:, 1] == dp_deg)][:, 4]
+        assert np.all(same == k_torque)  # one ceiling for every friction angle
+        checked += 1
+    assert checked >= 8
+    at_10 = table[(table[:, 0] == 5.0) & (np.abs(table[:, 1] - 10.0) < 1.3)]
+    assert np.all((at_10[:, 4] > 12.0) & (at_10[:, 4] < 18.0)), at_10[:, [1, 4]]
+
+
+def _drawn(argv, tmp_path, monkeypatch):
+    """The axes ``lift_map`` draws for ``argv`` (kept open instead of closed)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    kept = []
+    monkeypatch.setattr(plt, 'close', lambda fig: kept.append(fig))
+    assert lift_map.main([*argv, '--n-delta-theta-p', '60', '--out',
+                          str(tmp_path / 'm.png')]) == 0
+    [figure] = kept
+    return figure.axes[0]
+
+
+def test_what_the_hand_cannot_drive_is_shaded_and_not_hatched(tmp_path, monkeypatch):
+    ax = _drawn(['--friction-angles', '5deg', '--k-max', '40'], tmp_path, monkeypatch)
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    [ceiling_label] = [label for label in lines if label.startswith('torque ceiling')]
+    ceiling = lines[ceiling_label]
+    dp, k_torque = (np.asarray(v, dtype=float) for v in ceiling.get_data())
+    hatched = [c for c in ax.collections if c.get_hatch()]
+    assert hatched
+    for collection in hatched:
+        for path in collection.get_paths():
+            x, y = path.vertices[:, 0], path.vertices[:, 1]
+            top = np.interp(x, dp, np.where(np.isfinite(k_torque), k_torque, 40.0))
+            assert np.all(y <= np.minimum(top, 40.0) + 1e-6), 'hatched above the ceiling'
+    shaded = [c for c in ax.collections if not c.get_hatch()]
+    assert shaded, 'nothing shaded above the ceiling'
+
+
+def test_a_boundary_that_stops_inside_the_plot_is_marked_and_said_why(tmp_path, monkeypatch):
+    ax = _drawn(['--object', 'square_bar', '--friction-angles', '5deg'], tmp_path, monkeypatch)
+    notes = [t.get_text() for t in ax.texts]
+    assert any(n.startswith('CSM ends at') for n in notes), notes
+    marks = [line for line in ax.get_lines() if line.get_marker() == 'x']
+    assert len(marks) == len(notes)
+
+
+def test_an_empty_map_has_no_legend_entry_for_a_line_not_drawn(tmp_path, monkeypatch):
+    ax = _drawn(['--object', 'hex_pencil', '--friction-angles', '5deg'], tmp_path, monkeypatch)
+    for line in ax.get_lines():
+        label = line.get_label()
+        if label.startswith('_') or line.get_linestyle() == 'None':
+            continue
+        y = np.asarray(line.get_ydata(), dtype=float)
+        assert y.size and np.any(np.isfinite(y)), f'legend entry {label!r} has no line'
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert 'alpha = 5 deg: sufficient region empty' in labels, labels
 
 
 def test_main_in_process_with_explicit_csv_and_range(tmp_path, analyzer):

@@ -223,3 +223,24 @@ def test_the_command_scales_a_named_object(tmp_path: Path,
     assert main(['--object', 'pencil', '--radius-range', '3mm:9mm:3', '--delta-theta-p',
                  '10deg', '--out', str(out)]) == 2
     assert "'pencil' is not in the object library" in capsys.readouterr().err
+
+
+def test_a_curve_with_no_value_has_no_legend_line(tmp_path: Path, monkeypatch) -> None:
+    """A map where nothing lifts (the configured 3.5 mm hexagonal pencil) listed legend
+    entries for lines that were not drawn; each now says the curve has no value instead."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    kept = []
+    monkeypatch.setattr(plt, 'close', lambda fig: kept.append(fig))
+    assert main(['--object', 'hex_pencil', '--radius-range', '3mm:3.5mm:2', '--delta-theta-p',
+                 '10deg', '--out', str(tmp_path / 'p.png')]) == 0
+    [figure] = kept
+    lines = figure.axes[0].get_lines()
+    for line in lines:
+        if line.get_label().startswith('_') or line.get_linestyle() == 'None':
+            continue
+        y = np.asarray(line.get_ydata(), dtype=float)
+        assert y.size and np.any(np.isfinite(y)), f'{line.get_label()!r} has no line'
+    assert any('none in this range' in line.get_label() for line in lines)

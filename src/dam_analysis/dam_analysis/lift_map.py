@@ -3,7 +3,11 @@
 For each friction angle the tool draws both lower region boundaries ``k_theta*(delta_theta_p)``
 (finger 1's stiffness; the other fingers follow the configured ratios): the sufficient condition
 of eq. (18) as a thick line with its region hatched, and the contact stiffness model (CSM) as a
-thin dashed line, one colour per friction angle. Examples::
+thin dashed line, one colour per friction angle. A dotted line is the hand's torque ceiling:
+above it some finger's SPCM torque exceeds the torque limit (``/check_lift``: "exceeds the
+torque limit"), so that part is shaded and not hatched. A boundary that stops inside the plot
+ends in an ``x`` with a note (the SPCM branch ends, or no stiffness lifts beyond); an empty
+region is named in the legend, with no line. Examples::
 
     ros2 run dam_analysis lift_map --friction-angles 1deg 5deg 30deg --out map.png
     ros2 run dam_analysis lift_map --friction-angles 5deg --n-delta-theta-p 400 \\
@@ -12,10 +16,10 @@ thin dashed line, one colour per friction angle. Examples::
 
 Friction angles and ``--delta-theta-p-max`` take their unit (``5deg``, ``0.09rad``); a bare number
 is radians, as in every command of the suite, and one implausible as radians (``5``) is refused
-with what was probably meant. The CSV has the columns
-``alpha_deg, delta_theta_p_deg, k_theta_sufficient, k_theta_csm`` [deg, deg, N m/rad, N m/rad];
-an empty cell means that no stiffness lifts the object there (including displacements beyond the
-end of the SPCM branch). Exit status: 0 on success, 2 on bad arguments or configuration.
+with what was probably meant. The CSV has the columns ``alpha_deg, delta_theta_p_deg,
+k_theta_sufficient, k_theta_csm, k_theta_torque_limit`` [deg, deg, N m/rad x 3]; an empty cell
+means that no stiffness lifts the object there (including displacements beyond the end of the
+SPCM branch). Exit status: 0 on success, 2 on bad arguments or configuration.
 It needs no ROS: only the analysis core and matplotlib (Agg backend).
 """
 
@@ -46,7 +50,8 @@ DEFAULT_K_MAX = 10.0
 K_MIN_FACTOR = 3.0
 #: ... but never more than this multiple of the largest finite boundary.
 K_MAX_FACTOR = 1.5
-CSV_COLUMNS = ('alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm')
+CSV_COLUMNS = ('alpha_deg', 'delta_theta_p_deg', 'k_theta_sufficient', 'k_theta_csm',
+               'k_theta_torque_limit')
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -124,15 +129,33 @@ def _cell(value: float) -> str:
 
 
 def write_csv(path: Path, friction_angles_deg: Sequence[float],
-              boundaries: Sequence[Boundaries]) -> None:
-    """Write the boundaries [deg, deg, N m/rad, N m/rad]; empty cells where nothing lifts."""
+              boundaries: Sequence[Boundaries], ceiling: np.ndarray | None = None) -> None:
+    """Write the boundaries and the torque ceiling [deg, deg, N m/rad x 3] (:data:`CSV_COLUMNS`);
+    empty cells where nothing lifts (or, for the ceiling, beyond the SPCM branch)."""
     with open(path, 'w', newline='') as stream:
         writer = csv.writer(stream, lineterminator='\n')
         writer.writerow(CSV_COLUMNS)
         for alpha, b in zip(friction_angles_deg, boundaries, strict=True):
-            for dp, ks, kc in zip(np.degrees(b.delta_theta_p), b.sufficient, b.csm,
-                                  strict=True):
-                writer.writerow((f'{alpha:g}', repr(float(dp)), _cell(ks), _cell(kc)))
+            tops = np.full(b.delta_theta_p.shape, np.nan) if ceiling is None else ceiling
+            for dp, ks, kc, kt in zip(np.degrees(b.delta_theta_p), b.sufficient, b.csm, tops,
+                                      strict=True):
+                writer.writerow((f'{alpha:g}', repr(float(dp)), _cell(ks), _cell(kc),
+                                 _cell(kt)))
+
+
+def torque_ceiling(analyzer: LiftAnalyzer, delta_theta_p: np.ndarray) -> np.ndarray:
+    """The finger-1 stiffness [N m/rad] above which the SPCM torque ``|tau_s|`` of some finger
+    exceeds the hand's torque limit, per displacement (:func:`~dam_analysis.scale_study.
+    torque_stiffness`: under SPCM ``delta_theta_s`` does not depend on ``k_theta`` or the
+    friction angle, so one curve serves every friction angle); NaN beyond the SPCM branch.
+
+    Returns
+    -------
+    (D,) float64 array, the same the ``/check_lift`` answer's ``within_torque_limit`` flips at.
+    """
+    from dam_analysis.scale_study import torque_stiffness  # noqa: PLC0415
+
+    return np.array([torque_stiffness(analyzer, float(dp)) for dp in delta_theta_p])
 
 
 def default_k_max(boundaries: Sequence[Boundaries]) -> float:
@@ -151,46 +174,101 @@ def default_k_max(boundaries: Sequence[Boundaries]) -> float:
     return min(wanted, K_MAX_FACTOR * max(float(c.max()) for c in curves))
 
 
-def plot_map(path: Path, friction_angles_deg: Sequence[float],
-             boundaries: Sequence[Boundaries], k_max: float, delta_theta_p_max: float,
-             object_text: str = '') -> None:
-    """Draw the boundaries and hatch the sufficient regions; save to ``path``.
+def _curve_ends(dp_deg: np.ndarray, k: np.ndarray) -> list[int]:
+    """Indices of the last finite sample of each stretch of ``k`` that stops inside the
+    plotted range (the next sample is NaN: no stiffness lifts from there on)."""
+    finite = np.isfinite(k)
+    return [int(i) for i in np.flatnonzero(finite[:-1] & ~finite[1:])]
+
+
+def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boundaries],
+             k_max: float, delta_theta_p_max: float, ceiling: np.ndarray | None = None,
+             torque_limit: float = math.nan, branch_end_deg: float = math.inf) -> None:
+    """Draw the lift map on the matplotlib axes ``ax``.
+
+    Both boundaries per friction angle (sufficient: thick, its region hatched up to the torque
+    ceiling; CSM: dashed); the torque ceiling dotted with what lies above it shaded (pairs the
+    hand cannot drive: ``/check_lift`` says the torque limit is exceeded); an ``x`` and a note
+    where a boundary stops inside the plot; a legend entry only for what is drawn.
 
     Parameters
     ----------
     k_max : top of the k_theta axis [N m/rad]; delta_theta_p_max : right end [deg].
+    ceiling : (D,) torque ceiling [N m/rad] on the boundaries' displacements, or None.
+    torque_limit : the hand's compliant torque limit [N m], for the legend.
+    branch_end_deg : where the SPCM branch ends [deg], to say why a boundary stops there.
+    """
+    colours = ['#1f77b4', '#ff7f0e', '#2ca02c', '#d62728', '#9467bd', '#8c564b', '#e377c2']
+    hatches = ('//', '\\\\', '||', '--', 'xx', '++')
+    top = np.full(boundaries[0].delta_theta_p.shape, k_max) if boundaries else np.array([])
+    if ceiling is not None and boundaries:
+        dp = np.degrees(boundaries[0].delta_theta_p)
+        top = np.where(np.isfinite(ceiling), np.minimum(ceiling, k_max), k_max)
+        beyond = np.isfinite(ceiling) & (ceiling < k_max)
+        if np.any(beyond):
+            ax.fill_between(dp, top, k_max, where=beyond, facecolor='0.55', alpha=0.25,
+                            linewidth=0.0)
+        if np.any(np.isfinite(ceiling)):
+            ax.plot(dp, ceiling, color='black', linewidth=1.2, linestyle=':',
+                    label=f'torque ceiling |tau_s| = {torque_limit:g} N*m '
+                          '(shaded above: beyond the hand)')
+    for j, (alpha, b) in enumerate(zip(friction_angles_deg, boundaries, strict=True)):
+        colour = colours[j % len(colours)]
+        dp = np.degrees(b.delta_theta_p)
+        for name, k, width, style in (('sufficient (eq. 18)', b.sufficient, 2.6, '-'),
+                                      ('CSM', b.csm, 1.1, '--')):
+            short = 'sufficient' if name.startswith('sufficient') else name
+            if not np.any(np.isfinite(k)):
+                ax.plot([], [], ' ', label=f'alpha = {alpha:g} deg: {short} region empty')
+                continue
+            ax.plot(dp, k, color=colour, linewidth=width, linestyle=style,
+                    label=f'alpha = {alpha:g} deg: {name}')
+            for i in _curve_ends(dp, k):
+                if k[i] >= k_max:
+                    continue  # it leaves through the top of the plot first
+                why = ('the SPCM branch ends' if dp[i + 1] >= branch_end_deg - 1e-9
+                       else 'no stiffness lifts beyond')
+                ax.plot([dp[i]], [k[i]], marker='x', color=colour, markersize=7)
+                ax.annotate(f'{short} ends at {dp[i]:.3g} deg: {why}', (dp[i], k[i]),
+                            textcoords='offset points', xytext=(-4, 6), ha='right',
+                            fontsize=6, color=colour)
+        lifts = np.isfinite(b.sufficient) & (b.sufficient < top)
+        if np.any(lifts):
+            # margin = k_theta A - m_B g is increasing in k_theta: the region is above k*, up
+            # to what the hand can drive
+            ax.fill_between(dp, np.where(lifts, b.sufficient, top), top, where=lifts,
+                            facecolor='none', edgecolor=colour, linewidth=0.0,
+                            hatch=hatches[j % len(hatches)], alpha=0.6)
+    ax.set_xlim(0.0, delta_theta_p_max)
+    ax.set_ylim(0.0, k_max)
+    ax.set_xlabel('position-joint displacement delta_theta_p [deg]')
+    ax.set_ylabel('compliant-joint stiffness k_theta (finger 1) [N m/rad]')
+    ax.grid(True, alpha=0.3)
+    # Below the axes: inside, it hid the curves' ends and their notes.
+    ax.legend(fontsize=7, loc='upper center', bbox_to_anchor=(0.5, -0.12), ncol=2,
+              frameon=False)
+
+
+def plot_map(path: Path, friction_angles_deg: Sequence[float],
+             boundaries: Sequence[Boundaries], k_max: float, delta_theta_p_max: float,
+             object_text: str = '', ceiling: np.ndarray | None = None,
+             torque_limit: float = math.nan, branch_end_deg: float = math.inf) -> None:
+    """Draw the map (:func:`draw_map`) with its title; save it to ``path`` (PNG).
+
+    Parameters
+    ----------
     object_text : the object, for the title (e.g. ``'square_bar: square, 16 mm across flats'``).
+    The others as for :func:`draw_map`.
     """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 5.0), dpi=120)
-    colours = plt.rcParams['axes.prop_cycle'].by_key()['color']
-    hatches = ('//', '\\\\', '||', '--', 'xx', '++')
-    for j, (alpha, b) in enumerate(zip(friction_angles_deg, boundaries, strict=True)):
-        colour = colours[j % len(colours)]
-        dp = np.degrees(b.delta_theta_p)
-        ax.plot(dp, b.sufficient, color=colour, linewidth=2.6,
-                label=f'alpha = {alpha:g} deg: sufficient (eq. 18)')
-        ax.plot(dp, b.csm, color=colour, linewidth=1.1, linestyle='--',
-                label=f'alpha = {alpha:g} deg: CSM')
-        lifts = np.isfinite(b.sufficient) & (b.sufficient < k_max)
-        if np.any(lifts):
-            # margin = k_theta A - m_B g is increasing in k_theta: the region is above k*
-            ax.fill_between(dp, np.where(lifts, b.sufficient, k_max), k_max, where=lifts,
-                            facecolor='none', edgecolor=colour, linewidth=0.0,
-                            hatch=hatches[j % len(hatches)], alpha=0.6)
-        elif not np.any(np.isfinite(b.sufficient)):
-            ax.plot([], [], ' ', label=f'alpha = {alpha:g} deg: sufficient region empty')
-    ax.set_xlim(0.0, delta_theta_p_max)
-    ax.set_ylim(0.0, k_max)
-    ax.set_xlabel('position-joint displacement delta_theta_p [deg]')
-    ax.set_ylabel('compliant-joint stiffness k_theta (finger 1) [N m/rad]')
-    title = 'Lift regions (hatched: sufficient condition holds)'
+    fig, ax = plt.subplots(figsize=(7.5, 6.4), dpi=120)
+    draw_map(ax, friction_angles_deg, boundaries, k_max, delta_theta_p_max, ceiling,
+             torque_limit, branch_end_deg)
+    title = 'Lift regions (hatched: sufficient condition holds within the torque limit)'
     ax.set_title(f'{title}\n{object_text}' if object_text else title, fontsize=10)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7, loc='upper right')
     fig.tight_layout()
     fig.savefig(path, format='png')
     plt.close(fig)
@@ -222,12 +300,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     dps = np.radians(np.linspace(0.0, dp_max, options.n_delta_theta_p))
     dps = np.minimum(dps, analyzer.model.delta_theta_p_max)
     boundaries = compute_boundaries(analyzer, options.friction_angles, dps)
+    ceiling = torque_ceiling(analyzer, dps)
+    branch_end = math.degrees(min(path.valid_until for path in analyzer.table.paths))
     csv_path = options.csv if options.csv is not None else options.out.with_suffix('.csv')
     k_max = options.k_max if options.k_max is not None else default_k_max(boundaries)
     try:
-        write_csv(csv_path, options.friction_angles, boundaries)
+        write_csv(csv_path, options.friction_angles, boundaries, ceiling)
         plot_map(options.out, options.friction_angles, boundaries, k_max, dp_max,
-                 f'{config.object.name}: {config.object.section.describe()}')
+                 f'{config.object.name}: {config.object.section.describe()}', ceiling,
+                 analyzer.limits.torque_limit, branch_end)
     except OSError as exc:
         print(f'lift_map: cannot write output: {exc}', file=sys.stderr)
         return 1

@@ -134,14 +134,18 @@ def plot_study(path: Path, study: ScaleStudy) -> None:
     for d, dp in enumerate(study.delta_theta_p):
         colour = colours[d % len(colours)]
         label = f'delta_theta_p = {math.degrees(dp):g} deg'
-        # markers too: a radius alone (or between two without a value) has no line
-        ax.plot(r_mm, study.k_sufficient[:, d], color=colour, linewidth=2.4, marker='o',
-                markersize=4, label=f'{label}: sufficient (eq. 18)')
-        ax.plot(r_mm, study.k_csm[:, d], color=colour, linewidth=1.1, linestyle='--',
-                marker='s', markersize=3, label=f'{label}: CSM')
-        ax.plot(r_mm, study.k_torque[:, d], color=colour, linewidth=1.1, linestyle=':',
-                marker='v', markersize=3,
-                label=f'{label}: torque limit {study.torque_limit:g} N*m')
+        # markers too: a radius alone (or between two without a value) has no line; a curve
+        # with no value at all has a legend entry saying so, and no line
+        for values, name, width, style, marker, size in (
+                (study.k_sufficient[:, d], 'sufficient (eq. 18)', 2.4, '-', 'o', 4),
+                (study.k_csm[:, d], 'CSM', 1.1, '--', 's', 3),
+                (study.k_torque[:, d], f'torque limit {study.torque_limit:g} N*m', 1.1, ':',
+                 'v', 3)):
+            if not np.any(np.isfinite(values)):
+                ax.plot([], [], ' ', label=f'{label}: {name}: none in this range')
+                continue
+            ax.plot(r_mm, values, color=colour, linewidth=width, linestyle=style,
+                    marker=marker, markersize=size, label=f'{label}: {name}')
     step = float(np.min(np.diff(r_mm))) if r_mm.size > 1 else 1.0
     shaded = False
     for j, reason in enumerate(study.no_contact):
