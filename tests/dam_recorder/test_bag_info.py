@@ -198,6 +198,35 @@ def make_episode_dir(root: Path, typestore, prefixes) -> dict[str, dict]:
     return {**runs, '2026_11_29-18_10_05_success_incomplete': gb.summary()}
 
 
+def test_a_directory_of_ordinary_bags_lists_them_as_bags(tmp_path: Path, typestore,
+                                                          prefixes) -> None:
+    """``bag info DIR`` on ordinary bags (no episode metadata, no episode's name) called them
+    "3 episodes ... UNKNOWN"; now they are bags, with their sizes, and count in no outcome,
+    beside the episodes of the same directory."""
+    for name in ('rosbag2_2026_11_29-18_05_12', 'calibration', 'morning_run'):
+        gb.write_grasp_bag(tmp_path / name, typestore, prefixes)
+    gb.write_grasp_bag(tmp_path / '2026_11_29-18_06_40_failure', typestore, prefixes,
+                       topics=('/dam/status',), episode=gb.summary(outcome=3,
+                                                                   outcome_name='FAILURE'))
+    info = episodes_info(tmp_path)
+    assert [r.name for r in info.bags] == ['calibration', 'morning_run',
+                                           'rosbag2_2026_11_29-18_05_12']
+    assert [r.name for r in info.episodes] == ['2026_11_29-18_06_40_failure']
+    assert all(r.outcome == '-' and r.kind == 'bag' for r in info.bags)
+    assert len({r.message_count for r in info.bags}) == 1  # the same bag three times
+    assert info.bags[0].topic_count == 4 and info.bags[0].message_count > 100
+    assert info.totals == {'FAILURE': 1}
+    text = format_episodes(info)
+    assert text.splitlines()[0].endswith(': 1 episode, 3 other bags (not episodes)'), text
+    assert 'UNKNOWN' not in text
+    bags = text.split('bags (no episode metadata')[1].splitlines()[1:]
+    assert bags[0].split()[:4] == ['bag', 'start', 'duration', '[s]']
+    assert [line.split()[0] for line in bags[1:]] == [r.name for r in info.bags]
+    data = episodes_json(info)
+    assert [b['name'] for b in data['bags']] == [r.name for r in info.bags]
+    assert [e['name'] for e in data['episodes']] == ['2026_11_29-18_06_40_failure']
+
+
 def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefixes) -> None:
     runs = make_episode_dir(tmp_path, typestore, prefixes)
     info = episodes_info(tmp_path)

@@ -79,16 +79,46 @@ def test_phases_are_spans_from_one_change_to_the_next(grasp_bag) -> None:
     assert labels == ['APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE']
 
 
-def test_a_phase_too_short_for_its_name_is_labelled_upright() -> None:
+def _overlapping_labels(figure) -> list[tuple[str, str]]:
+    """Pairs of visible phase labels of one axes whose drawn boxes overlap."""
+    renderer = figure.canvas.get_renderer()
+    pairs = []
+    for ax in figure.axes:
+        boxes = [(t.get_text(), t.get_window_extent(renderer)) for t in ax.texts
+                 if t.get_gid() == 'phase_label' and t.get_visible()]
+        for i, (name_a, a) in enumerate(boxes):
+            for name_b, b in boxes[i + 1:]:
+                if a.overlaps(b):
+                    pairs.append((name_a, name_b))
+    return pairs
+
+
+def test_short_phases_side_by_side_have_labels_that_never_overlap() -> None:
+    """A short ENVELOPE between ROLLING_UP and DONE, then CLASSIFYING, DONE, RELEASING, IDLE
+    within a second (a grasp and its release): labels overlapped; each now takes a row where
+    it clears the others."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from dam_recorder.bag_plot import PhaseSpan, _shade_phases
+    from dam_recorder.bag_plot import PhaseSpan, _shade_phases, _stack_labels
 
-    ax = Figure().add_subplot()
-    _shade_phases(ax, [PhaseSpan('ROLLING_UP', 0.0, 9.0), PhaseSpan('ENVELOPE', 9.0, 9.1),
-                       PhaseSpan('DONE', 9.1, 10.0)], label=True)
-    texts = {t.get_text(): t.get_rotation() for t in ax.texts if t.get_gid() == 'phase_label'}
-    assert texts == {'ROLLING_UP': 0.0, 'ENVELOPE': 90.0, 'DONE': 0.0}
+    figure = Figure(figsize=(6, 3))
+    FigureCanvasAgg(figure)
+    ax = figure.add_subplot()
+    spans = [PhaseSpan('ROLLING_UP', 0.0, 9.0), PhaseSpan('ENVELOPE', 9.0, 9.1),
+             PhaseSpan('CLASSIFYING', 9.1, 9.2), PhaseSpan('DONE', 9.2, 9.3),
+             PhaseSpan('RELEASING', 9.3, 9.6), PhaseSpan('CHECK_LIFT', 9.6, 9.7),
+             PhaseSpan('APPROACH', 9.7, 20.0)]
+    _shade_phases(ax, spans, label=True)
+    ax.set_xlim(0.0, 20.0)
+    figure.canvas.draw()
+    assert _overlapping_labels(figure), 'the test must start from overlapping labels'
+    _stack_labels(figure)
+    figure.canvas.draw()
+    assert _overlapping_labels(figure) == []
+    labels = [t for t in ax.texts if t.get_gid() == 'phase_label']
+    assert {t.get_text() for t in labels} == {s.phase for s in spans}
+    assert len({round(t.get_position()[1], 6) for t in labels}) > 1  # stacked in rows
 
 
 def test_height_is_the_rise_in_mm_and_the_margins_and_title_are_written(grasp_bag) -> None:
@@ -195,3 +225,157 @@ def test_phase_spans_of_status_samples() -> None:
     assert [(s.phase, s.start_s, s.end_s) for s in spans] == \
         [('IDLE', 0.0, 1.0), ('APPROACH', 1.0, 2.0), ('DONE', 2.0, 3.0)]
     assert phase_spans([], 1.0) == []
+
+
+# -- a bag of several grasps --------------------------------------------------------------
+
+#: Three grasps 30 s apart (outcomes SUCCESS, FAILURE, LIFTED_DAM_FAILED), /joint_states only
+#: while each runs (100 Hz), so the stream pauses for about 25 s between them.
+MULTI_GRASPS = ((1, 'SUCCESS'), (3, 'FAILURE'), (2, 'LIFTED_DAM_FAILED'))
+MULTI_START_S = (2.0, 32.0, 62.0)
+MULTI_PHASES = [('APPROACH', 1.0), ('ROLLING_UP', 2.0), ('ENVELOPE', 0.1), ('CLASSIFYING', 0.1),
+                ('DONE', 0.5), ('RELEASING', 0.3), ('IDLE', 0.5)]
+
+
+@pytest.fixture(scope='module')
+def multi_bag(tmp_path_factory, typestore, prefixes) -> Path:
+    from dam_recorder.bag_writer import BagWriter
+    from dam_recorder.type_description import load_message_type
+
+    t = typestore.types
+    path = tmp_path_factory.mktemp('multi') / 'afternoon'
+    writer = BagWriter(path, storage='mcap', compression='zstd', custom_data=dict)
+    ids = {}
+    for topic, type_name in (('/joint_states', 'sensor_msgs/msg/JointState'),
+                             ('/dam/status', 'dam_interfaces/msg/DamStatus')):
+        kind = load_message_type(type_name, prefixes)
+        ids[topic] = (writer.add_topic(topic, kind.name, kind.definition(), kind.type_hash, []),
+                      type_name)
+    pending = []
+
+    def header(time_s):
+        return t['std_msgs/msg/Header'](stamp=t['builtin_interfaces/msg/Time'](
+            sec=int(time_s), nanosec=0), frame_id='')
+
+    def status(time_s, phase, outcome):
+        names = {0: 'UNKNOWN', 1: 'SUCCESS', 2: 'LIFTED_DAM_FAILED', 3: 'FAILURE'}
+        pending.append((time_s, '/dam/status', t['dam_interfaces/msg/DamStatus'](
+            header=header(time_s), phase=phase, progress=0.5, finger_names=list(gb.FINGERS),
+            compliant_torque=np.zeros(3), delta_theta_s=np.zeros(3), outcome=outcome,
+            outcome_name=names[outcome], message='')))
+
+    status(0.0, 'IDLE', 0)
+    for (outcome, _name), start in zip(MULTI_GRASPS, MULTI_START_S, strict=True):
+        now = start
+        for phase, length in MULTI_PHASES:
+            ended = phase in ('DONE',)
+            for k in range(int(round(length / 0.1))):
+                status(now + 0.1 * k, phase, outcome if ended else 0)
+            now += length
+        for i in range(int((now - start) * 100)):
+            time_s = start + 0.01 * i
+            pending.append((time_s, '/joint_states', t['sensor_msgs/msg/JointState'](
+                header=header(time_s), name=list(gb.JOINTS),
+                position=np.full(len(gb.JOINTS), 0.01 * i), velocity=np.array([]),
+                effort=np.full(len(gb.JOINTS), 0.1))))
+    for time_s, topic, msg in sorted(pending, key=lambda item: item[0]):
+        topic_id, type_name = ids[topic]
+        writer.write(topic_id, gb.T0 + int(round(time_s * 1e9)),
+                     bytes(typestore.serialize_cdr(msg, type_name)))
+    writer.close()
+    return path
+
+
+def test_a_bag_of_several_grasps_shows_the_last_and_names_the_others(multi_bag,
+                                                                     tmp_path) -> None:
+    result = plot_bag(multi_bag, tmp_path / 'last.png')
+    data = result.data
+    assert data.outcome == 'LIFTED_DAM_FAILED'  # the grasp shown: the last
+    assert '(grasp 3 of 3)' in data.title()
+    low, high = result.figure.axes[0].get_xlim()
+    # from 1 s before its first active phase (APPROACH at 62 s) to 3 s after DONE
+    assert low == pytest.approx(MULTI_START_S[2] - 1.0) and high < 70.0, (low, high)
+    notes = data.selection.notes
+    assert notes[0] == 'the bag holds 3 grasps; shown: the last. The others:'
+    assert notes[1].startswith('  1: 2.000 s to ') and notes[1].endswith(', SUCCESS')
+    assert notes[2].startswith('  2: 32.000 s to ') and notes[2].endswith(', FAILURE')
+    assert 'choose one with --episode N' in all_text(result.figure)
+    assert _overlapping_labels(result.figure) == []
+
+
+def test_episode_n_shows_that_grasp_with_its_own_outcome(multi_bag) -> None:
+    data = plot_bag(multi_bag, episode=2).data
+    assert data.outcome == 'FAILURE' and '(grasp 2 of 3)' in data.title()
+    series = data.joints['finger1_compliant_joint']
+    assert series.time_s.min() >= 31.0 and series.time_s.max() <= 61.0
+
+
+def test_a_time_window_shows_what_lies_in_it(multi_bag) -> None:
+    data = plot_bag(multi_bag, start_s=30.0, end_s=40.0).data
+    series = data.joints['finger1_compliant_joint']
+    assert 32.0 <= series.time_s.min() and series.time_s.max() <= 40.0
+    assert data.outcome == 'FAILURE'  # the one grasp that starts in the window
+    assert data.phases[0].start_s == pytest.approx(30.0)  # the phase at the window's start
+    assert data.phases[0].phase == 'IDLE'
+
+
+def test_lines_break_at_a_pause_instead_of_crossing_it(multi_bag) -> None:
+    figure = plot_bag(multi_bag, start_s=0.0, end_s=70.0).figure
+    line = lines_by_label(figure.axes[0])['finger1_compliant_joint']
+    x = np.asarray(line.get_xdata(), dtype=float)
+    y = np.asarray(line.get_ydata(), dtype=float)
+    breaks = np.flatnonzero(np.isnan(y))
+    assert len(breaks) == 2  # between grasps 1 and 2, 2 and 3
+    finite = ~np.isnan(y)
+    steps = np.diff(x[finite])
+    # the only long steps of the drawn line are across the breaks
+    assert np.sum(steps > 1.0) == 2 and all(np.isnan(y[i]) for i in breaks)
+
+
+@pytest.mark.parametrize(('kwargs', 'says'), [
+    ({'episode': 4}, '--episode 4: the bag holds grasps 1 to 3: 1: 2.000 s'),
+    ({'episode': 1, 'start_s': 3.0}, '--episode and --start/--end choose the same thing'),
+    ({'start_s': 10.0, 'end_s': 5.0}, '--start 10 s is not before --end 5 s'),
+    ({'start_s': 500.0}, 'lies outside the bag'),
+])
+def test_a_selection_the_bag_cannot_give_is_refused_naming_it(multi_bag, kwargs, says) -> None:
+    from dam_recorder.errors import BagReadError
+
+    with pytest.raises(BagReadError) as caught:
+        plot_bag(multi_bag, **kwargs)
+    assert says in str(caught.value)
+
+
+def test_export_takes_the_same_selection(multi_bag, tmp_path) -> None:
+    import csv
+
+    from dam_recorder.bag_export import export_bag
+    from dam_recorder.bag_plot import read_selection
+
+    chosen = read_selection(multi_bag, episode=1)
+    [joint_states, _status] = sorted(
+        export_bag(multi_bag, tmp_path / 'one', selection=chosen), key=lambda e: e.topic)
+    with open(joint_states.path, encoding='utf-8', newline='') as stream:
+        times = [float(row['time_s']) for row in csv.DictReader(stream)]
+    assert times and min(times) >= 1.0 and max(times) <= 31.0
+    whole = sorted(export_bag(multi_bag, tmp_path / 'all'), key=lambda e: e.topic)
+    assert whole[0].rows > joint_states.rows * 2.5
+
+
+def test_the_command_line_takes_the_selection(multi_bag, tmp_path, capsys) -> None:
+    from dam_recorder.bag_cli import main
+
+    assert main(['plot', str(multi_bag), '-o', str(tmp_path / 'two.png'), '--episode', '2']) == 0
+    out = capsys.readouterr().out
+    assert '(grasp 2 of 3): FAILURE' in out and 'shown: grasp 2: 32.000 s' in out, out
+    assert main(['plot', str(multi_bag), '-o', str(tmp_path / 'last.png')]) == 0
+    out = capsys.readouterr().out
+    assert 'the bag holds 3 grasps; shown: the last' in out and '1: 2.000 s' in out, out
+    assert main(['export', str(multi_bag), '-o', str(tmp_path / 'csv'), '--start', '30',
+                 '--end', '40s']) == 0
+    assert '30.000 s to 40.000 s' in capsys.readouterr().out
+    assert main(['plot', str(multi_bag), '--episode', '9']) == 1
+    assert 'bag plot: --episode 9: the bag holds grasps 1 to 3' in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(['plot', str(multi_bag), '--episode', '0'])
+    assert 'grasps are numbered from 1' in capsys.readouterr().err

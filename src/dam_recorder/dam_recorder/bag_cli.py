@@ -4,8 +4,9 @@
 
     ros2 run dam_recorder bag info BAG [--json]      # topics, rates, gaps, losses, episode
     ros2 run dam_recorder bag info EPISODES_DIR      # one row per episode bag, totals
-    ros2 run dam_recorder bag plot BAG [-o grasp.png]
+    ros2 run dam_recorder bag plot BAG [-o grasp.png] [--episode N | --start S --end S]
     ros2 run dam_recorder bag export BAG [-o DIR] [--topics /joint_states /dam/status]
+                                         [--episode N | --start S --end S]
 
 Exit status 0 on success, 1 when a bag cannot be read or an output cannot be written (one line
 on standard error naming the path and the cause), 2 for a malformed command line.
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from collections.abc import Sequence
@@ -71,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help='picture to write; the suffix picks the format (.png, .pdf, .svg); '
                            'default <bag name>.png in the current directory')
     plot.add_argument('--dpi', type=int, default=110, help='resolution of a PNG (default 110)')
+    _selection_options(plot, 'the only one; of several, the last (the others are named)')
 
     export = sub.add_parser(
         'export', help='write the signals as CSV, one file per topic',
@@ -85,7 +88,40 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument('-t', '--topics', metavar='TOPIC', nargs='+', type=_topics,
                         help='topics to export (names, or one comma-separated list); '
                              'default every topic')
+    _selection_options(export, 'the whole bag')
     return parser
+
+
+def _selection_options(parser: argparse.ArgumentParser, default: str) -> None:
+    group = parser.add_argument_group(
+        'which part of the bag', 'the grasps are found from /dam/status and numbered as bag '
+        f'info BAG lists them (default: {default})')
+    group.add_argument('--episode', type=_grasp_number, metavar='N',
+                       help='the N-th grasp of the bag (1 is the first)')
+    group.add_argument('--start', type=_seconds, metavar='S',
+                       help='window start [s from the bag\'s first message]')
+    group.add_argument('--end', type=_seconds, metavar='S',
+                       help='window end [s from the bag\'s first message]')
+
+
+def _grasp_number(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a grasp number (1, 2, ...)') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'{text!r}: grasps are numbered from 1')
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text.removesuffix('s'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a time [s]') from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f'{text!r} is not a finite time')
+    return value
 
 
 def _one_bag(path: str) -> None:
@@ -124,9 +160,16 @@ def run_plot(args: argparse.Namespace) -> int:
     if args.dpi <= 0:
         raise DamRecorderError(f'--dpi must be positive, got {args.dpi}')
     output = args.output or Path(f'{Path(args.bag).resolve().name}.png')
-    result = plot_bag(args.bag, output, dpi=args.dpi)
+    result = plot_bag(args.bag, output, dpi=args.dpi, episode=args.episode,
+                      start_s=args.start, end_s=args.end)
     data = result.data
     print(f'{output}: {data.title()}')
+    chosen = data.selection
+    if chosen is not None and (chosen.grasp_count > 1 or args.start is not None
+                               or args.end is not None):
+        print(f'  shown: {chosen.description}')
+        for note in chosen.notes:
+            print(f'  {note}')
     print(f'  {len(data.joints)} joints, {len(data.phases)} phase spans'
           + (', check_lift margins' if data.margins else ''))
     if data.height_rise_mm is not None and len(data.height_rise_mm):
@@ -143,7 +186,14 @@ def run_export(args: argparse.Namespace) -> int:
 
     _one_bag(args.bag)
     topics = [t for group in args.topics for t in group] if args.topics else None
-    for exported in export_bag(args.bag, args.output, topics):
+    selection = None
+    if args.episode is not None or args.start is not None or args.end is not None:
+        from dam_recorder.bag_plot import read_selection
+
+        selection = read_selection(args.bag, episode=args.episode, start_s=args.start,
+                                   end_s=args.end)
+        print(f'{args.bag}: {selection.description}')
+    for exported in export_bag(args.bag, args.output, topics, selection):
         print(f'{exported.path}: {exported.rows} rows, {len(exported.columns)} columns '
               f'({exported.topic})')
     return 0

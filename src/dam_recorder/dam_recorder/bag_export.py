@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from dam_recorder.bag_reading import BagReader, check_topics, read_bag_metadata
+from dam_recorder.bag_selection import Selection
 from dam_recorder.errors import ExportError
 
 TIME_COLUMNS: tuple[str, str] = ('time_s', 'time_ns')
@@ -172,7 +173,8 @@ def default_output(bag_dir: str | os.PathLike[str]) -> Path:
 
 
 def export_bag(bag_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None,
-               topics: Sequence[str] | None = None) -> list[ExportedTopic]:
+               topics: Sequence[str] | None = None,
+               selection: Selection | None = None) -> list[ExportedTopic]:
     """Write the CSV file of each topic of ``bag_dir`` (or of ``topics``) into ``out_dir``.
 
     Parameters
@@ -183,6 +185,10 @@ def export_bag(bag_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] 
         Where the files go (created with its parents); default :func:`default_output`.
     topics : sequence of str, optional
         Topic names to export; default every topic of the bag.
+    selection : Selection, optional
+        Only the messages received within it (one grasp or a time window,
+        :mod:`dam_recorder.bag_selection`); default the whole bag. ``time_s`` still counts
+        from the bag's first message.
 
     Returns
     -------
@@ -211,6 +217,8 @@ def export_bag(bag_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] 
         # has; second pass: the rows.
         columns: dict[str, dict[str, None]] = {t: {} for t in chosen}
         for item in bag.messages([t for t in chosen if t in bag.topics]):
+            if selection is not None and not selection.contains(item.time_ns):
+                continue
             columns[item.topic].update(dict.fromkeys(
                 flatten(item.message, fields_of=bag.field_names)))
         try:
@@ -231,6 +239,8 @@ def export_bag(bag_dir: str | os.PathLike[str], out_dir: str | os.PathLike[str] 
                 writers[topic] = csv.writer(files[topic])
                 writers[topic].writerow([*TIME_COLUMNS, *columns[topic]])
             for item in bag.messages([t for t in chosen if t in bag.topics]):
+                if selection is not None and not selection.contains(item.time_ns):
+                    continue
                 values = flatten(item.message, fields_of=bag.field_names)
                 writers[item.topic].writerow(
                     [seconds_text(item.time_ns - start_ns), str(item.time_ns),

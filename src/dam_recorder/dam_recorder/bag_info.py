@@ -205,6 +205,11 @@ class EpisodeRow:
         name's ``_incomplete`` suffix tells).
     missing : list of str
         What it lacks, one line per item.
+    kind : str
+        ``'episode'`` (episode metadata, or an episode's name), or ``'bag'``: an ordinary bag
+        (no outcome: ``outcome`` is ``'-'``).
+    message_count, topic_count : int or None
+        The bag's messages and topics (``None`` when unreadable).
     """
 
     name: str
@@ -218,21 +223,37 @@ class EpisodeRow:
     error: str | None = None
     complete: bool | None = None
     missing: tuple[str, ...] = ()
+    kind: str = 'episode'
+    message_count: int | None = None
+    topic_count: int | None = None
 
 
 @dataclass(frozen=True)
 class EpisodesInfo:
-    """The answer of ``bag info`` for a directory of episode bags: its path and one
-    :class:`EpisodeRow` per bag, in name (so time) order."""
+    """The answer of ``bag info`` for a directory of bags: its path and one
+    :class:`EpisodeRow` per bag, in name (so time) order; episodes and ordinary bags are told
+    apart by :attr:`EpisodeRow.kind`."""
 
     path: Path
     rows: list[EpisodeRow]
 
     @property
+    def episodes(self) -> list[EpisodeRow]:
+        """The rows of episode bags (and of bags that cannot be read)."""
+        return [r for r in self.rows if r.kind == 'episode']
+
+    @property
+    def bags(self) -> list[EpisodeRow]:
+        """The rows of ordinary bags (no episode metadata, no episode's name)."""
+        return [r for r in self.rows if r.kind == 'bag']
+
+    @property
     def totals(self) -> dict[str, int]:
         """Episodes per outcome, in :data:`OUTCOME_ORDER` (other names after); an incomplete
-        episode counts as ``INCOMPLETE`` whatever outcome it names."""
-        counts = Counter('INCOMPLETE' if r.complete is False else r.outcome for r in self.rows)
+        episode counts as ``INCOMPLETE`` whatever outcome it names. Ordinary bags have no
+        outcome and are not counted."""
+        counts = Counter('INCOMPLETE' if r.complete is False else r.outcome
+                         for r in self.episodes)
         order = [o for o in OUTCOME_ORDER if o in counts]
         order += sorted(o for o in counts if o not in OUTCOME_ORDER)
         return {o: counts[o] for o in order}
@@ -350,11 +371,14 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
     else:  # a bag without the key: its name may still say
         complete = False if name.endswith(INCOMPLETE_SUFFIX) else None
         missing = ()
+    sizes = {'message_count': meta.message_count, 'topic_count': len(meta.topics)}
     if episode is None:
         named = parse_episode_name(name.removesuffix(INCOMPLETE_SUFFIX))
+        if named is None and completeness is None:  # an ordinary bag, not an episode
+            return EpisodeRow(name, start, duration, None, '-', kind='bag', **sizes)
         outcome = named[1].upper() if named else 'UNKNOWN'
         return EpisodeRow(name, start, duration, None, outcome, complete=complete,
-                          missing=missing)
+                          missing=missing, **sizes)
     summary = episode.summary
     check = summary.check_lift
     ran = bool(summary.k_theta or summary.delta_theta_p)  # else refused: what was asked
@@ -362,11 +386,12 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
                       summary.k_theta if ran else summary.goal_k_theta,
                       summary.delta_theta_p if ran else summary.goal_delta_theta_p,
                       check.lift_guaranteed if check is not None else None,
-                      complete=complete, missing=missing)
+                      complete=complete, missing=missing, **sizes)
 
 
 def episodes_info(path: str | os.PathLike[str]) -> EpisodesInfo:
-    """Describe every episode bag in the directory ``path`` (see the module).
+    """Describe every bag in the directory ``path``: episodes and ordinary bags (see
+    :class:`EpisodesInfo`).
 
     Raises
     ------
@@ -489,26 +514,40 @@ def format_bag_info(info: BagInfo) -> str:
 
 
 def format_episodes(info: EpisodesInfo) -> str:
-    """``info`` as the table ``bag info`` prints for a directory of episodes."""
-    rows = []
-    for r in info.rows:
-        rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
-                     _num(r.grasp_duration_s, '.3f'), r.outcome,
-                     '-' if r.complete is None else ('yes' if r.complete else 'NO'),
-                     format_floats(r.k_theta), format_floats(r.delta_theta_p, math.degrees(1.0)),
-                     _yes(r.lift_guaranteed)])
-    header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'complete',
-              'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
-    lines = [f'{info.path}: {len(info.rows)} episode{"" if len(info.rows) == 1 else "s"}', '',
-             *_table(header, rows, {2, 3})]
-    incomplete = [r for r in info.rows if r.complete is False]
-    if incomplete:
-        lines += ['', 'incomplete (the bag lacks part of the episode):']
-        for r in incomplete:
-            lines.append(f'  {r.name}:')
-            lines += [f'    {line}' for line in r.missing] or ['    (not recorded)']
-    lines += ['', 'totals:']
-    lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
+    """``info`` as the tables ``bag info`` prints for a directory of bags: the episodes with
+    their outcomes and totals, then the ordinary bags with their sizes."""
+    episodes, bags = info.episodes, info.bags
+    counted = [f'{len(episodes)} episode{"" if len(episodes) == 1 else "s"}']
+    if bags:
+        counted.append(f'{len(bags)} other bag{"" if len(bags) == 1 else "s"} (not episodes)')
+    lines = [f'{info.path}: {", ".join(counted)}']
+    if episodes:
+        rows = []
+        for r in episodes:
+            rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
+                         _num(r.grasp_duration_s, '.3f'), r.outcome,
+                         '-' if r.complete is None else ('yes' if r.complete else 'NO'),
+                         format_floats(r.k_theta),
+                         format_floats(r.delta_theta_p, math.degrees(1.0)),
+                         _yes(r.lift_guaranteed)])
+        header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'complete',
+                  'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
+        lines += ['', *_table(header, rows, {2, 3})]
+        incomplete = [r for r in episodes if r.complete is False]
+        if incomplete:
+            lines += ['', 'incomplete (the bag lacks part of the episode):']
+            for r in incomplete:
+                lines.append(f'  {r.name}:')
+                lines += [f'    {line}' for line in r.missing] or ['    (not recorded)']
+        lines += ['', 'totals:']
+        lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
+    if bags:
+        rows = [[r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
+                 _num(r.message_count, 'd'), _num(r.topic_count, 'd')] for r in bags]
+        lines += ['', 'bags (no episode metadata: bag info BAG describes one, its grasps '
+                      'included):',
+                  *_table(['bag', 'start', 'duration [s]', 'messages', 'topics'], rows,
+                          {2, 3, 4})]
     return '\n'.join(lines)
 
 
@@ -539,4 +578,5 @@ def bag_info_json(info: BagInfo) -> dict[str, Any]:
 
 def episodes_json(info: EpisodesInfo) -> dict[str, Any]:
     """``info`` for ``--json``: the rows and the totals per outcome."""
-    return {'path': str(info.path), 'episodes': jsonable(info.rows), 'totals': info.totals}
+    return {'path': str(info.path), 'episodes': jsonable(info.episodes),
+            'bags': jsonable(info.bags), 'totals': info.totals}

@@ -9,6 +9,11 @@ every time axis; the object's rise above its first height [mm] from ``/sim/objec
 :mod:`dam_recorder.completeness`), ``k_theta`` and ``delta_theta_p``. Time runs in seconds
 from the bag's first message.
 
+A bag of several grasps is shown one grasp at a time, or a time window
+(:mod:`dam_recorder.bag_selection`); the title names the grasp shown and its own outcome.
+Lines break where a stream pauses (:func:`with_gaps`): no straight line across a gap. The phase
+labels above the top axes are stacked in rows so that none overlaps another.
+
 What is missing (a topic, a joint, a torque, what an incomplete episode lacks) is plotted as
 far as it is there and listed in the figure and in :attr:`GraspData.missing`.
 
@@ -31,6 +36,7 @@ import numpy as np
 from dam_common.config import JOINT_ROLES
 from dam_recorder.bag_info import STATUS_TOPIC, grasps_from_status
 from dam_recorder.bag_reading import BagReader, read_bag_metadata
+from dam_recorder.bag_selection import Selection, select
 from dam_recorder.completeness import describe
 from dam_recorder.episode import Episode, format_floats
 from dam_recorder.errors import BagReadError
@@ -47,6 +53,14 @@ PHASE_COLOURS: dict[str, str] = {
     'APPROACH': '#9ecae1', 'ROLLING_UP': '#fdd0a2', 'ENVELOPE': '#a1d99b', 'DONE': '#d9d9d9',
     'ABORTED': '#fcbba1', 'FAILED': '#fb6a4a', 'RELEASING': '#dadaeb', 'CHECK_LIFT': '#fff7bc',
     'CLASSIFYING': '#f0f0f0', 'STOPPING': '#fdd49e'}
+#: Height of the first row of phase labels, and of each further row [axes fraction].
+LABEL_Y = 1.02
+LABEL_ROW = 0.11
+#: A pause in a stream longer than this many times its median sample interval, and than
+#: :data:`GAP_MIN_S`, breaks its line.
+GAP_FACTOR = 20.0
+#: The shortest pause that breaks a line [s].
+GAP_MIN_S = 0.5
 _JOINT_NAME = re.compile(r'^(?P<finger>.+)_(?P<role>' + '|'.join(JOINT_ROLES) + r')_joint$')
 
 
@@ -151,6 +165,15 @@ class GraspData:
     episode: Episode | None
     outcome: str
     missing: list[str] = field(default_factory=list)
+    selection: Selection | None = None
+
+    @property
+    def window_s(self) -> tuple[float, float]:
+        """The time shown [s from the bag's first message]."""
+        if self.selection is None:
+            return 0.0, self.end_s
+        return ((self.selection.start_ns - self.start_ns) * 1e-9,
+                (self.selection.end_ns - self.start_ns) * 1e-9)
 
     def title(self) -> str:
         """``<bag>: <outcome>, k_theta = [...] N*m/rad, delta_theta_p = [...] deg``."""
@@ -167,7 +190,12 @@ class GraspData:
                 pair = f'{s.object}, {pair}'
         else:
             pair = 'k_theta and delta_theta_p unknown (no episode metadata)'
-        return f'{self.bag.name}: {self.outcome}, {pair}'
+        shown = ''
+        if self.selection is not None and self.selection.grasp_count > 1:
+            shown = (f' (grasp {self.selection.grasp} of {self.selection.grasp_count})'
+                     if self.selection.grasp is not None else
+                     f' ({self.selection.description})')
+        return f'{self.bag.name}{shown}: {self.outcome}, {pair}'
 
 
 def joint_name(finger: str, role: str) -> str:
@@ -198,8 +226,51 @@ def _joint_series(samples: dict[str, list[tuple[float, float, float]]]
     return out
 
 
-def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
-    """Collect the signals :func:`grasp_figure` draws from one bag.
+def with_gaps(time_s: np.ndarray, *values: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``time_s`` and ``values`` with a NaN sample inserted in every pause longer than
+    ``max(GAP_MIN_S, GAP_FACTOR x the median interval)``, so that a line breaks there."""
+    t = np.asarray(time_s, dtype=float)
+    if t.size < 3:
+        return (t, *(np.asarray(v, dtype=float) for v in values))
+    steps = np.diff(t)
+    limit = max(GAP_MIN_S, GAP_FACTOR * float(np.median(steps)))
+    cuts = np.flatnonzero(steps > limit) + 1
+    if not cuts.size:
+        return (t, *(np.asarray(v, dtype=float) for v in values))
+    middle = 0.5 * (t[cuts - 1] + t[cuts])
+    return (np.insert(t, cuts, middle),
+            *(np.insert(np.asarray(v, dtype=float), cuts, np.nan) for v in values))
+
+
+def read_selection(bag_dir: str | os.PathLike[str], *, episode: int | None = None,
+                   start_s: float | None = None, end_s: float | None = None) -> Selection:
+    """The part of the bag to show (:func:`dam_recorder.bag_selection.select`), from its
+    ``/dam/status`` and its messages' receive times.
+
+    Raises
+    ------
+    BagReadError
+        The bag cannot be read, or the selection does not fit it.
+    """
+    meta = read_bag_metadata(bag_dir)
+    status: list[tuple[int, str, int, str]] = []
+    with BagReader(meta.path) as bag:
+        times = bag.receive_times()
+        nonempty = [t for t, v in times.items() if v.size]
+        start_ns = min((int(times[t][0]) for t in nonempty), default=meta.start_ns)
+        end_ns = max((int(times[t][-1]) for t in nonempty), default=start_ns)
+        if STATUS_TOPIC in bag.topics:
+            for item in bag.messages([STATUS_TOPIC]):
+                status.append((item.time_ns, str(item.message.phase),
+                               int(item.message.outcome), str(item.message.message)))
+    return select(grasps_from_status(status), start_ns, end_ns, episode=episode,
+                  start_s=start_s, end_s=end_s)
+
+
+def read_grasp_data(bag_dir: str | os.PathLike[str],
+                    selection: Selection | None = None) -> GraspData:
+    """Collect the signals :func:`grasp_figure` draws from one bag, within ``selection``
+    (default: the whole bag).
 
     Raises
     ------
@@ -223,6 +294,12 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
         for item in bag.messages([t for t in wanted if t in present]):
             t_s = (item.time_ns - start_ns) * 1e-9
             msg = item.message
+            if selection is not None and not selection.contains(item.time_ns):
+                if item.topic == STATUS_TOPIC and item.time_ns < selection.start_ns:
+                    # the phase at the window's start
+                    status[:] = [(selection.start_ns, str(msg.phase), int(msg.outcome),
+                                  str(msg.message))]
+                continue
             if item.topic == JOINT_STATES_TOPIC:
                 names = tuple(msg.name)
                 index = index_cache.setdefault(names, {n: i for i, n in enumerate(names)})
@@ -243,6 +320,7 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
                                    float(fb.worst_case_margin), bool(fb.csm_lift),
                                    float(fb.csm_margin))
     end_s = (end_ns - start_ns) * 1e-9
+    shown_end_s = end_s if selection is None else (selection.end_ns - start_ns) * 1e-9
     missing: list[str] = []
     for topic in wanted:
         if topic not in present:
@@ -271,8 +349,11 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
             check.csm_lift, check.csm_margin)
     if margins is None:
         missing.append('check_lift margins: none recorded')
-    if episode is not None:
+    several = selection is not None and selection.grasp_count > 1
+    if episode is not None and not several:
         outcome = episode.summary.outcome_name
+    elif selection is not None and selection.outcome is not None:
+        outcome = selection.outcome  # the grasp shown, not the bag's last
     else:
         grasps = grasps_from_status(status)
         outcome = grasps[-1].outcome if grasps else 'outcome unknown'
@@ -286,26 +367,48 @@ def read_grasp_data(bag_dir: str | os.PathLike[str]) -> GraspData:
         height_t, height_mm = h[:, 0], (h[:, 1] - h[0, 1]) * 1000.0
     return GraspData(
         bag=meta.path, start_ns=start_ns, end_s=end_s, fingers=fingers, joints=joints,
-        phases=phase_spans([((t - start_ns) * 1e-9, p) for t, p, _, _ in status], end_s),
+        phases=phase_spans([((t - start_ns) * 1e-9, p) for t, p, _, _ in status],
+                           shown_end_s),
         height_time_s=height_t, height_rise_mm=height_mm, margins=margins, episode=episode,
-        outcome=outcome, missing=missing)
+        outcome=outcome, missing=missing, selection=selection)
 
 
 def _shade_phases(ax: Any, phases: Sequence[PhaseSpan], label: bool) -> None:
-    total_s = max((span.end_s for span in phases), default=0.0)
     for span in phases:
         if span.phase == 'IDLE':
             continue
         ax.axvspan(span.start_s, span.end_s, color=PHASE_COLOURS.get(span.phase, '#eeeeee'),
                    alpha=0.6, lw=0, label=f'phase {span.phase}', gid='phase', zorder=0)
-        # Across the span where it fits (7-point capitals: about 6 % of the axis for
-        # ROLLING_UP), else upright above it (a short ENVELOPE had no label; user test).
-        wide = span.end_s - span.start_s >= 0.006 * len(span.phase) * total_s
-        if label:
-            ax.text((span.start_s + span.end_s) / 2, 1.02, span.phase,
-                    rotation=0 if wide else 90, ha='center', va='bottom',
-                    fontsize=7 if wide else 6, transform=ax.get_xaxis_transform(),
-                    gid='phase_label')
+        if label:  # stacked in rows by _stack_labels once the figure is laid out
+            ax.text((span.start_s + span.end_s) / 2, LABEL_Y, span.phase, ha='center',
+                    va='bottom', fontsize=7, transform=ax.get_xaxis_transform(),
+                    gid='phase_label', clip_on=False)
+
+
+def _stack_labels(fig: Any) -> None:
+    """Move the phase labels of each axes into rows above it so that no two overlap: each
+    label takes the lowest row where it clears the labels already there (measured with the
+    figure's renderer); a label whose span lies outside the axes is hidden."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        labels = [t for t in ax.texts if t.get_gid() == 'phase_label']
+        if not labels:
+            continue
+        low, high = ax.get_xlim()
+        rows: list[float] = []  # the right edge of the last label in each row [px]
+        for text in sorted(labels, key=lambda t: t.get_position()[0]):
+            x = text.get_position()[0]
+            if not low <= x <= high:
+                text.set_visible(False)
+                continue
+            box = text.get_window_extent(renderer)
+            pad = 0.3 * box.height
+            row = next((i for i, right in enumerate(rows) if box.x0 > right + pad), len(rows))
+            if row == len(rows):
+                rows.append(-math.inf)
+            rows[row] = box.x1
+            text.set_y(LABEL_Y + row * LABEL_ROW)
 
 
 def _legend(ax: Any) -> None:
@@ -349,9 +452,11 @@ def grasp_figure(data: GraspData) -> Any:
             if series is None:
                 continue
             drawn = True
-            angle_ax.plot(series.time_s, np.degrees(series.angle_rad), label=name, lw=1.2)
+            t, angle, torque = with_gaps(series.time_s, np.degrees(series.angle_rad),
+                                         series.torque_nm)
+            angle_ax.plot(t, angle, label=name, lw=1.2)
             if not np.all(np.isnan(series.torque_nm)):
-                torque_ax.plot(series.time_s, series.torque_nm, label=name, lw=1.2)
+                torque_ax.plot(t, torque, label=name, lw=1.2)
         for ax in (angle_ax, torque_ax):
             _shade_phases(ax, data.phases, label=row == 0)
             if drawn:
@@ -364,8 +469,8 @@ def grasp_figure(data: GraspData) -> Any:
     height_ax.set_xlabel('time [s] from the bag start')
     _shade_phases(height_ax, data.phases, label=False)
     if data.height_time_s is not None and data.height_rise_mm is not None:
-        height_ax.plot(data.height_time_s, data.height_rise_mm, label='object rise',
-                       color='k', lw=1.2)
+        height_ax.plot(*with_gaps(data.height_time_s, data.height_rise_mm),
+                       label='object rise', color='k', lw=1.2)
         _legend(height_ax)
         # Millimetres as they are (no offset), at least 1 mm of axis: a still object's
         # micrometre noise must not look like a lift.
@@ -385,10 +490,14 @@ def grasp_figure(data: GraspData) -> Any:
         lines += ['', f'{data.episode.summary.outcome_name}: {data.episode.summary.message}']
     if data.missing:
         lines += ['', 'missing:', *data.missing]
+    if data.selection is not None and data.selection.notes:
+        lines += ['', *data.selection.notes]
     text_ax.text(0.0, 1.0, '\n'.join(lines), ha='left', va='top', fontsize=8,
                  family='monospace', transform=text_ax.transAxes, gid='margins', wrap=True)
-    if data.end_s > 0:
-        axes[0][0].set_xlim(0.0, data.end_s)
+    low, high = data.window_s
+    if high > low:
+        axes[0][0].set_xlim(low, high)
+    _stack_labels(fig)
     return fig
 
 
@@ -401,16 +510,21 @@ class PlotResult:
 
 
 def plot_bag(bag_dir: str | os.PathLike[str],
-             output: str | os.PathLike[str] | None = None, dpi: int = 110) -> PlotResult:
-    """Read ``bag_dir``, draw the grasp and save it to ``output`` (PNG, PDF, SVG by its
-    suffix) when given.
+             output: str | os.PathLike[str] | None = None, dpi: int = 110, *,
+             episode: int | None = None, start_s: float | None = None,
+             end_s: float | None = None) -> PlotResult:
+    """Read ``bag_dir``, draw one grasp (``episode``, 1-based; default: the only one, or the
+    last of several) or the window ``start_s`` to ``end_s`` [s from the bag's first message],
+    and save it to ``output`` (PNG, PDF, SVG by its suffix) when given.
 
     Raises
     ------
     BagReadError
-        If the bag cannot be read, or the picture cannot be written (naming the file).
+        If the bag cannot be read, the selection does not fit it, or the picture cannot be
+        written (naming the file).
     """
-    data = read_grasp_data(bag_dir)
+    selection = read_selection(bag_dir, episode=episode, start_s=start_s, end_s=end_s)
+    data = read_grasp_data(bag_dir, selection)
     figure = grasp_figure(data)
     if output is not None:
         path = Path(output)
