@@ -182,6 +182,9 @@ def test_an_empty_map_has_no_legend_entry_for_a_line_not_drawn(tmp_path, monkeyp
         assert y.size and np.any(np.isfinite(y)), f'legend entry {label!r} has no line'
     labels = [line.get_label() for line in ax.get_lines()]
     assert 'alpha = 5 deg: sufficient region empty' in labels, labels
+    # the ceiling lies above the whole plot here: said, not listed as a line
+    assert any(label.startswith('torque ceiling') and 'above the plot (from' in label
+               for label in labels), labels
 
 
 def test_main_in_process_with_explicit_csv_and_range(tmp_path, analyzer):

@@ -117,7 +117,7 @@ def test_bad_input_is_refused_with_the_value(config) -> None:
 
 def test_radius_ranges() -> None:
     np.testing.assert_allclose(parse_radius_range('3mm:20mm:18'), np.arange(3, 21) * 1e-3)
-    np.testing.assert_allclose(parse_radius_range('7mm:0.007:1'), [7e-3])
+    np.testing.assert_allclose(parse_radius_range('7mm:7mm:1'), [7e-3])
     np.testing.assert_allclose(parse_radius_range('0.003:0.02:18'), np.arange(3, 21) * 1e-3)
     import argparse
     for bad, words in (('3mm:20mm', 'START:STOP:COUNT'), ('a:2mm:3', 'is not a length'),

@@ -3,7 +3,6 @@ negative value was taken for an option: ``expected at least one argument``)."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -64,7 +63,7 @@ REFUSED = [
     ('dam_analysis', 'plan_lift', ['--position-tolerance', '-1mm'],
      "argument --position-tolerance: '-1mm': -1 mm must be at least 0 mm (leave"),
     ('dam_analysis', 'plan_lift', ['--mass', '-0.03:0.05'],
-     "argument --mass: '-0.03:0.05': -30 g must be at least 0 g (leave"),
+     "argument --mass: '-0.03:0.05': -30 g must be above 0 g (leave"),
     ('dam_analysis', 'plan_lift', ['--delta-theta-p', '-5deg:10deg'],
      "argument --delta-theta-p: '-5deg:10deg': -5 deg must be at least 0 deg"),
     ('dam_analysis', 'scale_map', ['--radius-range', '-5mm:12mm:3', '--delta-theta-p', '5deg'],
@@ -73,6 +72,36 @@ REFUSED = [
      "argument --delta-theta-p: '-10deg': -10 deg must be above 0 deg"),
     ('dam_recorder', 'recorder', ['-o', 'x', '--max-bag-duration', '-1.5e1'],
      "argument -d/--max-bag-duration: '-1.5e1' is negative"),
+    ('dam_analysis', 'check_lift', ['--delta-theta-p', '-1deg'],
+     "argument --delta-theta-p: '-1deg': -1 deg must be above 0 deg"),
+]
+
+#: Values the server or the controller would refuse, refused by the command line before it
+#: waits for anything (a fresh user's review: they were sent, and the user waited).
+OUT_OF_RANGE = [
+    ('dam_analysis', 'check_lift', ['--k-theta', '0'], "'0' must be above 0 N*m/rad"),
+    ('dam_analysis', 'check_lift', ['--k-theta', 'nan'], "'nan' is not a finite number"),
+    ('dam_analysis', 'check_lift', ['--delta-theta-p', '95deg'], '95 deg must be at most 90'),
+    ('dam_analysis', 'check_lift', ['--friction-angle', '95deg'], '95 deg must be below 90'),
+    ('dam_analysis', 'check_lift', ['--timeout', 'nan'], "'nan' is not a finite number"),
+    ('dam_analysis', 'plan_lift', ['--friction-angle', '90deg'], '90 deg must be below 90'),
+    ('dam_analysis', 'plan_lift', ['--mass', '0'], '0 g must be above 0 g'),
+    ('dam_analysis', 'plan_lift', ['--k-theta-max', '0'], "'0' must be above 0 N*m/rad"),
+    ('dam_analysis', 'plan_lift', ['--timeout', 'inf'], "'inf' is not a finite number"),
+    ('dam_spcm_controller', 'dam_grasp', ['--delta-theta-p', '95deg'],
+     '95 deg must be at most 90 deg'),
+    ('dam_sim_bridge', 'dam_experiment', ['--alpha', '100deg'],
+     '--alpha: 100 deg must be in [0, 90) deg'),
+    ('dam_sim_bridge', 'dam_experiment', ['--delta-theta-p', '80deg'],
+     '--delta-theta-p: 80 deg must be in (0, 65] deg'),
+    ('dam_sim_bridge', 'dam_experiment', ['--config', '/nonexistent/dam.yaml'],
+     'dam_experiment: '),
+    ('dam_analysis', 'check_lift', ['--ros-args', '-p', 'bad'],
+     'check_lift: invalid ROS arguments: '),
+    ('dam_analysis', 'plan_lift', ['--ros-args', '--params-file', '/nonexistent.yaml'],
+     'plan_lift: invalid ROS arguments: '),
+    ('dam_recorder', 'recorder', ['-o', 'x', '--ros-args', '-p', 'bad'],
+     'recorder: invalid ROS arguments: '),
 ]
 
 
@@ -86,10 +115,18 @@ def test_negative_values_are_refused_by_their_option(package: str, executable: s
     assert 'expected' not in result.stderr, result.stderr
 
 
-def test_a_negative_displacement_reaches_check_lift_s_server() -> None:
-    """``check_lift --delta-theta-p -1deg`` is a request the server judges (the option takes
-    it): with no server, the client says so instead of refusing the argument."""
-    result = _run('dam_analysis', 'check_lift', '--delta-theta-p', '-1deg', '2deg',
-                  '--timeout', '0.2', '--service', f'/no_check_lift_{os.getpid()}')
-    assert result.returncode == 1, (result.stdout, result.stderr)
-    assert 'is not available' in result.stderr + result.stdout
+@pytest.mark.parametrize(('package', 'executable', 'args', 'error'), OUT_OF_RANGE,
+                         ids=[f'{c[1]}{" ".join(c[2])}' for c in OUT_OF_RANGE])
+def test_values_the_other_end_would_refuse_are_refused_at_once(package: str, executable: str,
+                                                               args: list[str],
+                                                               error: str) -> None:
+    result = _run(package, executable, *args)
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert error in result.stderr, result.stderr
+    assert 'Traceback' not in result.stderr, result.stderr
+
+
+def test_dam_grasp_takes_ros_arguments_as_ros2_run_passes_them() -> None:
+    result = _run('dam_spcm_controller', 'dam_grasp', '--ros-args', '-p', 'x:=1', '--',
+                  '--help')
+    assert result.returncode == 0 and 'usage: dam_grasp' in result.stdout, result.stderr

@@ -44,7 +44,6 @@ def test_a_value_is_read_in_si_units(text: str, quantity, si: float) -> None:
     ('2', ANGLE, '2 rad (114.6 deg)', '2deg'),
     ('50', MASS, '50 kg', '50g'),
     ('5', LENGTH, '5 m (5000 mm)', '5mm'),
-    ('1e-7', LENGTH, '1e-07 m (0.0001 mm)', '1e-7mm'),
 ])
 def test_an_implausible_bare_number_says_how_it_was_read_and_what_was_meant(
         text: str, quantity, reading: str, meant: str) -> None:
@@ -53,6 +52,33 @@ def test_an_implausible_bare_number_says_how_it_was_read_and_what_was_meant(
     message = str(caught.value)
     assert f'reads as {reading}' in message, message
     assert f'did you mean {meant}?' in message, message
+
+
+@pytest.mark.parametrize(('text', 'quantity', 'says'), [
+    ('-10', ANGLE, 'reads as -10 rad (-573 deg): beyond -90 deg'),
+    ('1e-7', LENGTH, 'reads as 1e-07 m (0.0001 mm): less than 0.001 mm in size'),
+])
+def test_an_implausible_bare_number_without_a_likelier_reading_says_so(text, quantity,
+                                                                       says) -> None:
+    with pytest.raises(argparse.ArgumentTypeError) as caught:
+        parse_quantity(text, quantity)
+    assert says in str(caught.value), str(caught.value)
+    if text == '1e-7':
+        assert 'did you mean' not in str(caught.value)  # no unit makes it plausible
+
+
+def test_a_range_gives_both_ends_their_unit_or_none() -> None:
+    for text in ('1:80deg', '0.1deg:1', '5:60deg'):  # 1:80deg read its 1 as 57 deg
+        with pytest.raises(argparse.ArgumentTypeError, match='has no unit while the other end'):
+            parse_range(text, ANGLE)
+    with pytest.raises(argparse.ArgumentTypeError, match='has no unit while the other end'):
+        parse_linspace('0.1:60deg:3', ANGLE, 10)
+    assert parse_range('0:80deg', ANGLE) == pytest.approx((0.0, math.radians(80.0)))
+    for text in ('3deg:', ':6deg'):
+        with pytest.raises(argparse.ArgumentTypeError, match='is not MIN:MAX'):
+            parse_range(text, ANGLE)
+    with pytest.raises(argparse.ArgumentTypeError, match='is not START:STOP:COUNT'):
+        parse_linspace('2mm::3', LENGTH, 10)
 
 
 def test_the_same_value_with_its_unit_is_taken_as_written() -> None:
@@ -77,7 +103,7 @@ def test_a_word_that_is_no_value_of_its_quantity_is_refused(text, quantity, says
 def test_ranges_and_linspaces_read_each_end_with_its_unit() -> None:
     assert parse_range('3deg:6deg', ANGLE) == pytest.approx(
         (math.radians(3.0), math.radians(6.0)))
-    assert parse_range('30g:0.05', MASS) == pytest.approx((0.03, 0.05))
+    assert parse_range('30g:50g', MASS) == pytest.approx((0.03, 0.05))
     assert parse_range('5deg', ANGLE) == pytest.approx((math.radians(5.0),) * 2)
     np.testing.assert_allclose(parse_linspace('3mm:20mm:18', LENGTH, 400),
                                np.arange(3, 21) * 1e-3)

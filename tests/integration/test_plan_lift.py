@@ -165,8 +165,8 @@ def test_command_line_client(server: object) -> None:
     assert 'contact stiffness model   : k_theta ' in done.stdout
     assert 'method: friction: worst case at alpha_max = 6 deg' in done.stdout
     # the same request in SI units, bare or suffixed: a bare number is SI in every command
-    suffixed = _run('--friction-angle', '3deg:0.10471975511965977', '--mass', '0.03kg:0.05',
-                    '--position-tolerance', '0.001')
+    suffixed = _run('--friction-angle', '0.05235987755982988:0.10471975511965977', '--mass',
+                    '0.03kg:0.05kg', '--position-tolerance', '0.001')
     assert suffixed.returncode == 0 and suffixed.stdout == done.stdout, suffixed.stderr
     for option, word, meant in (('--friction-angle', '3:6', '3deg'), ('--mass', '30:50', '30g'),
                                 ('--position-tolerance', '1', '1mm')):

@@ -24,28 +24,33 @@ import math
 import sys
 from collections.abc import Sequence
 
-from rclpy.utilities import remove_ros_args
-
-from dam_analysis.service_call import call_and_print
+from dam_analysis.service_call import call_and_print, user_args
 from dam_common.command_line import CommandLineParser
-from dam_common.quantities import ANGLE, LEAVE_OUT, argument
+from dam_common.quantities import ANGLE, LEAVE_OUT, RIGHT_ANGLE, argument, number_argument
 from dam_interfaces.srv import CheckLift
+
+PROG = 'check_lift'
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = CommandLineParser(
-        prog='check_lift',
+        prog=PROG,
         description='Ask /check_lift whether a (k_theta, delta_theta_p) pair lifts the object.')
-    parser.add_argument('--k-theta', type=float, nargs='+', default=[], metavar='N*m/rad',
+    parser.add_argument('--k-theta', type=number_argument(above=0.0, unit='N*m/rad'), nargs='+',
+                        default=[], metavar='N*m/rad',
                         help='compliant-joint stiffness: one value (finger 1, the others from '
                              'the configured ratios) or one per finger (default: the server\'s '
                              'configured task.k_theta_nm_per_rad)')
-    parser.add_argument('--delta-theta-p', type=argument(ANGLE), nargs='+', default=[],
+    parser.add_argument('--delta-theta-p',
+                        type=argument(ANGLE, low=0.0, low_inclusive=False, high=RIGHT_ANGLE),
+                        nargs='+', default=[],
                         metavar='ANGLE',
                         help='position-joint displacement (40deg, 0.7rad; bare: rad): one for '
                              'all fingers or one per finger (default: the server\'s configured '
                              'task.delta_theta_p_deg)')
-    parser.add_argument('--friction-angle', type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT),
+    parser.add_argument('--friction-angle', type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT,
+                                                          high=RIGHT_ANGLE,
+                                                          high_inclusive=False),
                         default=None, metavar='ANGLE',
                         help='friction angle alpha (5deg, 0.09rad; bare: rad; default: the '
                              'server\'s configured value)')
@@ -53,7 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='column object of the configuration\'s object.library (default: '
                              'the server\'s object.default)')
     parser.add_argument('--service', default='/check_lift', help='service name')
-    parser.add_argument('--timeout', type=float, default=10.0, metavar='S',
+    parser.add_argument('--timeout', type=number_argument(above=0.0, unit='s'), default=10.0,
+                        metavar='S',
                         help='seconds to wait for the service and for the answer (default: '
                              '%(default)s)')
     return parser
@@ -94,7 +100,7 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
 
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    options = build_parser().parse_args(user_args(PROG, argv))
     request = CheckLift.Request()
     request.k_theta = [float(v) for v in options.k_theta]
     request.delta_theta_p = [float(v) for v in options.delta_theta_p]

@@ -208,10 +208,14 @@ def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boun
         if np.any(beyond):
             ax.fill_between(dp, top, k_max, where=beyond, facecolor='0.55', alpha=0.25,
                             linewidth=0.0)
-        if np.any(np.isfinite(ceiling)):
+        finite = ceiling[np.isfinite(ceiling)]
+        if np.any(beyond):
             ax.plot(dp, ceiling, color='black', linewidth=1.2, linestyle=':',
                     label=f'torque ceiling |tau_s| = {torque_limit:g} N*m '
                           '(shaded above: beyond the hand)')
+        elif finite.size:  # all of it above the plot: said, not drawn
+            ax.plot([], [], ' ', label=f'torque ceiling |tau_s| = {torque_limit:g} N*m: above '
+                                       f'the plot (from {finite.min():.3g} N*m/rad)')
     for j, (alpha, b) in enumerate(zip(friction_angles_deg, boundaries, strict=True)):
         colour = colours[j % len(colours)]
         dp = np.degrees(b.delta_theta_p)
@@ -221,6 +225,10 @@ def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boun
             if not np.any(np.isfinite(k)):
                 ax.plot([], [], ' ', label=f'alpha = {alpha:g} deg: {short} region empty')
                 continue
+            if not np.any(k[np.isfinite(k)] < k_max):  # all of it above the plot
+                ax.plot([], [], ' ', label=f'alpha = {alpha:g} deg: {name}: above the plot '
+                                           f'(from {np.nanmin(k):.3g} N*m/rad)')
+                continue
             ax.plot(dp, k, color=colour, linewidth=width, linestyle=style,
                     label=f'alpha = {alpha:g} deg: {name}')
             for i in _curve_ends(dp, k):
@@ -229,9 +237,12 @@ def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boun
                 why = ('the SPCM branch ends' if dp[i + 1] >= branch_end_deg - 1e-9
                        else 'no stiffness lifts beyond')
                 ax.plot([dp[i]], [k[i]], marker='x', color=colour, markersize=7)
+                left = dp[i] < 0.5 * delta_theta_p_max  # the note stays inside the axes
                 ax.annotate(f'{short} ends at {dp[i]:.3g} deg: {why}', (dp[i], k[i]),
-                            textcoords='offset points', xytext=(-4, 6), ha='right',
-                            fontsize=6, color=colour)
+                            textcoords='offset points', xytext=(6 if left else -6, 6),
+                            ha='left' if left else 'right', fontsize=6, color=colour,
+                            bbox={'facecolor': 'white', 'edgecolor': 'none', 'alpha': 0.85,
+                                  'pad': 0.6}, zorder=5)
         lifts = np.isfinite(b.sufficient) & (b.sufficient < top)
         if np.any(lifts):
             # margin = k_theta A - m_B g is increasing in k_theta: the region is above k*, up
@@ -239,6 +250,10 @@ def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boun
             ax.fill_between(dp, np.where(lifts, b.sufficient, top), top, where=lifts,
                             facecolor='none', edgecolor=colour, linewidth=0.0,
                             hatch=hatches[j % len(hatches)], alpha=0.6)
+    if branch_end_deg < delta_theta_p_max:
+        ax.axvspan(branch_end_deg, delta_theta_p_max, facecolor='white', edgecolor='0.7',
+                   hatch='..', linewidth=0.0,
+                   label=f'beyond the SPCM branch ({branch_end_deg:.3g} deg): nothing lifts')
     ax.set_xlim(0.0, delta_theta_p_max)
     ax.set_ylim(0.0, k_max)
     ax.set_xlabel('position-joint displacement delta_theta_p [deg]')

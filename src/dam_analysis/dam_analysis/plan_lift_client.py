@@ -25,25 +25,35 @@ import math
 import sys
 from collections.abc import Sequence
 
-from rclpy.utilities import remove_ros_args
-
-from dam_analysis.service_call import call_and_print
+from dam_analysis.service_call import call_and_print, user_args
 from dam_common.command_line import CommandLineParser
-from dam_common.quantities import ANGLE, LEAVE_OUT, LENGTH, MASS, argument, number_argument
+from dam_common.quantities import (
+    ANGLE,
+    LEAVE_OUT,
+    LENGTH,
+    MASS,
+    RIGHT_ANGLE,
+    argument,
+    number_argument,
+)
 from dam_interfaces.srv import PlanLift
+
+PROG = 'plan_lift'
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = CommandLineParser(
-        prog='plan_lift',
+        prog=PROG,
         description='Ask /plan_lift for the (k_theta, delta_theta_p) pair that lifts the '
                     'object over ranges of friction angle, mass and position.')
     parser.add_argument('--friction-angle',
-                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range'),
+                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range',
+                                      high=RIGHT_ANGLE, high_inclusive=False),
                         default=None, metavar='ANGLE[:ANGLE]',
                         help='friction angle alpha range (3deg:6deg, 0.05rad:0.1rad; bare: rad; '
                              'default: the configured one)')
-    parser.add_argument('--mass', type=argument(MASS, low=0.0, why_low=LEAVE_OUT, form='range'),
+    parser.add_argument('--mass', type=argument(MASS, low=0.0, low_inclusive=False,
+                                                why_low=LEAVE_OUT, form='range'),
                         default=None, metavar='MASS[:MASS]',
                         help='object mass range (30g:50g, 0.03kg:0.05kg; bare: kg; default: '
                              'the configured one)')
@@ -51,12 +61,15 @@ def build_parser() -> argparse.ArgumentParser:
                         default=None, metavar='LENGTH',
                         help="the object's position along the fingers within +-this (1mm, "
                              '0.001m; bare: m; default: 0, the configured position)')
-    parser.add_argument('--k-theta-max', type=number_argument(low=0.0, why_low=LEAVE_OUT),
+    parser.add_argument('--k-theta-max',
+                        type=number_argument(low=0.0, why_low=LEAVE_OUT, above=0.0,
+                                             unit='N*m/rad'),
                         default=None, metavar='N*m/rad',
                         help='largest finger-1 stiffness to propose (default: the largest '
                              'the device accepts)')
     parser.add_argument('--delta-theta-p',
-                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range'),
+                        type=argument(ANGLE, low=0.0, why_low=LEAVE_OUT, form='range',
+                                      high=RIGHT_ANGLE),
                         default=None, metavar='ANGLE:ANGLE',
                         help='displacement range (5deg:40deg; bare: rad; default: all the '
                              'configuration allows)')
@@ -68,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='column object of the configuration\'s object.library (default: '
                              'the server\'s object.default)')
     parser.add_argument('--service', default='/plan_lift', help='service name')
-    parser.add_argument('--timeout', type=float, default=30.0, metavar='S',
+    parser.add_argument('--timeout', type=number_argument(above=0.0, unit='s'), default=30.0,
+                        metavar='S',
                         help='seconds to wait for the service and for the answer (a first '
                              'request with a position tolerance builds an analysis per node; '
                              'default: %(default)s)')
@@ -126,7 +140,7 @@ def format_response(response: PlanLift.Response) -> str:
 
 def main(args: Sequence[str] | None = None) -> int:
     argv = list(sys.argv if args is None else args)
-    options = build_parser().parse_args(remove_ros_args(argv)[1:])
+    options = build_parser().parse_args(user_args(PROG, argv))
     return call_and_print('plan_lift', argv, PlanLift, options.service, build_request(options),
                           options.timeout, format_response)
 

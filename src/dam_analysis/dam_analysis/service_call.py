@@ -16,7 +16,9 @@ from typing import Any
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 from dam_common.shutdown import SHUTDOWN, ShutdownRequest
 
@@ -58,6 +60,22 @@ def _stopped(prog: str, shutdown: ShutdownRequest, waiting_for: str) -> int:
     return INTERRUPTED
 
 
+def user_args(prog: str, argv: Sequence[str]) -> list[str]:
+    """The command's own arguments: ``argv`` without the program name and its ROS arguments.
+
+    Raises
+    ------
+    SystemExit
+        Status 2, with one line naming the problem, for malformed ROS arguments
+        (``--ros-args -p bad``; rclpy raised with a traceback).
+    """
+    try:
+        return remove_ros_args(list(argv))[1:]
+    except _rclpy.RCLError as exc:
+        print(f'{prog}: invalid ROS arguments: {" ".join(str(exc).split())}', file=sys.stderr)
+        raise SystemExit(REJECTED) from None
+
+
 def call_and_print(prog: str, argv: Sequence[str], srv_type: Any, service: str, request: Any,
                    timeout_s: float, render: Callable[[Any], str]) -> int:
     """Call ``service`` once with ``request`` and print ``render(response)``.
@@ -83,7 +101,12 @@ def call_and_print(prog: str, argv: Sequence[str], srv_type: Any, service: str, 
     if shutdown.requested:
         return _stopped(prog, shutdown, 'nothing yet')
     context = rclpy.Context()
-    rclpy.init(args=list(argv), context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=list(argv), context=context,
+                   signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as exc:  # a malformed --ros-args part
+        print(f'{prog}: invalid ROS arguments: {" ".join(str(exc).split())}', file=sys.stderr)
+        return REJECTED
     node = None
     executor = None
     try:

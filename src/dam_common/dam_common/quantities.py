@@ -80,6 +80,8 @@ MASS = Quantity('mass', 'kg', {'g': 1e-3, 'kg': 1.0},
                 bare_max=2.0, bare_min=0.0, meant='g',
                 examples='40g, 0.04kg, 0.04')
 
+#: The friction angle's bound [rad]: a friction cone of 90 deg or more is no cone.
+RIGHT_ANGLE = math.pi / 2.0
 #: Why a negative value is refused where a request reads one as "the configured value".
 LEAVE_OUT = 'leave the option out for the configured value'
 
@@ -126,13 +128,16 @@ def parse_quantity(text: str, quantity: Quantity) -> float:
         shown = quantity.show(number)
         if shown.replace(' ', '') != read.replace(' ', ''):
             read += f' ({shown})'
-        why = ('more than' if magnitude > quantity.bare_max else 'less than')
-        limit = quantity.show(quantity.bare_max if magnitude > quantity.bare_max
-                              else quantity.bare_min)
+        if magnitude > quantity.bare_max:
+            why = (f'more than {quantity.show(quantity.bare_max)}' if number > 0 else
+                   f'beyond -{quantity.show(quantity.bare_max)}')
+            meant = f'did you mean {match.group(1)}{quantity.meant}? '
+        else:  # below the smallest plausible size: no unit makes it plausible
+            why = f'less than {quantity.show(quantity.bare_min)} in size'
+            meant = ''
         raise argparse.ArgumentTypeError(
-            f'{text!r} has no unit, so it reads as {read}: {why} {limit}, implausible for '
-            f'this hand; did you mean {match.group(1)}{quantity.meant}? (a bare number is in '
-            f'{quantity.si_unit}; write the unit)')
+            f'{text!r} has no unit, so it reads as {read}: {why}, implausible for this hand; '
+            f'{meant}(a bare number is in {quantity.si_unit}; write the unit)')
     return number
 
 
@@ -145,8 +150,9 @@ def parse_range(text: str, quantity: Quantity) -> tuple[float, float]:
         Not one or two values, a value :func:`parse_quantity` refuses, or max below min.
     """
     parts = text.split(':')
-    if len(parts) not in (1, 2):
+    if len(parts) not in (1, 2) or not all(part.strip() for part in parts):
         raise argparse.ArgumentTypeError(f'{text!r} is not MIN:MAX or one {quantity.name}')
+    _same_way(text, parts)
     low, high = parse_quantity(parts[0], quantity), parse_quantity(parts[-1], quantity)
     if high < low:
         raise argparse.ArgumentTypeError(
@@ -169,8 +175,9 @@ def parse_linspace(text: str, quantity: Quantity, max_count: int) -> np.ndarray:
         number in [1, max_count], STOP below START, or COUNT 1 with START != STOP.
     """
     parts = text.split(':')
-    if len(parts) != 3:
+    if len(parts) != 3 or not all(part.strip() for part in parts):
         raise argparse.ArgumentTypeError(f'{text!r} is not START:STOP:COUNT')
+    _same_way(text, parts[:2])
     start, stop = parse_quantity(parts[0], quantity), parse_quantity(parts[1], quantity)
     try:
         count = int(parts[2])
@@ -238,6 +245,22 @@ def argument(quantity: Quantity, *, low: float | None = None, high: float | None
     return checked
 
 
+def has_unit(text: str) -> bool:
+    """Whether the value ``text`` carries a unit (``'5deg'``; not ``'5'``, ``'0'``)."""
+    match = _VALUE.match(text)
+    return bool(match and match.group(2))
+
+
+def _same_way(text: str, ends: list[str]) -> None:
+    """Refuse a range with one end bare and the other with a unit (``1:80deg`` read its 1 as
+    57 deg): a person who wrote one unit meant it for both. A bare 0 goes with anything."""
+    bare = [end for end in ends if not has_unit(end) and _is_float(end) and float(end) != 0.0]
+    if bare and any(has_unit(end) for end in ends):
+        raise argparse.ArgumentTypeError(
+            f'{text!r}: {bare[0]!r} has no unit while the other end has one; give both ends '
+            'their unit (a bare number is SI)')
+
+
 def _is_float(text: str) -> bool:
     try:
         float(text)
@@ -250,15 +273,15 @@ def _article(noun: str) -> str:
     return f'an {noun}' if noun[0] in 'aeiou' else f'a {noun}'
 
 
-def number_argument(*, low: float | None = None, why_low: str = '',
-                    unit: str = '') -> Callable[[str], float]:
-    """An argparse ``type=`` for a plain finite number (a stiffness [N*m/rad], a margin [N])
-    at least ``low``.
+def number_argument(*, low: float | None = None, why_low: str = '', unit: str = '',
+                    above: float | None = None) -> Callable[[str], float]:
+    """An argparse ``type=`` for a plain finite number (a stiffness [N*m/rad], a margin [N],
+    a time [s]) at least ``low`` and above ``above``.
 
     Raises
     ------
     argparse.ArgumentTypeError
-        Not a finite number, or below ``low`` (followed by ``why_low``).
+        Not a finite number, below ``low`` (followed by ``why_low``), or not above ``above``.
     """
 
     def checked(text: str) -> float:
@@ -272,6 +295,9 @@ def number_argument(*, low: float | None = None, why_low: str = '',
             tail = f' ({why_low})' if why_low else ''
             raise argparse.ArgumentTypeError(
                 f'{text!r} must be at least {low:g}{" " + unit if unit else ""}{tail}')
+        if above is not None and not value > above:
+            raise argparse.ArgumentTypeError(
+                f'{text!r} must be above {above:g}{" " + unit if unit else ""}')
         return value
 
     checked.__name__ = 'number'

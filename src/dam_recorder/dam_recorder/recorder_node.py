@@ -68,6 +68,7 @@ from pathlib import Path
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -797,7 +798,13 @@ class RecorderNode(Node):
 def main(args: list[str] | None = None) -> None:
     """Run the recorder; exit with :data:`WRITE_ERROR_STATUS` after a write error."""
     argv = list(sys.argv if args is None else args)
-    overrides = parameter_overrides(remove_ros_args(argv)[1:])
+    try:
+        own = remove_ros_args(argv)[1:]
+    except _rclpy.RCLError as exc:  # a malformed --ros-args part: one line, no traceback
+        print(f'recorder: invalid ROS arguments: {" ".join(str(exc).split())}',
+              file=sys.stderr)
+        raise SystemExit(2) from None
+    overrides = parameter_overrides(own)
     made: list[RecorderNode] = []
 
     def make() -> RecorderNode:

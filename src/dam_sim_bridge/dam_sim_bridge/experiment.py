@@ -15,8 +15,8 @@ the object and, on request, the recorded signals.
 ``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
 friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
 
-    ros2 run dam_sim_bridge dam_experiment --alpha 5 30 --k-theta 0.5 2 7 15 \\
-        --delta-theta-p 5 10 15 25 40 --out results.csv
+    ros2 run dam_sim_bridge dam_experiment --alpha 5deg 30deg --k-theta 0.5 2 7 15 \\
+        --delta-theta-p 5deg 10deg 15deg 25deg 40deg --out results.csv
 """
 
 from __future__ import annotations
@@ -346,19 +346,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments."""
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415
     from dam_common.config import load_config  # noqa: PLC0415
+    from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(sys.argv[1:] if argv is None else argv)
     try:
         config = load_config(args.config)
-    except DamAnalysisError as exc:
+    except (DamAnalysisError, DamCommonError) as exc:
         sys.stderr.write(f'dam_experiment: {exc}\n')
         return 2
-    bad = [v for v in args.k_theta if not (math.isfinite(v) and v > 0.0)]
-    bad += [v for v in args.delta_theta_p if not (math.isfinite(v) and v > 0.0)]
-    if bad:
-        sys.stderr.write(f'dam_experiment: k_theta and delta_theta_p must be positive, got '
-                         f'{bad}\n')
-        return 2
+    dp_max = math.degrees(config.task.delta_theta_p_max_rad)
+    for option, values, low, high, unit in (
+            ('--k-theta', args.k_theta, 0.0, math.inf, 'N*m/rad'),
+            ('--delta-theta-p', args.delta_theta_p, 0.0, dp_max, 'deg'),
+            ('--alpha', args.alpha or [], -1e-12, 90.0, 'deg')):
+        for v in values:
+            if not (math.isfinite(v) and low < v and (v <= high if option != '--alpha'
+                                                      else v < high)):
+                bound = {'--k-theta': 'above 0', '--delta-theta-p': f'in (0, {dp_max:g}]',
+                         '--alpha': 'in [0, 90)'}[option]
+                sys.stderr.write(f'dam_experiment: {option}: {v:g} {unit} must be {bound} '
+                                 f'{unit}\n')
+                return 2
     alphas = ([math.radians(a) for a in args.alpha] if args.alpha
               else [float(config.contact.friction_angle_rad)])
     if args.fixtures is not None:

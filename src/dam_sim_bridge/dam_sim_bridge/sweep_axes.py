@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from dam_common.quantities import Quantity, parse_quantity
+from dam_common.quantities import Quantity, has_unit, parse_quantity
 from dam_sim_bridge.errors import SweepError
 
 #: Significant digits kept of a value computed from a range (``0.05:20:24:log``).
@@ -38,6 +38,14 @@ def _number(field_name: str, text: str, token: str, quantity: Quantity | None = 
     if not math.isfinite(value):
         raise SweepError(f'{field_name}: {text!r} in {token!r} is not a finite number')
     return value
+
+
+def _plain(text: str) -> float | None:
+    """``text`` as a bare number, or None."""
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def parse_range(field_name: str, token: str, quantity: Quantity | None = None,
@@ -78,6 +86,10 @@ def parse_range(field_name: str, token: str, quantity: Quantity | None = None,
                                     ('log', 'lin')):
         raise SweepError(f'{field_name}: {token!r} is neither a number nor a range '
                          f'start:stop:count[:lin] or start:stop:count:log')
+    if quantity is not None and has_unit(parts[0]) != has_unit(parts[1]) and \
+            0.0 not in (_plain(parts[0]), _plain(parts[1])):
+        raise SweepError(f'{field_name}: {token!r}: one end has a unit and the other not; give '
+                         'both ends their unit (a bare number is SI)')
     start = _number(field_name, parts[0], token, quantity, unit_si)
     stop = _number(field_name, parts[1], token, quantity, unit_si)
     try:

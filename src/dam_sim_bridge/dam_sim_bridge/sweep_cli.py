@@ -2,8 +2,8 @@
 
 ::
 
-    ros2 run dam_sim_bridge sweep --friction-angles 5 30 --k-theta 0.05:20:24:log \\
-        --delta-theta-p 5:60:12 --out DIR [--repeats N] [--workers N] [--scheduler ADDRESS]
+    ros2 run dam_sim_bridge sweep --friction-angles 5deg 30deg --k-theta 0.05:20:24:log \\
+        --delta-theta-p 5deg:60deg:12 --out DIR [--repeats N] [--workers N] [--scheduler ADDRESS]
 
 Runs every trial of :class:`~dam_sim_bridge.sweep.SweepSpec` (:func:`~dam_sim_bridge.sweep.
 run_trial`) on all local cores (a Dask ``LocalCluster`` of one single-threaded worker process

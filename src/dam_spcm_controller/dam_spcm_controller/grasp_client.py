@@ -23,7 +23,8 @@ import time
 from collections.abc import Sequence
 
 from dam_common.command_line import CommandLineParser
-from dam_common.quantities import ANGLE, argument, parse_quantity
+from dam_common.quantities import ANGLE, RIGHT_ANGLE, argument, parse_quantity
+from dam_common.ros_args import strip_ros_args
 
 EXIT_SUCCESS = 0
 EXIT_NO_SERVER = 1
@@ -32,7 +33,7 @@ EXIT_OTHER_OUTCOME = 3
 
 #: The displacement: a positive angle (the position joints curl inward by it); a bare number
 #: is radians, as in every command of the suite (:mod:`dam_common.quantities`).
-_DELTA_THETA_P = argument(ANGLE, low=0.0, low_inclusive=False)
+_DELTA_THETA_P = argument(ANGLE, low=0.0, low_inclusive=False, high=RIGHT_ANGLE)
 
 
 def parse_angle(text: str) -> float:
@@ -69,7 +70,7 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--cancel-timeout', type=_positive, default=5.0, metavar='S',
                    help='on SIGINT/SIGTERM, how long to wait for the cancel to be confirmed '
                         '[s] (default 5)')
-    return p.parse_args(list(argv))
+    return p.parse_args(strip_ros_args(list(argv)))  # rclpy's, as ros2 run passes them
 
 
 def run(args: argparse.Namespace) -> int:
