@@ -41,7 +41,7 @@ def sample(topic: str, i: int) -> dict[str, Any]:
                                                                       'ENVELOPE'][i % 3],
                 'progress': i / 1000.0, 'finger_names': ['f1', 'f2', 'f3'][: 1 + i % 3],
                 'compliant_torque': [0.1 * i, 0.2], 'delta_theta_s': [],
-                'outcome': i % 6, 'message': 'x' * (i % 5)}
+                'outcome': i % 6, 'outcome_name': 'o' * (i % 4), 'message': 'x' * (i % 5)}
     if topic == '/hand/command':
         return {'header': {'stamp': stamp, 'frame_id': 'palm'},
                 'name': ['f1_position_joint', 'f2_position_joint'], 'mode': [1, 3],
@@ -53,7 +53,8 @@ def sample(topic: str, i: int) -> dict[str, Any]:
                          'orientation': {'x': 0.0, 'y': 0.0, 'z': 0.0, 'w': 1.0}}}
     if topic == '/dam_grasp/_action/feedback':
         return {'goal_id': {'uuid': [(i + k) % 256 for k in range(16)]},
-                'feedback': {'phase': 'ROLLING_UP', 'progress': 0.5, 'lift_checked': True,
+                'feedback': {'phase': 'ROLLING_UP', 'outcome': i % 6,
+                             'outcome_name': 'o' * (i % 3), 'progress': 0.5, 'lift_checked': True,
                              'lift_guaranteed': i % 2 == 0, 'worst_case_margin': -1.0 * i,
                              'csm_lift': False, 'csm_margin': float('inf') if i == 0 else 1.0,
                              'compliant_torque': [0.3, 0.15, 0.15]}}
