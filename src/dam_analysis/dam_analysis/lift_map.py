@@ -174,7 +174,7 @@ def default_k_max(boundaries: Sequence[Boundaries]) -> float:
     return min(wanted, K_MAX_FACTOR * max(float(c.max()) for c in curves))
 
 
-def _curve_ends(dp_deg: np.ndarray, k: np.ndarray) -> list[int]:
+def _curve_ends(k: np.ndarray) -> list[int]:
     """Indices of the last finite sample of each stretch of ``k`` that stops inside the
     plotted range (the next sample is NaN: no stiffness lifts from there on)."""
     finite = np.isfinite(k)
@@ -231,7 +231,7 @@ def draw_map(ax, friction_angles_deg: Sequence[float], boundaries: Sequence[Boun
                 continue
             ax.plot(dp, k, color=colour, linewidth=width, linestyle=style,
                     label=f'alpha = {alpha:g} deg: {name}')
-            for i in _curve_ends(dp, k):
+            for i in _curve_ends(k):
                 if k[i] >= k_max:
                     continue  # it leaves through the top of the plot first
                 why = ('the SPCM branch ends' if dp[i + 1] >= branch_end_deg - 1e-9

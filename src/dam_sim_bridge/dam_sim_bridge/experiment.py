@@ -355,15 +355,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f'dam_experiment: {exc}\n')
         return 2
     dp_max = math.degrees(config.task.delta_theta_p_max_rad)
-    for option, values, low, high, unit in (
-            ('--k-theta', args.k_theta, 0.0, math.inf, 'N*m/rad'),
-            ('--delta-theta-p', args.delta_theta_p, 0.0, dp_max, 'deg'),
-            ('--alpha', args.alpha or [], -1e-12, 90.0, 'deg')):
+    checks = (('--k-theta', args.k_theta, 'above 0', lambda v: v > 0.0, 'N*m/rad'),
+              ('--delta-theta-p', args.delta_theta_p, f'in (0, {dp_max:g}]',
+               lambda v: 0.0 < v <= dp_max, 'deg'),
+              ('--alpha', args.alpha or [], 'in [0, 90)', lambda v: 0.0 <= v < 90.0, 'deg'))
+    for option, values, bound, inside, unit in checks:
         for v in values:
-            if not (math.isfinite(v) and low < v and (v <= high if option != '--alpha'
-                                                      else v < high)):
-                bound = {'--k-theta': 'above 0', '--delta-theta-p': f'in (0, {dp_max:g}]',
-                         '--alpha': 'in [0, 90)'}[option]
+            if not (math.isfinite(v) and inside(v)):
                 sys.stderr.write(f'dam_experiment: {option}: {v:g} {unit} must be {bound} '
                                  f'{unit}\n')
                 return 2
