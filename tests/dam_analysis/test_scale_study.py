@@ -122,8 +122,9 @@ def test_radius_ranges() -> None:
     import argparse
     for bad, words in (('3mm:20mm', 'START:STOP:COUNT'), ('a:2mm:3', 'is not a length'),
                        ('3mm:20mm:x', 'not a whole number'), ('0:20mm:3', 'must be above 0'),
-                       ('3mm:nan:3', 'not a finite length'), ('20mm:3mm:3', 'below START'),
+                       ('0.003:nan:3', 'not a finite length'), ('20mm:3mm:3', 'below START'),
                        ('3mm:4mm:0', 'must be in'), ('3mm:4mm:1', 'START == STOP'),
+                       ('3mm:nan:3', 'has no unit while the other end has one'),
                        ('3:20:18', 'did you mean 3mm?')):
         with pytest.raises(argparse.ArgumentTypeError, match=words):
             parse_radius_range(bad)

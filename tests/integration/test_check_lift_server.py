@@ -392,9 +392,9 @@ def test_command_line_client(server: object) -> None:
     outside = _run_client('--k-theta', '0.5', '--delta-theta-p', '40deg')
     assert outside.returncode == 0, outside.stderr
     assert 'lift guaranteed (eq. 18) : no' in outside.stdout
-    rejected = _run_client('--k-theta', '-1', '--delta-theta-p', '0.3')
-    assert rejected.returncode == 2
-    assert 'REJECTED' in rejected.stdout and 'k_theta' in rejected.stdout
+    refused = _run_client('--k-theta', '-1', '--delta-theta-p', '0.3')  # before any request
+    assert refused.returncode == 2 and 'REJECTED' not in refused.stdout
+    assert '--k-theta' in refused.stderr and 'must be above 0 N*m/rad' in refused.stderr
     bad_angle = _run_client('--k-theta', '1', '--delta-theta-p', 'forty')
     assert bad_angle.returncode == 2
     assert "'forty' is not an angle" in bad_angle.stderr

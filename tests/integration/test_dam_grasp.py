@@ -204,7 +204,9 @@ def _dam_grasp(*args: str, env: dict[str, str] | None = None,
 def test_dam_grasp_executable_exit_codes(stack: _Grasper) -> None:
     """2 on a rejected goal, 3 after --cancel-after (ABORTED), 1 with no server (0 on
     SUCCESS is checked by hand: see docs/simulation_grasp.md)."""
-    rejected = _dam_grasp('--k-theta', '7', '--delta-theta-p', '100deg')
+    # 80 deg is a displacement the command line allows (below 90 deg) but the controller
+    # refuses (above the configured delta_theta_p_max_deg, 65 deg)
+    rejected = _dam_grasp('--k-theta', '7', '--delta-theta-p', '80deg')
     assert rejected.returncode == 2, rejected.stdout + rejected.stderr
     assert 'goal refused' in rejected.stderr and 'delta_theta_p' in rejected.stderr
 

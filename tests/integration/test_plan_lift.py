@@ -178,8 +178,12 @@ def test_command_line_client(server: object) -> None:
     assert capped.returncode == 0, capped.stderr
     assert 'guaranteed (eq. 18)       : none' in capped.stdout
     assert 'is above the cap there' in capped.stdout
-    rejected = _run('--friction-angle', '89deg:95deg')
+    refused = _run('--friction-angle', '89deg:95deg')  # the command line's own bound
+    assert refused.returncode == 2 and 'REJECTED' not in refused.stdout
+    assert 'friction-angle' in refused.stderr, refused.stderr
+    rejected = _run('--position-tolerance', '6mm')  # the server's bound (5 mm)
     assert rejected.returncode == 2 and 'REJECTED' in rejected.stdout
+    assert 'position_tolerance' in rejected.stdout, rejected.stdout
     bad = _run('--mass', '0.05:0.03')
     assert bad.returncode == 2 and 'empty range' in bad.stderr
     bad_length = _run('--position-tolerance', 'one')

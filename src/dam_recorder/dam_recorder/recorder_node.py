@@ -130,6 +130,9 @@ BACKLOG_WARNING_NS = 1_000_000_000
 #: and what they sent before the start was never asked for. Later ones appeared while
 #: recording (their messages before the subscription are counted).
 STARTUP_DISCOVERY_S = 3.0
+#: ... and the start-up window lasts at least this many discovery passes: on a loaded machine
+#: the passes come late, and discovery, which runs on the same starved cores, is late too.
+STARTUP_DISCOVERY_PASSES = 7
 #: The types whose messages an episode reads facts from (:mod:`dam_recorder.completeness`).
 FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
               EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
@@ -233,6 +236,7 @@ class RecorderNode(Node):
         #: it was found is missing (counted: :meth:`_follow_sequence`).
         self._found_first: set[str] = set()
         self._started_at = time.monotonic()
+        self._discovery_passes = 0
         self._refused: set[str] = set()
         self._paused = False
         self._last_message = time.monotonic()
@@ -356,7 +360,9 @@ class RecorderNode(Node):
                 recorded.last_sequence = None  # a new sequence to follow
             recorded.one_publisher = one
         topics = self.get_topic_names_and_types()
-        if time.monotonic() - self._started_at < STARTUP_DISCOVERY_S:
+        self._discovery_passes += 1
+        if time.monotonic() - self._started_at < STARTUP_DISCOVERY_S \
+                or self._discovery_passes <= STARTUP_DISCOVERY_PASSES:
             self._found_first.update(name for name, _types in topics)
         for name, types in topics:
             if name in self._recorded or name in self._refused \
