@@ -37,9 +37,9 @@ def run(args) -> dict:
     import dynamixel_sdk as sdk
 
     from dam_common.config import load_config
+    from dam_common.device_protocol import JointMode
     from dam_hand_driver.device import JointSample
     from dam_hand_driver.dynamixel_device import DynamixelDevice
-    from dam_hand_driver.protocol import JointMode
 
     n = 200 if args.quick else 2000
     config = load_config()

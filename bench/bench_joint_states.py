@@ -178,7 +178,7 @@ def _baseline_periods(rate_hz: float, seconds: float) -> np.ndarray:
 
 def _round_trips(config_file: Path, n: int, rate_hz: float) -> np.ndarray:
     from dam_common.config import load_config
-    from dam_hand_driver.protocol import FrameDecoder, FrameKind, encode_state
+    from dam_common.device_protocol import FrameDecoder, FrameKind, encode_state
 
     cfg = load_config(config_file)
     dev = cfg.device

@@ -1,6 +1,6 @@
 """Cost of one lockstep sweep trial, against the physics alone; the 480-trial grid on request.
 
-1. Trial: :func:`~dam_sim_bridge.sweep.run_trial` of the configured default cell (friction
+1. Trial: :func:`~dam_experiments.sweep.run_trial` of the configured default cell (friction
    angle ``contact.friction_angle_deg``, ``task.k_theta_nm_per_rad``,
    ``task.delta_theta_p_deg``, the sweep's default options: a whole grasp, about 5 s
    simulated), as ``sweep`` runs it for each grid point: a fresh :class:`HandWorld` stepped in
@@ -52,7 +52,7 @@ def _spread(samples: list[float], unit: str, digits: int = 3) -> dict[str, float
 def _trials(n: int) -> dict:
     """Wall and CPU time [s] of ``n`` default trials, and the simulated time of one [s]."""
     from dam_common.config import load_config
-    from dam_sim_bridge.sweep import SweepSpec, TrialSpec, analyzer_for, run_trial
+    from dam_experiments.sweep import SweepSpec, TrialSpec, analyzer_for, run_trial
 
     config = load_config()
     sweep = SweepSpec(friction_angles_deg=(math.degrees(config.contact.friction_angle_rad),),
@@ -80,7 +80,7 @@ def _bare_physics(sim_time_s: float, n: int) -> list[float]:
     """Wall time [s] of a fresh world (same model) stepping ``sim_time_s`` with no
     controller: construction and bare ``stepSimulation`` calls, ``n`` times."""
     from dam_common.config import load_config
-    from dam_sim_bridge.sweep import _quiet_stdout
+    from dam_experiments.sweep import _quiet_stdout
     from dam_sim_bridge.world import HandWorld
 
     config = load_config()
@@ -100,7 +100,7 @@ def _bare_physics(sim_time_s: float, n: int) -> list[float]:
 
 def _sweep_wall(args: tuple[str, ...], workers: int, out: Path) -> float:
     """Wall time [s] of the sweep command with ``args`` on ``workers`` local workers."""
-    sweep = installed_executable('dam_sim_bridge', 'sweep')
+    sweep = installed_executable('dam_experiments', 'sweep')
     start = time.monotonic()
     subprocess.run([str(sweep), *args, '--workers', str(workers), '--out', str(out),
                     '--quiet'], check=True, stdin=subprocess.DEVNULL, env=dict(os.environ))

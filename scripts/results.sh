@@ -24,7 +24,7 @@ source "$REPO_ROOT/scripts/env.sh"
 set -u
 cd "$REPO_ROOT"
 mkdir -p "$(dirname "$SWEEP_DIR")"
-bin=ros2_ws/install/dam_sim_bridge/lib/dam_sim_bridge
+bin=ros2_ws/install/dam_experiments/lib/dam_experiments
 "$bin/sweep" --friction-angles 5deg 30deg --k-theta 0.05:20:20:log --delta-theta-p 5deg:60deg:12 \
   --config config/dam.yaml --out "$SWEEP_DIR" "$@"
 "$bin/sweep_report" "$SWEEP_DIR" -o "$RESULTS" --config config/dam.yaml

@@ -42,7 +42,7 @@ def lockstep_reference(config_file: Path, k_theta: float, delta_theta_p: float,
     """(outcome name, rises of the object when the controller is done [m]) of the lockstep
     trials started after each of :data:`HOLDS_BEFORE_S`; their outcomes agree."""
     from dam_common.config import load_config
-    from dam_sim_bridge.experiment import run_experiment
+    from dam_experiments.experiment import run_experiment
     from dam_sim_bridge.world import HandWorld
 
     config = load_config(config_file).with_object(object_name)

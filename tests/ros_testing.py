@@ -246,7 +246,7 @@ class FakeStateDevice:
     def __init__(self, config: Path, status: int) -> None:
         import yaml
 
-        from dam_hand_driver.protocol import JointMode, encode_state
+        from dam_common.device_protocol import JointMode, encode_state
 
         data = yaml.safe_load(config.read_text(encoding='utf-8'))
         n = 3 * len(data['hand']['joint_roles'])

@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from dam_common.config import load_config
+    from dam_common.device_protocol import DeviceStatus
     from dam_common.errors import DamCommonError
     from dam_hand_driver.link import DeviceLink
-    from dam_hand_driver.protocol import DeviceStatus
 
     try:
         config = load_config()

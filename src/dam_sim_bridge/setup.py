@@ -25,10 +25,6 @@ setup(
         'console_scripts': [
             'sim_bridge = dam_sim_bridge.entry_points:sim_bridge',
             'dynamixel_bus = dam_sim_bridge.entry_points:dynamixel_bus',
-            'dam_experiment = dam_sim_bridge.experiment:main',
-            'sweep = dam_sim_bridge.sweep_cli:main',
-            'sweep_plot = dam_sim_bridge.sweep_plot:main',
-            'sweep_report = dam_sim_bridge.sweep_report_cli:main',
         ],
     },
 )

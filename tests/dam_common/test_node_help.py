@@ -38,10 +38,10 @@ EXECUTABLES = {
     ('dam_recorder', 'bag'): ['info', 'plot', 'export'],
     ('dam_recorder', 'recover'): ['usage'],
     ('dam_sim_bridge', 'dynamixel_bus'): ['usage'],
-    ('dam_sim_bridge', 'dam_experiment'): ['--alpha'],
-    ('dam_sim_bridge', 'sweep'): ['--friction-angles', '--scheduler'],
-    ('dam_sim_bridge', 'sweep_plot'): ['usage'],
-    ('dam_sim_bridge', 'sweep_report'): ['usage'],
+    ('dam_experiments', 'dam_experiment'): ['--alpha'],
+    ('dam_experiments', 'sweep'): ['--friction-angles', '--scheduler'],
+    ('dam_experiments', 'sweep_plot'): ['usage'],
+    ('dam_experiments', 'sweep_report'): ['usage'],
 }
 
 

@@ -147,8 +147,8 @@ COMMANDS = ('check_lift', 'plan_lift', 'scale_map', 'lift_map', 'dam_grasp', 'da
 def _read(command: str, word: str) -> float:
     """The displacement [rad] ``command`` reads from ``word`` (by its own parser)."""
     from dam_analysis import check_lift_client, lift_map, plan_lift_client, scale_map
-    from dam_sim_bridge import experiment
-    from dam_sim_bridge.sweep_axes import parse_axis
+    from dam_experiments import experiment
+    from dam_experiments.sweep_axes import parse_axis
     from dam_spcm_controller import grasp_client
 
     if command == 'check_lift':
@@ -182,7 +182,7 @@ def test_every_command_reads_an_angle_the_same_way(word: str, radians: float) ->
 @pytest.mark.parametrize('word', ['10', '25'])
 def test_every_command_refuses_a_bare_angle_in_degrees_and_says_what_was_meant(
         command: str, word: str, capsys: pytest.CaptureFixture[str]) -> None:
-    from dam_sim_bridge.errors import SweepError
+    from dam_experiments.errors import SweepError
 
     with pytest.raises((SystemExit, SweepError)) as caught:
         _read(command, word)

@@ -21,11 +21,11 @@ import yaml
 from dynamixel_testing import fast_gil_handoff
 
 from dam_common.config import DamConfig, config_from_dict, load_config
+from dam_common.device_protocol import JointMode
 from dam_common.dynamixel_config import POSITION_RAD_PER_COUNT
 from dam_common.errors import ConfigError
 from dam_hand_driver.dynamixel_goals import ServoTable, goals_raw, state_si
 from dam_hand_driver.errors import HandDriverError
-from dam_hand_driver.protocol import JointMode
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 H, P, T, IMP = (int(JointMode.HOLD), int(JointMode.POSITION), int(JointMode.TORQUE),

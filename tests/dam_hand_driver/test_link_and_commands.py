@@ -9,14 +9,14 @@ import socket
 import numpy as np
 import pytest
 
-from dam_hand_driver.errors import ParameterError
-from dam_hand_driver.link import DeviceLink
-from dam_hand_driver.protocol import (
+from dam_common.device_protocol import (
     FrameDecoder,
     FrameKind,
     JointMode,
     encode_state,
 )
+from dam_hand_driver.errors import ParameterError
+from dam_hand_driver.link import DeviceLink
 
 N = 3
 
@@ -160,7 +160,7 @@ def test_bad_impedance_commands_are_rejected_naming_field_and_value(
 def test_impedance_gains_the_link_cannot_carry_are_rejected() -> None:
     """A stiffness below one raw unit of the calibration (1e-4 N*m/rad by default) passes the
     range check but could not be encoded into any frame: refused on arrival, by joint."""
-    from dam_hand_driver.protocol import Calibration
+    from dam_common.device_protocol import Calibration
 
     calibration = Calibration(position_scale_rad_per_count=[1e-4] * N,
                               position_offset_counts=[0] * N,

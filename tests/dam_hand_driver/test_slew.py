@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from dam_common.config import load_config
+from dam_common.device_protocol import JointMode
 from dam_hand_driver.errors import ParameterError
-from dam_hand_driver.protocol import JointMode
 from dam_hand_driver.slew import CommandSlew, slew_torque
 from dam_sim_bridge.world import HandWorld, WorldOptions
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from dam_common.config import load_config
+from dam_common.device_protocol import FrameDecoder, FrameKind, StateFrame
 from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
-from dam_hand_driver.protocol import FrameDecoder, FrameKind, StateFrame
 from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.sim_device import SimDevice
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import DamConfig, load_config
-from dam_hand_driver.protocol import (
+from dam_common.device_protocol import (
     Calibration,
     DeviceStatus,
     FrameDecoder,

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import DamConfig, load_config
-from dam_hand_driver.protocol import Calibration, DeviceWatchdog, JointMode
+from dam_common.device_protocol import Calibration, DeviceWatchdog, JointMode
 from dam_sim_bridge.errors import WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions
 

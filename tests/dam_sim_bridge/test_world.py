@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import DamConfig, load_config
-from dam_hand_driver.protocol import Calibration, DeviceWatchdog, JointFault, JointMode
+from dam_common.device_protocol import Calibration, DeviceWatchdog, JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
@@ -77,6 +77,49 @@ def test_joint_order_and_limits_follow_the_config(world: HandWorld, cfg: DamConf
         rot = np.array(world.client.getMatrixFromQuaternion(axis_world)).reshape(3, 3)
         finger = cfg.hand.fingers[i // 3]
         np.testing.assert_allclose(rot @ np.array(info[13]), finger.joint_axis, atol=1e-9)
+
+
+def test_the_stand_in_loads_the_kinematic_tree_the_driver_publishes(world: HandWorld,
+                                                                    cfg: DamConfig) -> None:
+    """Every joint of the driver's /robot_description (the standard URDF) is in the loaded
+    PyBullet model with the same parent, origin, axis and limits, and every link with the same
+    mass and inertia: one model, two readers."""
+    from xml.etree import ElementTree as ET
+
+    from dam_common.hand_urdf import BASE_LINK, hand_urdf
+
+    robot = ET.fromstring(hand_urdf(cfg))
+    links = {link.get('name'): link for link in robot.findall('link')}
+    pb = world.client
+    loaded = {pb.getJointInfo(world.hand_id, j)[1].decode(): j
+              for j in range(pb.getNumJoints(world.hand_id))}
+    revolute = [j for j in robot.findall('joint') if j.get('type') == 'revolute']
+    assert sorted(j.get('name') for j in revolute) == sorted(loaded)
+    index_of_link = {pb.getJointInfo(world.hand_id, j)[12].decode(): j for j in loaded.values()}
+    for joint in revolute:
+        info = pb.getJointInfo(world.hand_id, loaded[joint.get('name')])
+        parent = joint.find('parent').get('link')
+        assert info[16] == (-1 if parent == BASE_LINK else index_of_link[parent])
+        assert info[12].decode() == joint.find('child').get('link')
+        limit = joint.find('limit')
+        assert (info[8], info[9]) == (float(limit.get('lower')), float(limit.get('upper')))
+        np.testing.assert_allclose(info[13], [float(v) for v in
+                                              joint.find('axis').get('xyz').split()])
+        # the joint frame's position in the parent link frame: PyBullet states it from the
+        # parent's centre of mass, so add that back to compare with the URDF origin
+        xyz = np.array([float(v) for v in joint.find('origin').get('xyz').split()])
+        parent_com = (np.zeros(3) if info[16] == -1 else
+                      np.array(pb.getDynamicsInfo(world.hand_id, info[16])[3]))
+        np.testing.assert_allclose(np.array(info[14]) + parent_com, xyz, atol=1e-12)
+        link = links[joint.find('child').get('link')]
+        dynamics = pb.getDynamicsInfo(world.hand_id, loaded[joint.get('name')])
+        assert dynamics[0] == pytest.approx(float(link.find('inertial/mass').get('value')))
+        inertia = link.find('inertial/inertia')
+        expected = [float(inertia.get(k)) for k in ('ixx', 'iyy', 'izz')]
+        if joint.get('name').endswith('_compliant_joint'):  # plus the rotor about y
+            rotor = world.options.compliant_rotor_inertia_kg_m2
+            expected = [expected[0] + rotor / 2.0, expected[1] + rotor, expected[2] + rotor / 2.0]
+        np.testing.assert_allclose(dynamics[2], expected, rtol=1e-12)
 
 
 def test_fingertips_follow_planar_forward_kinematics(world: HandWorld, cfg: DamConfig) -> None:

@@ -474,7 +474,7 @@ class _StateTap:
     ``(seq, state in SI)`` of every valid state frame."""
 
     def __init__(self, cfg, listen_port: int, forward_port: int) -> None:
-        from dam_hand_driver.protocol import Calibration, FrameDecoder, FrameKind
+        from dam_common.device_protocol import Calibration, FrameDecoder, FrameKind
 
         self.calibration = Calibration.from_config(cfg)
         self.decoder = FrameDecoder(FrameKind.STATE, len(cfg.hand.joint_names))

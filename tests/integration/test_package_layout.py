@@ -13,7 +13,19 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 SRC = REPO_ROOT / 'src'
 INSTALL = REPO_ROOT / 'ros2_ws' / 'install'
 PYTHON_PACKAGES = ['dam_common', 'dam_analysis', 'dam_sim_bridge', 'dam_hand_driver',
-                   'dam_spcm_controller', 'dam_recorder']
+                   'dam_spcm_controller', 'dam_recorder', 'dam_experiments']
+#: The suite's packages each package may import (besides itself and dam_interfaces): the
+#: stand-in hand sits beside the driver, below the controller; the experiments on top.
+LAYERS = {
+    'dam_common': set(),
+    'dam_analysis': {'dam_common'},
+    'dam_sim_bridge': {'dam_common'},
+    'dam_hand_driver': {'dam_common'},
+    'dam_recorder': {'dam_common'},
+    'dam_spcm_controller': {'dam_common', 'dam_analysis', 'dam_hand_driver'},
+    'dam_experiments': {'dam_common', 'dam_analysis', 'dam_hand_driver', 'dam_spcm_controller',
+                        'dam_sim_bridge'},
+}
 
 
 def declared_executables(setup_py: Path) -> list[str]:
@@ -46,6 +58,8 @@ def test_package_xml_is_format_3_with_real_dependencies(package: str) -> None:
     depends = {e.text for e in root if e.tag.endswith('depend')}
     if package == 'dam_interfaces':
         assert {'rosidl_default_generators', 'rosidl_default_runtime'} <= depends
+    elif package == 'dam_experiments':  # command-line tools on the pure cores: no node
+        assert 'rclpy' not in depends and 'dam_sim_bridge' in depends
     else:
         assert 'rclpy' in depends
         if package != 'dam_common':
@@ -199,6 +213,18 @@ def test_every_import_is_declared_in_package_xml(package: str) -> None:
         if key not in declared:
             missing.append(f'{module} -> <exec_depend>{key}</exec_depend>')
     assert not missing, f'{package}/package.xml lacks: {missing}'
+
+
+@pytest.mark.parametrize('package', PYTHON_PACKAGES)
+def test_a_package_imports_and_declares_only_the_packages_below_it(package: str) -> None:
+    above = {m for m in imported_modules(package) if m.startswith('dam_')} - LAYERS[package] \
+        - {package, 'dam_interfaces'}
+    assert not above, f'{package} imports {sorted(above)}, which are not below it'
+    root = ET.parse(SRC / package / 'package.xml').getroot()
+    declared = {e.text for e in root if e.tag in ('depend', 'exec_depend')}
+    suite = {name for name in declared if name and name.startswith('dam_')}
+    assert suite - LAYERS[package] <= {'dam_interfaces'}, \
+        f'{package}/package.xml depends on {sorted(suite - LAYERS[package])}, not below it'
 
 
 #: -pip keys the ROS rosdep database has (rosdistro rosdep/python.yaml).

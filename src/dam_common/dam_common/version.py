@@ -9,7 +9,8 @@ from pathlib import Path
 
 #: The suite's packages whose versions make up :func:`software_version`.
 PACKAGES: tuple[str, ...] = ('dam_common', 'dam_analysis', 'dam_hand_driver',
-                             'dam_spcm_controller', 'dam_sim_bridge', 'dam_recorder')
+                             'dam_spcm_controller', 'dam_sim_bridge', 'dam_experiments',
+                             'dam_recorder')
 
 
 def _git_commit(directory: Path) -> str:

@@ -43,7 +43,7 @@ class CommandItemLike(NamedTuple):
     """What :meth:`HandDevice.command_error` sees of one joint command (SI units)."""
 
     joint: int
-    mode: int  #: :class:`dam_hand_driver.protocol.JointMode` value
+    mode: int  #: :class:`dam_common.device_protocol.JointMode` value
     setpoint: float
     stiffness: float
     damping: float
@@ -86,7 +86,7 @@ class HandDevice(abc.ABC):
         sample
             The sample the command answers.
         modes
-            (n,) :class:`~dam_hand_driver.protocol.JointMode` per joint.
+            (n,) :class:`~dam_common.device_protocol.JointMode` per joint.
         setpoints
             (n,) slew-limited setpoints: torque [N*m] (TORQUE), angle [rad] (POSITION, and
             the impedance equilibrium ``theta_0`` of IMPEDANCE), ignored (HOLD).

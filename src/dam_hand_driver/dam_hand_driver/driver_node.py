@@ -102,7 +102,9 @@ from std_srvs.srv import Trigger
 from dam_common.clock import create_steady_timer
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
+from dam_common.device_protocol import JointMode
 from dam_common.echo import brief_repr
+from dam_common.hand_urdf import hand_urdf
 from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
@@ -121,10 +123,8 @@ from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver.device import HandDevice, JointSample
 from dam_hand_driver.dynamixel_device import DynamixelDevice
 from dam_hand_driver.errors import HandDriverError
-from dam_hand_driver.protocol import JointMode
 from dam_hand_driver.slew import CommandSlew
 from dam_hand_driver.udp_device import UdpDevice
-from dam_hand_driver.urdf import hand_urdf
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim', 'dynamixel')

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from dam_common.config import DamConfig
+from dam_common.device_protocol import JointMode
 from dam_hand_driver.device import CommandItemLike, HandDevice, JointSample
 from dam_hand_driver.dynamixel_goals import (
     ServoTable,
@@ -35,7 +36,6 @@ from dam_hand_driver.dynamixel_goals import (
     update_hold,
 )
 from dam_hand_driver.errors import HandDriverError
-from dam_hand_driver.protocol import JointMode
 
 try:  # imported here, not at start-up: a stop request may come at any moment of that
     import dynamixel_sdk as sdk

@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dam_common.device_protocol import JointMode
 from dam_common.dynamixel_config import (
     POSITION_RAD_PER_COUNT,
     VELOCITY_RAD_S_PER_UNIT,
     DynamixelConfig,
 )
-from dam_hand_driver.protocol import JointMode
 
 #: Operating Mode (address 11) values used.
 CURRENT_CONTROL = 0

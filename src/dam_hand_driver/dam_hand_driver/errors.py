@@ -2,22 +2,21 @@
 
 Every error names the offending value in its message. The frame decoder never raises: it
 rejects a bad frame, counts the reason and returns ``None`` (see
-:class:`dam_hand_driver.protocol.FrameDecoder`). The errors below are for programming and
-configuration mistakes: encoding a frame from bad values, a bad calibration, a bad watchdog
-timeout.
+:class:`dam_common.device_protocol.FrameDecoder`). The frame layer's own errors (a frame
+encoded from bad values, a bad calibration) are in :mod:`dam_common.errors`; the ones below
+are for this package's configuration mistakes (a bad port, a bad slew limit, a backend that
+cannot start).
 """
 
 from __future__ import annotations
+
+from dam_common.errors import DeviceParameterError
 
 
 class HandDriverError(Exception):
     """Base class of every error raised by this package."""
 
 
-class EncodeError(HandDriverError, ValueError):
-    """A frame cannot be encoded: a value is non-finite, out of its field's range or the
-    arrays have the wrong length."""
-
-
-class ParameterError(HandDriverError, ValueError):
-    """A parameter (watchdog timeout, joint count, calibration) is out of its allowed range."""
+class ParameterError(HandDriverError, DeviceParameterError):
+    """A parameter of the driver (a port, a slew limit, a watchdog timeout) is out of its
+    allowed range."""

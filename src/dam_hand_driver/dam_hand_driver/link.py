@@ -2,7 +2,7 @@
 
 :class:`DeviceLink` receives state frames on ``device.state_port`` and sends command frames to
 the device's ``device.command_port`` (``docs/device_protocol.md``). It validates every datagram
-with a :class:`~dam_hand_driver.protocol.FrameDecoder` (state kind) and never raises on bad
+with a :class:`~dam_common.device_protocol.FrameDecoder` (state kind) and never raises on bad
 input; socket errors while sending are counted.
 """
 
@@ -17,14 +17,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dam_hand_driver.errors import ParameterError
-from dam_hand_driver.protocol import (
+from dam_common.device_protocol import (
     FrameDecoder,
     FrameKind,
     StateFrame,
     encode_command,
     seq_next,
 )
+from dam_hand_driver.errors import ParameterError
 
 _MAX_DATAGRAM = 2048
 

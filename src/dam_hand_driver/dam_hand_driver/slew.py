@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dam_common.device_protocol import JointMode
 from dam_common.scalars import clip
 from dam_hand_driver.errors import ParameterError
-from dam_hand_driver.protocol import JointMode
 
 _TORQUE = int(JointMode.TORQUE)
 _IMPEDANCE = int(JointMode.IMPEDANCE)
@@ -90,7 +90,7 @@ class CommandSlew:
         Parameters
         ----------
         modes
-            (n,) :class:`~dam_hand_driver.protocol.JointMode` values of the command.
+            (n,) :class:`~dam_common.device_protocol.JointMode` values of the command.
         setpoints
             (n,) commanded setpoints (SI): torque [N*m] (TORQUE), angle [rad] (POSITION,
             IMPEDANCE ``theta_0``), ignored (HOLD).

@@ -1,7 +1,7 @@
 """The UDP device link as a :class:`~dam_hand_driver.device.HandDevice` (no rclpy).
 
 State frames in, command frames out (``docs/device_protocol.md``); raw device units are
-converted with the configured :class:`~dam_hand_driver.protocol.Calibration`. The device runs
+converted with the configured :class:`~dam_common.device_protocol.Calibration`. The device runs
 the impedance law itself (MODE_IMPEDANCE is sent as such) and has its own watchdog.
 """
 
@@ -12,10 +12,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from dam_common.config import DamConfig
+from dam_common.device_protocol import Calibration, DeviceStatus, JointMode, StateFrame
+from dam_common.errors import DeviceParameterError
 from dam_hand_driver.device import CommandItemLike, HandDevice, JointSample
-from dam_hand_driver.errors import ParameterError
 from dam_hand_driver.link import DeviceLink
-from dam_hand_driver.protocol import Calibration, DeviceStatus, JointMode, StateFrame
 
 
 def gains_error(items: Sequence[CommandItemLike], calibration: Calibration) -> str | None:
@@ -33,7 +33,7 @@ def gains_error(items: Sequence[CommandItemLike], calibration: Calibration) -> s
             damping[item.joint] = item.damping
     try:
         calibration.gains_raw(modes, stiffness, damping)
-    except ParameterError as exc:
+    except DeviceParameterError as exc:
         return f'impedance gains the device link cannot carry: {exc}'
     return None
 

@@ -1,5 +1,5 @@
-"""PyBullet stand-in for the three-fingered DAM hand, speaking the device link; simulated
-experiments.
+"""PyBullet stand-in for the three-fingered DAM hand, speaking the device link (UDP) or
+emulating a Dynamixel bus. The experiments that run on it are in ``dam_experiments``.
 """
 
 import os as _os

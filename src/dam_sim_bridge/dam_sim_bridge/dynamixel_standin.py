@@ -54,7 +54,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING
 
 from dam_common.command_line import CommandLineParser
-from dam_hand_driver.protocol import JointMode
+from dam_common.device_protocol import JointMode
 from dam_sim_bridge.dynamixel_bus import BusStats, DynamixelBus
 from dam_sim_bridge.dynamixel_packets import Instruction, Packet, from_le
 from dam_sim_bridge.dynamixel_servo import (

@@ -21,12 +21,3 @@ class CommandError(SimBridgeError, ValueError):
 class SimulationError(SimBridgeError, RuntimeError):
     """The physics server failed (disconnected, could not load the model)."""
 
-
-class SweepError(SimBridgeError, ValueError):
-    """A sweep is malformed (a bad range or option, naming the field and the value) or does
-    not match the sweep already in its output directory."""
-
-
-class SweepPlotError(SimBridgeError, ValueError):
-    """A sweep directory cannot be drawn: a missing directory or file, an empty or malformed
-    table (naming the file, the trial and the value), or a picture that cannot be written."""

@@ -4,11 +4,11 @@
 period (``1 / device.rate_hz``) it
 
 1. reads every pending command datagram on ``device.command_port`` through a
-   :class:`~dam_hand_driver.protocol.FrameDecoder` (command kind) and feeds the accepted ones to
-   a :class:`~dam_hand_driver.protocol.DeviceWatchdog`;
+   :class:`~dam_common.device_protocol.FrameDecoder` (command kind) and feeds the accepted ones to
+   a :class:`~dam_common.device_protocol.DeviceWatchdog`;
 2. applies the watchdog's output (the newest command, or the safe state) to the world, raw
    setpoints and impedance gains converted to SI with
-   :class:`~dam_hand_driver.protocol.Calibration`; IMPEDANCE joints then run their law
+   :class:`~dam_common.device_protocol.Calibration`; IMPEDANCE joints then run their law
    ``clip(k (theta_0 - theta) - d theta_dot)`` inside the world at every physics step (1 kHz),
    not once per device cycle, and every TORQUE and IMPEDANCE torque is slew-limited there to
    ``device.torque_rate_limit_nm_per_s`` (:mod:`dam_sim_bridge.world`);
@@ -45,8 +45,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from dam_common.realtime import reduce_timer_slack
-from dam_hand_driver.protocol import (
+from dam_common.device_protocol import (
     Calibration,
     CommandFrame,
     DeviceStatus,
@@ -57,6 +56,7 @@ from dam_hand_driver.protocol import (
     encode_state,
     seq_newer,
 )
+from dam_common.realtime import reduce_timer_slack
 from dam_sim_bridge.errors import WorldConfigError
 from dam_sim_bridge.pacing import sleep_until
 from dam_sim_bridge.world import HandWorld
@@ -302,7 +302,7 @@ class SimDevice:
         The command that answers state k was computed from the joint state before it (the
         driver answers with the newest command it has), so a command reaches the world two
         periods after the state it was computed from, as in the lockstep trial
-        (:func:`dam_sim_bridge.experiment.run_experiment`, ``latency_cycles=2``).
+        (:func:`dam_experiments.experiment.run_experiment`, ``latency_cycles=2``).
         """
         frame = self._compute_cycle(None)
         next_deadline = self._rt_clock()

@@ -40,7 +40,7 @@ Model
 
 Joint control
 -------------
-Each joint is in one :class:`~dam_hand_driver.protocol.JointMode`:
+Each joint is in one :class:`~dam_common.device_protocol.JointMode`:
 
 * ``TORQUE``: the default velocity motor is disabled (``VELOCITY_CONTROL`` with force 0) and the
   torque, clipped to :attr:`WorldOptions.torque_limit_nm`, is applied with ``TORQUE_CONTROL``
@@ -116,8 +116,9 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from dam_common.cross_section import Circle
+from dam_common.device_protocol import JointFault, JointMode
+from dam_common.hand_urdf import hand_urdf
 from dam_common.scalars import clip
-from dam_hand_driver.protocol import JointFault, JointMode
 from dam_sim_bridge.column_body import (
     prism_inertia,
     prism_triangles,
@@ -303,72 +304,6 @@ def _toward(current: float, target: float, max_change: float) -> float:
     return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
 
 
-def solid_cylinder_inertia(mass_kg: float, length_m: float, radius_m: float
-                           ) -> tuple[float, float, float]:
-    """Principal inertia (ixx, iyy, izz) [kg*m^2] of a solid cylinder along z about its centre."""
-    transverse = mass_kg * (3.0 * radius_m**2 + length_m**2) / 12.0
-    return transverse, transverse, 0.5 * mass_kg * radius_m**2
-
-
-def hand_urdf(config: DamConfig, link_masses_kg: Sequence[float],
-              compliant_rotor_inertia_kg_m2: float = 0.0) -> str:
-    """URDF text of the hand (fixed palm, three joints per finger) built from ``config``.
-
-    Parameters
-    ----------
-    config
-        A ``DamConfig``.
-    link_masses_kg
-        Mass of each link, base to tip [kg].
-    compliant_rotor_inertia_kg_m2
-        Added to the first (compliant) link's inertia about the joint axis (local y)
-        [kg*m^2].
-    """
-    hand = config.hand
-    r = hand.link_radius_m
-    parts = ['<?xml version="1.0"?>', '<robot name="dam_hand">',
-             '<link name="palm"><inertial><mass value="0.1"/>'
-             '<inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="0" ixz="0" iyz="0"/>'
-             '</inertial></link>']
-    for finger in hand.fingers:
-        parent = 'palm'
-        for i, role in enumerate(hand.joint_roles):
-            length = float(hand.link_lengths_m[i])
-            mass = float(link_masses_kg[i])
-            ixx, iyy, izz = solid_cylinder_inertia(mass, length, r)
-            if i == 0:  # a disc rotor about y (valid tensor: J/2 about the other axes,
-                # which the joint does not let turn)
-                rotor = float(compliant_rotor_inertia_kg_m2)
-                ixx, iyy, izz = ixx + rotor / 2.0, iyy + rotor, izz + rotor / 2.0
-            lo, hi = hand.joint_limits_rad[role]
-            link = f'{finger.name}_{role}_link'
-            if i == 0:
-                x, y, z = (float(v) for v in finger.base_position_m)
-                origin = f'<origin xyz="{x!r} {y!r} {z!r}" rpy="0 0 {finger.base_yaw_rad!r}"/>'
-            else:
-                prev = float(hand.link_lengths_m[i - 1])
-                origin = f'<origin xyz="0 0 {-prev!r}" rpy="0 0 0"/>'
-            parts.append(
-                f'<joint name="{finger.name}_{role}_joint" type="revolute">'
-                f'<parent link="{parent}"/><child link="{link}"/>{origin}'
-                f'<axis xyz="0 -1 0"/>'
-                f'<limit lower="{lo!r}" upper="{hi!r}" effort="100" velocity="100"/>'
-                f'<dynamics damping="0" friction="0"/></joint>')
-            parts.append(
-                f'<link name="{link}">'
-                f'<inertial><origin xyz="0 0 {-length / 2.0!r}"/><mass value="{mass!r}"/>'
-                f'<inertia ixx="{ixx!r}" iyy="{iyy!r}" izz="{izz!r}" ixy="0" ixz="0" iyz="0"/>'
-                f'</inertial>'
-                f'<collision><origin xyz="0 0 {-length / 2.0!r}"/>'
-                f'<geometry><capsule radius="{r!r}" length="{length!r}"/></geometry></collision>'
-                f'<visual><origin xyz="0 0 {-length / 2.0!r}"/>'
-                f'<geometry><capsule radius="{r!r}" length="{length!r}"/></geometry></visual>'
-                f'</link>')
-            parent = link
-    parts.append('</robot>')
-    return '\n'.join(parts)
-
-
 class HandWorld:
     """The simulated hand, table and cylinder, steppable in lockstep.
 
@@ -427,8 +362,9 @@ class HandWorld:
 
     def _build(self) -> None:
         pb = self._pb
-        urdf = hand_urdf(self.config, self.link_masses_kg,
-                         self.options.compliant_rotor_inertia_kg_m2)
+        urdf = hand_urdf(self.config, link_masses_kg=self.link_masses_kg,
+                         compliant_rotor_inertia_kg_m2=self.options.compliant_rotor_inertia_kg_m2,
+                         for_pybullet=True)
         fd, path = tempfile.mkstemp(suffix='.urdf', prefix='dam_hand_')
         try:
             with os.fdopen(fd, 'w', encoding='utf-8') as handle:
@@ -965,7 +901,7 @@ class HandWorld:
         return JointStates(positions, velocities, torques)
 
     def joint_faults(self, limit_tolerance_rad: float = 1e-3) -> np.ndarray:
-        """(n,) :class:`~dam_hand_driver.protocol.JointFault` bits of every joint.
+        """(n,) :class:`~dam_common.device_protocol.JointFault` bits of every joint.
 
         ``LIMIT`` when the joint is within ``limit_tolerance_rad`` of a joint limit,
         ``SATURATED`` when its TORQUE setpoint, or its IMPEDANCE law in the last physics step,

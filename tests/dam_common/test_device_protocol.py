@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import load_config
-from dam_hand_driver.errors import EncodeError, ParameterError
-from dam_hand_driver.protocol import (
+from dam_common.device_protocol import (
     MAGIC,
     PROTOCOL_VERSION,
     Calibration,
@@ -33,6 +32,7 @@ from dam_hand_driver.protocol import (
     seq_next,
     state_frame_size,
 )
+from dam_common.errors import DeviceParameterError, EncodeError
 
 N = 9
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
@@ -445,17 +445,17 @@ def test_impedance_gains_in_fixed_point() -> None:
     k, d = cal.gains_si(k_raw, d_raw)
     assert k.tolist() == pytest.approx([10.0, 0.5, 0.0])
     assert d.tolist() == pytest.approx([0.2, 0.0, 0.0])
-    with pytest.raises(ParameterError, match='at least one raw unit'):
+    with pytest.raises(DeviceParameterError, match='at least one raw unit'):
         cal.gains_raw([IMP, T, T], [-1.0, 0, 0], [0.0, 0, 0])
-    with pytest.raises(ParameterError, match='at least one raw unit'):
+    with pytest.raises(DeviceParameterError, match='at least one raw unit'):
         cal.gains_raw([IMP, T, T], [1e-6, 0, 0], [0.0, 0, 0])
-    with pytest.raises(ParameterError, match='>= 0'):
+    with pytest.raises(DeviceParameterError, match='>= 0'):
         cal.gains_raw([IMP, T, T], [1.0, 0, 0], [-0.1, 0, 0])
-    with pytest.raises(ParameterError, match='finite'):
+    with pytest.raises(DeviceParameterError, match='finite'):
         cal.gains_raw([IMP, T, T], [float('inf'), 0, 0], [0.0, 0, 0])
-    with pytest.raises(ParameterError, match='int32'):
+    with pytest.raises(DeviceParameterError, match='int32'):
         cal.gains_raw([IMP, T, T], [1e6, 0, 0], [0.0, 0, 0])
-    with pytest.raises(ParameterError, match='positive'):
+    with pytest.raises(DeviceParameterError, match='positive'):
         Calibration([1e-4], [0], [1e-5], [0], [-1e-4], [1e-6])
 
 
@@ -483,14 +483,14 @@ def test_state_si_and_raw_round_trip_through_a_frame() -> None:
 
 
 def test_calibration_rejects_bad_values() -> None:
-    with pytest.raises(ParameterError, match='zero scale'):
+    with pytest.raises(DeviceParameterError, match='zero scale'):
         Calibration([0.0], [0], [1e-5], [0])
     cal = Calibration([1e-4], [0], [1e-5], [0])
-    with pytest.raises(ParameterError, match='non-finite'):
+    with pytest.raises(DeviceParameterError, match='non-finite'):
         cal.torque_raw([float('inf')])
-    with pytest.raises(ParameterError, match='int32'):
+    with pytest.raises(DeviceParameterError, match='int32'):
         cal.position_raw([1e6])
-    with pytest.raises(ParameterError, match='JointMode'):
+    with pytest.raises(DeviceParameterError, match='JointMode'):
         cal.setpoints_raw([7], [0.0])
 
 
@@ -549,15 +549,15 @@ def test_watchdog_passes_gains_and_zeroes_impedance_torque_on_timeout() -> None:
     assert out.modes.tolist() == [T, H, T]  # IMPEDANCE joint: torque-controlled, zero torque
     assert out.setpoints.tolist() == [0, 0, 0]
     assert out.stiffness.tolist() == [0, 0, 0] and out.damping.tolist() == [0, 0, 0]
-    with pytest.raises(ParameterError, match='gains'):
+    with pytest.raises(DeviceParameterError, match='gains'):
         wd.feed([IMP, P, T], [0, 0, 0], [0, 0, 0], [0, 0, 0])
-    with pytest.raises(ParameterError, match='gains'):
+    with pytest.raises(DeviceParameterError, match='gains'):
         wd.feed([T, P, T], [0, 0, 0], [4, 0, 0], [0, 0, 0])
 
 
 def test_watchdog_timeout_is_bounded_and_never_off() -> None:
     for bad in (0.0, -0.01, 0.2001, 1.0, float('inf'), float('nan')):
-        with pytest.raises(ParameterError, match='never be switched off'):
+        with pytest.raises(DeviceParameterError, match='never be switched off'):
             DeviceWatchdog(3, bad)
     assert check_watchdog_timeout(0.2) == 0.2
     cfg = load_config()
@@ -566,8 +566,8 @@ def test_watchdog_timeout_is_bounded_and_never_off() -> None:
 
 def test_watchdog_rejects_bad_feed() -> None:
     wd = DeviceWatchdog(3, clock=FakeClock())
-    with pytest.raises(ParameterError, match='JointMode'):
+    with pytest.raises(DeviceParameterError, match='JointMode'):
         wd.feed([T, 0, P], [0, 0, 0])
-    with pytest.raises(ParameterError, match='shape'):
+    with pytest.raises(DeviceParameterError, match='shape'):
         wd.feed([T, P], [0, 0])
     assert wd.output().tripped  # a rejected feed does not disarm the watchdog

@@ -1,16 +1,16 @@
 """The paper's Fig. 7 as a sweep: many lockstep DAM grasps over ``(alpha, k_theta,
 delta_theta_p)``, each cell as a probability of lifting.
 
-The pure core of ``ros2 run dam_sim_bridge sweep`` (:mod:`dam_sim_bridge.sweep_cli`): no rclpy,
+The pure core of ``ros2 run dam_experiments sweep`` (:mod:`dam_experiments.sweep_cli`): no rclpy,
 no Dask. It defines a sweep (:class:`SweepSpec`: the three axes, the repeats, the seed, the
 perturbations and the trial options), lists its trials (:meth:`SweepSpec.trials`), draws each
 trial's perturbations from its seed (:meth:`Perturbations.draw`) and runs one trial
 (:func:`run_trial`): the stand-in world and the controller core in lockstep, exactly as
-``dam_experiment`` does (:func:`~dam_sim_bridge.experiment.run_experiment`), classified as in
+``dam_experiment`` does (:func:`~dam_experiments.experiment.run_experiment`), classified as in
 the paper's Fig. 7 (SUCCESS, LIFTED_DAM_FAILED, FAILURE: the controller's verdict from joint
 signals alone) together with the ground-truth rise of the object and what ``/check_lift``
 answers for the pair (the sufficient condition, eq. 18, and the contact stiffness model).
-:mod:`dam_sim_bridge.sweep_table` writes the table and resumes an interrupted sweep.
+:mod:`dam_experiments.sweep_table` writes the table and resumes an interrupted sweep.
 
 Determinism: a trial's row depends only on its inputs (the cell, the sweep's perturbation
 scales and trial options, the configuration) and its seed. The seed of trial ``r`` of cell
@@ -18,7 +18,7 @@ scales and trial options, the configuration) and its seed. The seed of trial ``r
 drawn from ``numpy.random.SeedSequence(seed, spawn_key=(i, j, l, r))``; each trial builds a
 fresh world, so neither the order of the trials nor the process that runs them matters.
 
-Axes on the command line (:func:`dam_sim_bridge.sweep_axes.parse_axis`) are values or ranges
+Axes on the command line (:func:`dam_experiments.sweep_axes.parse_axis`) are values or ranges
 ``start:stop:count`` (evenly spaced, both ends included) and ``start:stop:count:log`` (evenly
 spaced logarithms); angles in degrees.
 """
@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from dam_common.polygon_section import ConvexPolygon
-from dam_sim_bridge.errors import SweepError
+from dam_experiments.errors import SweepError
 
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
 MAX_FRICTION_ANGLE_DEG = 89.0
@@ -450,7 +450,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     """Run one trial: draw its world, grasp in lockstep, ask the analysis.
 
     The world is the configured one with the trial's perturbations (:meth:`Perturbations.draw`);
-    the grasp is :func:`~dam_sim_bridge.experiment.run_experiment` of the cell's pair in a
+    the grasp is :func:`~dam_experiments.experiment.run_experiment` of the cell's pair in a
     fresh world. The analysis columns are what ``/check_lift`` answers for the request the
     controller would send, i.e. the cell's pair at the cell's friction angle with the
     configured object: eq. (18) holds for every admissible contact force
@@ -473,7 +473,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
         Its row (every value formatted, so that a rerun writes the same bytes) and its cost.
     """
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415 - imports on first use
-    from dam_sim_bridge.experiment import run_experiment  # noqa: PLC0415 - imports pybullet
+    from dam_experiments.experiment import run_experiment  # noqa: PLC0415 - imports pybullet
     from dam_sim_bridge.world import HandWorld  # noqa: PLC0415
 
     analyzer = analyzer_for(config)  # once per process, not part of the trial's cost

@@ -1,16 +1,16 @@
-"""``ros2 run dam_sim_bridge sweep``: the paper's Fig. 7 as a sweep of lockstep DAM grasps.
+"""``ros2 run dam_experiments sweep``: the paper's Fig. 7 as a sweep of lockstep DAM grasps.
 
 ::
 
-    ros2 run dam_sim_bridge sweep --friction-angles 5deg 30deg --k-theta 0.05:20:24:log \\
+    ros2 run dam_experiments sweep --friction-angles 5deg 30deg --k-theta 0.05:20:24:log \\
         --delta-theta-p 5deg:60deg:12 --out DIR [--repeats N] [--workers N] [--scheduler ADDRESS]
 
-Runs every trial of :class:`~dam_sim_bridge.sweep.SweepSpec` (:func:`~dam_sim_bridge.sweep.
+Runs every trial of :class:`~dam_experiments.sweep.SweepSpec` (:func:`~dam_experiments.sweep.
 run_trial`) on all local cores (a Dask ``LocalCluster`` of one single-threaded worker process
 per core; ``--workers 1`` runs them in this process, without Dask) or on a Dask cluster
 (``--scheduler tcp://HOST:PORT``), shows progress with the time left, and writes
 ``DIR/trials.csv``, ``DIR/sweep.json`` and ``DIR/cells.csv``
-(:mod:`dam_sim_bridge.sweep_table`). Ctrl-C (SIGINT) or SIGTERM stops it with the finished
+(:mod:`dam_experiments.sweep_table`). Ctrl-C (SIGINT) or SIGTERM stops it with the finished
 trials kept; the same command again runs only the missing ones.
 
 One sweep at a time writes a directory: a second one started on it is refused with a message
@@ -35,8 +35,8 @@ from typing import Any
 
 from dam_common.command_line import CommandLineParser
 from dam_common.quantities import ANGLE, LENGTH, argument, in_degrees
-from dam_sim_bridge.errors import SweepError
-from dam_sim_bridge.sweep import (
+from dam_experiments.errors import SweepError
+from dam_experiments.sweep import (
     MAX_FRICTION_ANGLE_DEG,
     Perturbations,
     SweepSpec,
@@ -45,9 +45,9 @@ from dam_sim_bridge.sweep import (
     analyzer_for,
     run_trial,
 )
-from dam_sim_bridge.sweep_axes import parse_axis
-from dam_sim_bridge.sweep_lock import SweepLocked
-from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, TrialTable
+from dam_experiments.sweep_axes import parse_axis
+from dam_experiments.sweep_lock import SweepLocked
+from dam_experiments.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, TrialTable
 
 PROG = 'sweep'
 #: Longest wait for the first worker of a ``--scheduler`` cluster [s].

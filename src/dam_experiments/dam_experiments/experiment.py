@@ -15,7 +15,7 @@ the object and, on request, the recorded signals.
 ``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
 friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
 
-    ros2 run dam_sim_bridge dam_experiment --alpha 5deg 30deg --k-theta 0.5 2 7 15 \\
+    ros2 run dam_experiments dam_experiment --alpha 5deg 30deg --k-theta 0.5 2 7 15 \\
         --delta-theta-p 5deg 10deg 15deg 25deg 40deg --out results.csv
 """
 
@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from dam_common.command_line import CommandLineParser
+from dam_common.device_protocol import JointMode as WireMode
 from dam_common.quantities import ANGLE, argument, in_degrees
-from dam_hand_driver.protocol import JointMode as WireMode
 from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
 from dam_spcm_controller.classification import (

@@ -1,8 +1,8 @@
 """The numbers of the results document: a sweep's simulated lifts against the lift analysis.
 
-The pure core of ``ros2 run dam_sim_bridge sweep_report`` (:mod:`dam_sim_bridge.sweep_report_cli`
-writes the document, :mod:`dam_sim_bridge.sweep_report_markdown` renders it). From a sweep
-directory (:func:`~dam_sim_bridge.sweep_results.read_sweep`) and the analysis of the
+The pure core of ``ros2 run dam_experiments sweep_report`` (:mod:`dam_experiments.sweep_report_cli`
+writes the document, :mod:`dam_experiments.sweep_report_markdown` renders it). From a sweep
+directory (:func:`~dam_experiments.sweep_results.read_sweep`) and the analysis of the
 configuration, :func:`compute_report` answers, per friction angle alpha:
 
 1. false guarantees: cells the sufficient condition (eq. 18) guarantees that do not lift;
@@ -16,7 +16,7 @@ Ground truth per cell: the share of its trials whose object lifted (column ``lif
 ``p_lift``; the cell lifts when ``p_lift >= LIFT_PROBABILITY``. The analysis columns
 (``check_lift_guaranteed``, ``csm_lift`` and the margins) are the cell's ``/check_lift``
 answer, the same for every trial of a cell; the first trial's are used. The rows come from
-:mod:`dam_sim_bridge.sweep_report_rows`. No rclpy, no matplotlib: numpy and the analysis.
+:mod:`dam_experiments.sweep_report_rows`. No rclpy, no matplotlib: numpy and the analysis.
 """
 
 from __future__ import annotations
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from dam_sim_bridge.errors import SweepPlotError
-from dam_sim_bridge.sweep import config_digest
-from dam_sim_bridge.sweep_report_rows import (
+from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep import config_digest
+from dam_experiments.sweep_report_rows import (
     CHECKS_LIFTING,
     CHECKS_NOT_LIFTING,
     Limits,
@@ -43,7 +43,7 @@ from dam_sim_bridge.sweep_report_rows import (
     rise_class,
     trial_label,
 )
-from dam_sim_bridge.sweep_results import SweepData, k_axis_is_log
+from dam_experiments.sweep_results import SweepData, k_axis_is_log
 
 #: A cell lifts when at least this share of its trials lifted [-].
 LIFT_PROBABILITY = 0.5
@@ -450,7 +450,7 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
     Parameters
     ----------
     data
-        The sweep (:func:`~dam_sim_bridge.sweep_results.read_sweep`).
+        The sweep (:func:`~dam_experiments.sweep_results.read_sweep`).
     config
         ``DamConfig`` of the analysis and of the limits (the sweep's, to compare like with
         like: :attr:`SweepReport.config_matches` says whether it is).
@@ -458,7 +458,7 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
         A ``LiftAnalyzer`` of ``config`` to reuse (built when None).
     n_points
         Samples of the dense boundaries
-        (:func:`~dam_sim_bridge.sweep_plot.sweep_boundaries`), at least 2.
+        (:func:`~dam_experiments.sweep_plot.sweep_boundaries`), at least 2.
 
     Returns
     -------
@@ -471,7 +471,7 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
         (:func:`read_rows`), or ``n_points < 2``.
     """
     from dam_analysis.lift_map import compute_boundaries  # noqa: PLC0415 - slow import
-    from dam_sim_bridge.sweep_plot import boundary_grid_deg, sweep_boundaries  # noqa: PLC0415
+    from dam_experiments.sweep_plot import boundary_grid_deg, sweep_boundaries  # noqa: PLC0415
 
     if n_points < 2:
         raise SweepPlotError(f'n_points {n_points} must be at least 2')

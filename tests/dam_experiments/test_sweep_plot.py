@@ -21,9 +21,9 @@ import pytest
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.lift_map import compute_boundaries
 from dam_common.config import load_config
-from dam_sim_bridge.errors import SweepPlotError
-from dam_sim_bridge.sweep import SweepSpec, input_columns, table_columns
-from dam_sim_bridge.sweep_plot import (
+from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep import SweepSpec, input_columns, table_columns
+from dam_experiments.sweep_plot import (
     CLASS_LABELS,
     CSM_LABEL,
     DISAGREE_LABEL,
@@ -33,8 +33,8 @@ from dam_sim_bridge.sweep_plot import (
     main,
     plot_sweep,
 )
-from dam_sim_bridge.sweep_results import OUTCOMES, k_axis_is_log, read_sweep
-from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE, TrialTable
+from dam_experiments.sweep_results import OUTCOMES, k_axis_is_log, read_sweep
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE, TrialTable
 from ros_testing import installed_executable
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -330,7 +330,7 @@ def test_main_in_process(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
 
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
-    exe = installed_executable('dam_sim_bridge', 'sweep_plot')
+    exe = installed_executable('dam_experiments', 'sweep_plot')
     assert exe.is_file(), f'{exe} missing: build the workspace with scripts/setup.sh'
     return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=120)
 

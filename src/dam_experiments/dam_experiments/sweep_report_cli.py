@@ -1,13 +1,13 @@
-"""``ros2 run dam_sim_bridge sweep_report DIR -o docs/results.md``: the results document.
+"""``ros2 run dam_experiments sweep_report DIR -o docs/results.md``: the results document.
 
 ::
 
-    ros2 run dam_sim_bridge sweep_report DIR [-o FILE.md] [--config YAML]
+    ros2 run dam_experiments sweep_report DIR [-o FILE.md] [--config YAML]
 
 Reads what ``sweep`` wrote into ``DIR`` (a sweep still running or interrupted is reported as
 far as it got, and the document says how many trials are present), computes the numbers
-(:func:`dam_sim_bridge.sweep_report.compute_report`) with the analysis of the configuration,
-writes the Markdown document (:func:`dam_sim_bridge.sweep_report_markdown.render_markdown`)
+(:func:`dam_experiments.sweep_report.compute_report`) with the analysis of the configuration,
+writes the Markdown document (:func:`dam_experiments.sweep_report_markdown.render_markdown`)
 and its figures into a directory beside it named after it (``docs/results.md`` ->
 ``docs/results/fig7.png`` and ``docs/results/boundaries.png``, linked relatively), and prints a
 short summary. Default output: ``DIR/results.md``.
@@ -32,8 +32,8 @@ import numpy as np
 
 from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
-from dam_sim_bridge.errors import SweepPlotError
-from dam_sim_bridge.sweep_plot import (
+from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep_plot import (
     CSM_LABEL,
     DEFAULT_BOUNDARY_POINTS,
     SUFFICIENT_LABEL,
@@ -42,10 +42,10 @@ from dam_sim_bridge.sweep_plot import (
     k_limits,
     sweep_figure,
 )
-from dam_sim_bridge.sweep_report import SweepReport, compute_report
-from dam_sim_bridge.sweep_report_markdown import decades, render_markdown, share
-from dam_sim_bridge.sweep_results import read_sweep
-from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE
+from dam_experiments.sweep_report import SweepReport, compute_report
+from dam_experiments.sweep_report_markdown import decades, render_markdown, share
+from dam_experiments.sweep_results import read_sweep
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 PROG = 'sweep_report'
 #: Document written into DIR when ``-o`` is not given.
@@ -224,7 +224,7 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def _command(args: argparse.Namespace, output: Path) -> str:
-    parts = ['ros2 run dam_sim_bridge sweep_report', shlex.quote(str(args.directory)), '-o',
+    parts = ['ros2 run dam_experiments sweep_report', shlex.quote(str(args.directory)), '-o',
              shlex.quote(str(output))]
     if args.config is not None:
         parts += ['--config', shlex.quote(str(args.config))]

@@ -2,7 +2,7 @@
 
 An output directory holds
 
-* ``trials.csv``: one row per trial (:func:`~dam_sim_bridge.sweep.table_columns`), appended
+* ``trials.csv``: one row per trial (:func:`~dam_experiments.sweep.table_columns`), appended
   as trials finish and flushed row by row, rewritten in trial order when the sweep is
   complete, so that a rerun gives the same bytes;
 * ``sweep.json``: the sweep's parameters (:meth:`SweepSpec.to_dict`), the SHA-256 of the
@@ -27,8 +27,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
-from dam_sim_bridge.errors import SweepError
-from dam_sim_bridge.sweep import (
+from dam_experiments.errors import SweepError
+from dam_experiments.sweep import (
     SweepSpec,
     TrialSpec,
     config_digest,
@@ -36,7 +36,7 @@ from dam_sim_bridge.sweep import (
     input_columns,
     table_columns,
 )
-from dam_sim_bridge.sweep_lock import SweepLock
+from dam_experiments.sweep_lock import SweepLock
 
 #: The classes a row's ``outcome`` may hold; a row with another (an edited table) is run again.
 _OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')

@@ -18,7 +18,7 @@ import socket
 import sys
 from pathlib import Path
 
-from dam_sim_bridge.errors import SweepError
+from dam_experiments.errors import SweepError
 
 #: The lock file, inside the sweep directory.
 LOCK_FILE = '.sweep.lock'

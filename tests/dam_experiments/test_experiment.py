@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import DamConfig, load_config
-from dam_sim_bridge.experiment import (
+from dam_experiments.experiment import (
     PHASE_CODES,
     ExperimentResult,
     main,
@@ -134,7 +134,7 @@ def test_the_experiment_runs_the_impedance_where_configured(
     """Impedance on the device (default): the world's compliant joints end in IMPEDANCE (the
     world runs the law every physics step); in the controller: TORQUE. Both lift the object
     at k_theta 10 inside the sufficient region."""
-    from dam_hand_driver.protocol import JointMode as WireMode
+    from dam_common.device_protocol import JointMode as WireMode
 
     assert int(WireMode.IMPEDANCE) == 4 and int(WireMode.TORQUE) == 1
     with HandWorld(cfg) as world:

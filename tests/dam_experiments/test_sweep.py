@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from dam_common.config import DamConfig, load_config
-from dam_sim_bridge.errors import SweepError
-from dam_sim_bridge.sweep import (
+from dam_experiments.errors import SweepError
+from dam_experiments.sweep import (
     Perturbations,
     SweepSpec,
     TrialSpec,
@@ -26,8 +26,8 @@ from dam_sim_bridge.sweep import (
     table_columns,
     trial_seed,
 )
-from dam_sim_bridge.sweep_axes import parse_axis, parse_range
-from dam_sim_bridge.sweep_table import (
+from dam_experiments.sweep_axes import parse_axis, parse_range
+from dam_experiments.sweep_table import (
     CELLS_FILE,
     PARAMS_FILE,
     TABLE_FILE,

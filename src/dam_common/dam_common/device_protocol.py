@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from dam_hand_driver.errors import EncodeError, ParameterError
+from dam_common.errors import DeviceParameterError, EncodeError
 
 if TYPE_CHECKING:
     from dam_common.config import DamConfig
@@ -445,7 +445,7 @@ class FrameDecoder:
 
     def __init__(self, kind: FrameKind, n_joints: int) -> None:
         if not 1 <= int(n_joints) <= MAX_JOINTS:
-            raise ParameterError(f'n_joints {n_joints!r} is outside [1, {MAX_JOINTS}]')
+            raise DeviceParameterError(f'n_joints {n_joints!r} is outside [1, {MAX_JOINTS}]')
         self.kind = FrameKind(kind)
         self.n_joints = int(n_joints)
         self.counters = RejectCounters()
@@ -598,16 +598,16 @@ torque_offset_raw
         for name, values in arrays.items():
             arr = np.asarray(values, dtype=np.float64)
             if arr.ndim != 1 or arr.size == 0:
-                raise ParameterError(f'{name} must be a non-empty 1-D array, got {values!r}')
+                raise DeviceParameterError(f'{name} must be a non-empty 1-D array, got {values!r}')
             if n is not None and arr.size != n:
-                raise ParameterError(f'{name} has {arr.size} joints, expected {n}')
+                raise DeviceParameterError(f'{name} has {arr.size} joints, expected {n}')
             n = arr.size
             if not np.all(np.isfinite(arr)):
-                raise ParameterError(f'{name} has a non-finite value: {arr.tolist()!r}')
+                raise DeviceParameterError(f'{name} has a non-finite value: {arr.tolist()!r}')
             if name.endswith(('_per_count', '_per_raw')) and np.any(arr == 0.0):
-                raise ParameterError(f'{name} has a zero scale: {arr.tolist()!r}')
+                raise DeviceParameterError(f'{name} has a zero scale: {arr.tolist()!r}')
             if name.startswith(('stiffness', 'damping')) and np.any(arr <= 0.0):
-                raise ParameterError(f'{name} must be positive: {arr.tolist()!r}')
+                raise DeviceParameterError(f'{name} must be positive: {arr.tolist()!r}')
             checked[name] = arr
         self.position_scale = checked['position_scale_rad_per_count']
         self.position_offset = checked['position_offset_counts']
@@ -680,14 +680,15 @@ torque_offset_raw
         m = np.asarray(modes, dtype=np.int64)
         sp = np.asarray(setpoints_si, dtype=np.float64)
         if m.shape != (self.n_joints,) or sp.shape != (self.n_joints,):
-            raise ParameterError(f'modes {m.shape} and setpoints {sp.shape} must both have '
-                                 f'shape ({self.n_joints},)')
+            raise DeviceParameterError(f'modes {m.shape} and setpoints {sp.shape} must both have '
+                                       f'shape ({self.n_joints},)')
         out = np.zeros(self.n_joints, dtype=np.int64)
         torque = m == JointMode.TORQUE
         position = (m == JointMode.POSITION) | (m == JointMode.IMPEDANCE)
         bad = ~(torque | position | (m == JointMode.HOLD))
         if np.any(bad):
-            raise ParameterError(f'modes {m.tolist()!r} contain a value that is not a JointMode')
+            raise DeviceParameterError(f'modes {m.tolist()!r} contain a value that is not a '
+                                       'JointMode')
         if np.any(torque):
             out[torque] = self.torque_raw(np.where(torque, sp, 0.0))[torque]
         if np.any(position):
@@ -721,7 +722,7 @@ torque_offset_raw
 
         Raises
         ------
-        ParameterError
+        DeviceParameterError
             Wrong shape, or an IMPEDANCE joint whose stiffness is not finite or rounds to
             less than one raw unit, whose damping is negative or not finite, or whose gain
             does not fit the int32 field.
@@ -730,26 +731,27 @@ torque_offset_raw
         k = np.asarray(stiffness_nm_per_rad, dtype=np.float64)
         d = np.asarray(damping_nms_per_rad, dtype=np.float64)
         if m.shape != (self.n_joints,) or k.shape != m.shape or d.shape != m.shape:
-            raise ParameterError(f'modes {m.shape}, stiffness {k.shape} and damping {d.shape} '
-                                 f'must all have shape ({self.n_joints},)')
+            raise DeviceParameterError(f'modes {m.shape}, stiffness {k.shape} and damping '
+                                       f'{d.shape} must all have shape ({self.n_joints},)')
         imp = m == JointMode.IMPEDANCE
         k_raw = np.zeros(self.n_joints, dtype=np.int64)
         d_raw = np.zeros(self.n_joints, dtype=np.int64)
         if not np.any(imp):
             return k_raw, d_raw
         if not (np.all(np.isfinite(k[imp])) and np.all(np.isfinite(d[imp]))):
-            raise ParameterError(f'impedance gains must be finite: stiffness {k.tolist()!r}, '
-                                 f'damping {d.tolist()!r}')
+            raise DeviceParameterError(f'impedance gains must be finite: stiffness {k.tolist()!r}, '
+                                       f'damping {d.tolist()!r}')
         kr = np.rint(np.where(imp, k, 0.0) / self.stiffness_scale)
         dr = np.rint(np.where(imp, d, 0.0) / self.damping_scale)
         if np.any(kr[imp] < 1):
-            raise ParameterError(f'stiffness {k.tolist()!r} N*m/rad: an IMPEDANCE joint needs '
-                                 f'at least one raw unit ({self.stiffness_scale.tolist()!r})')
+            raise DeviceParameterError(f'stiffness {k.tolist()!r} N*m/rad: an IMPEDANCE joint '
+                                       'needs at least one raw unit '
+                                       f'({self.stiffness_scale.tolist()!r})')
         if np.any(dr[imp] < 0):
-            raise ParameterError(f'damping {d.tolist()!r} N*m*s/rad must be >= 0')
+            raise DeviceParameterError(f'damping {d.tolist()!r} N*m*s/rad must be >= 0')
         if np.any(kr > _INT32_MAX) or np.any(dr > _INT32_MAX):
-            raise ParameterError(f'stiffness {k.tolist()!r} or damping {d.tolist()!r} does '
-                                 f'not fit the int32 raw field')
+            raise DeviceParameterError(f'stiffness {k.tolist()!r} or damping {d.tolist()!r} does '
+                                       f'not fit the int32 raw field')
         k_raw[imp] = kr[imp].astype(np.int64)
         d_raw[imp] = dr[imp].astype(np.int64)
         return k_raw, d_raw
@@ -764,12 +766,13 @@ torque_offset_raw
                 offset: np.ndarray | float) -> np.ndarray:
         arr = np.asarray(si, dtype=np.float64)
         if arr.shape != (self.n_joints,):
-            raise ParameterError(f'{what}: expected shape ({self.n_joints},), got {arr.shape}')
+            raise DeviceParameterError(f'{what}: expected shape ({self.n_joints},), got '
+                                       f'{arr.shape}')
         if not np.all(np.isfinite(arr)):
-            raise ParameterError(f'{what}: non-finite value in {arr.tolist()!r}')
+            raise DeviceParameterError(f'{what}: non-finite value in {arr.tolist()!r}')
         raw = np.rint(arr / scale + offset)
         if np.any(raw < _INT32_MIN) or np.any(raw > _INT32_MAX):
-            raise ParameterError(f'{what}: {arr.tolist()!r} does not fit the int32 raw field')
+            raise DeviceParameterError(f'{what}: {arr.tolist()!r} does not fit the int32 raw field')
         return raw.astype(np.int64)
 
 
@@ -782,13 +785,13 @@ def check_watchdog_timeout(timeout_s: float) -> float:
 
     Raises
     ------
-    ParameterError
+    DeviceParameterError
         Zero, negative, infinite or NaN (the watchdog can never be off) or above 0.2 s.
     """
     t = float(timeout_s)
     if not math.isfinite(t) or t <= 0.0 or t > WATCHDOG_MAX_S:
-        raise ParameterError(f'watchdog timeout {timeout_s!r} s is outside (0, '
-                             f'{WATCHDOG_MAX_S}] s (it can never be switched off)')
+        raise DeviceParameterError(f'watchdog timeout {timeout_s!r} s is outside (0, '
+                                   f'{WATCHDOG_MAX_S}] s (it can never be switched off)')
     return t
 
 
@@ -824,7 +827,7 @@ class DeviceWatchdog:
     def __init__(self, n_joints: int, timeout_s: float = WATCHDOG_DEFAULT_S,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not 1 <= int(n_joints) <= MAX_JOINTS:
-            raise ParameterError(f'n_joints {n_joints!r} is outside [1, {MAX_JOINTS}]')
+            raise DeviceParameterError(f'n_joints {n_joints!r} is outside [1, {MAX_JOINTS}]')
         self.n_joints = int(n_joints)
         self.timeout_s = check_watchdog_timeout(timeout_s)
         self._clock = clock
@@ -852,7 +855,7 @@ class DeviceWatchdog:
 
         Raises
         ------
-        ParameterError
+        DeviceParameterError
             Wrong array length, a mode that is not a :class:`JointMode`, or gains against
             the rule above.
         """
@@ -864,15 +867,17 @@ class DeviceWatchdog:
         d = np.zeros(n, dtype=np.int64) if damping is None else np.asarray(damping,
                                                                            dtype=np.int64)
         if any(a.shape != (n,) for a in (m, s, k, d)):
-            raise ParameterError(f'modes {m.shape}, setpoints {s.shape}, stiffness {k.shape} '
-                                 f'and damping {d.shape} must all have shape ({n},)')
+            raise DeviceParameterError(f'modes {m.shape}, setpoints {s.shape}, stiffness {k.shape} '
+                                       f'and damping {d.shape} must all have shape ({n},)')
         if not all(int(v) in _VALID_MODES for v in m):
-            raise ParameterError(f'modes {m.tolist()!r} contain a value that is not a JointMode')
+            raise DeviceParameterError(f'modes {m.tolist()!r} contain a value that is not a '
+                                       'JointMode')
         imp = m == int(JointMode.IMPEDANCE)
         if np.any(np.where(imp, (k <= 0) | (d < 0), (k != 0) | (d != 0))):
-            raise ParameterError(f'impedance gains against the rules (IMPEDANCE: stiffness > 0, '
-                                 f'damping >= 0; others 0): modes {m.tolist()!r}, stiffness '
-                                 f'{k.tolist()!r}, damping {d.tolist()!r}')
+            raise DeviceParameterError(f'impedance gains against the rules (IMPEDANCE: '
+                                       f'stiffness > 0, damping >= 0; others 0): modes '
+                                       f'{m.tolist()!r}, stiffness '
+                                       f'{k.tolist()!r}, damping {d.tolist()!r}')
         self._modes = m.copy()
         self._setpoints = s.copy()
         self._stiffness = k.copy()

@@ -1,4 +1,4 @@
-"""The results document as Markdown: :class:`~dam_sim_bridge.sweep_report.SweepReport` in words.
+"""The results document as Markdown: :class:`~dam_experiments.sweep_report.SweepReport` in words.
 
 :func:`render_markdown` writes the document ``sweep_report`` saves: a header with the sweep's
 parameters and the command that generated it, the definitions of every number, a summary table
@@ -13,8 +13,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from dam_sim_bridge.sweep_report import LIFT_PROBABILITY, Category, SweepReport
-from dam_sim_bridge.sweep_report_rows import (
+from dam_experiments.sweep_report import LIFT_PROBABILITY, Category, SweepReport
+from dam_experiments.sweep_report_rows import (
     CHECKS_LIFTING,
     CHECKS_NOT_LIFTING,
     LIMIT_FRACTION,
@@ -73,7 +73,7 @@ def sweep_command(report: SweepReport) -> str:
     spec = report.data.spec
     given = report.data.parameters.get('axes_as_given')
     given = given if isinstance(given, Mapping) else {}
-    parts = ['ros2 run dam_sim_bridge sweep']
+    parts = ['ros2 run dam_experiments sweep']
     for option, key, values in (('--friction-angles', 'friction_angles',
                                  spec.friction_angles_deg),
                                 ('--k-theta', 'k_theta', spec.k_theta),
@@ -409,7 +409,7 @@ def render_markdown(report: SweepReport, command: str,
     Parameters
     ----------
     report
-        :func:`~dam_sim_bridge.sweep_report.compute_report` of the sweep.
+        :func:`~dam_experiments.sweep_report.compute_report` of the sweep.
     command
         The command that generated it (shown in the header).
     figures

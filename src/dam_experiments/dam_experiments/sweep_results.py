@@ -1,7 +1,7 @@
 """A sweep directory read back: the trials of ``trials.csv`` with the sweep of ``sweep.json``.
 
-What :mod:`dam_sim_bridge.sweep_plot` draws: :func:`read_sweep` checks the files ``sweep``
-(:mod:`dam_sim_bridge.sweep_table`) writes and returns the trials as :class:`Trial` (the cell,
+What :mod:`dam_experiments.sweep_plot` draws: :func:`read_sweep` checks the files ``sweep``
+(:mod:`dam_experiments.sweep_table`) writes and returns the trials as :class:`Trial` (the cell,
 the controller's classification ``outcome`` and the ground truth ``lifted``), grouped per
 friction angle and per cell on demand (:class:`SweepData`); :func:`k_axis_is_log` tells whether
 the sweep's ``k_theta`` axis was a log range. A sweep still running or interrupted is read as
@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from dam_sim_bridge.errors import SweepError, SweepPlotError
-from dam_sim_bridge.sweep import SweepSpec
-from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE
+from dam_experiments.errors import SweepError, SweepPlotError
+from dam_experiments.sweep import SweepSpec
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 #: The paper's three classes (column ``outcome``), in legend order: x, triangle, o.
 OUTCOMES = ('FAILURE', 'LIFTED_DAM_FAILED', 'SUCCESS')

@@ -23,8 +23,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from dam_sim_bridge.sweep_cli import main
-from dam_sim_bridge.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, read_table
+from dam_experiments.sweep_cli import main
+from dam_experiments.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, read_table
 from ros_testing import installed_executable
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -44,7 +44,7 @@ def _env() -> dict[str, str]:
 
 
 def _sweep_command(out: Path, *extra: str) -> list[str]:
-    return [sys.executable, '-m', 'dam_sim_bridge.sweep_cli', *SWEEP, '--out', str(out), *extra]
+    return [sys.executable, '-m', 'dam_experiments.sweep_cli', *SWEEP, '--out', str(out), *extra]
 
 
 @pytest.fixture(scope='module')
@@ -219,7 +219,7 @@ def test_loopback_dask_cluster_gives_the_same_table(reference: str, loopback_clu
     assert f'on the Dask cluster at {loopback_cluster}' in capsys.readouterr().out
     assert (tmp_path / TABLE_FILE).read_text(encoding='utf-8') == reference
     with Client(loopback_cluster, timeout='30s') as client:  # both workers took trials
-        ran = client.run(lambda: len(__import__('dam_sim_bridge.sweep').sweep._ANALYZERS))
+        ran = client.run(lambda: len(__import__('dam_experiments.sweep').sweep._ANALYZERS))
     assert sorted(ran.values()) == [1, 1]
 
 
@@ -317,7 +317,7 @@ def test_an_unreachable_scheduler_fails_at_once_and_writes_nothing(
         capsys: pytest.CaptureFixture[str]) -> None:
     import socket
 
-    from dam_sim_bridge import sweep_cli
+    from dam_experiments import sweep_cli
 
     with socket.socket() as sock:  # a port nobody listens on
         sock.bind(('127.0.0.1', 0))
@@ -342,7 +342,7 @@ def test_a_server_that_never_answers_or_is_a_worker_is_refused_in_time(
 
     from distributed import Client
 
-    from dam_sim_bridge import sweep_cli
+    from dam_experiments import sweep_cli
 
     monkeypatch.setattr(sweep_cli, 'CONNECT_TIMEOUT_S', 2.0)
     with socket.socket() as silent:
@@ -386,14 +386,14 @@ def test_a_bare_perturbation_is_in_si_units_and_an_implausible_one_is_refused(
 
 
 def test_installed_command() -> None:
-    """``ros2 run dam_sim_bridge sweep`` finds it; the core imports no rclpy."""
-    exe = installed_executable('dam_sim_bridge', 'sweep')
+    """``ros2 run dam_experiments sweep`` finds it; the core imports no rclpy."""
+    exe = installed_executable('dam_experiments', 'sweep')
     proc = subprocess.run([str(exe), '--help'], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     for option in ('--friction-angles', '--k-theta', '--delta-theta-p', '--repeats',
                    '--workers', '--scheduler', 'start:stop:count:log'):
         assert option in proc.stdout
-    code = ('import sys, dam_sim_bridge.sweep_cli, dam_sim_bridge.sweep_table; '
+    code = ('import sys, dam_experiments.sweep_cli, dam_experiments.sweep_table; '
             'assert "rclpy" not in sys.modules, "the sweep imports rclpy"')
     subprocess.run([sys.executable, '-c', code], check=True, timeout=60, env=_env())
 
@@ -427,11 +427,11 @@ def test_a_second_sweep_on_a_busy_directory_is_refused_naming_the_first(
 
 
 def test_a_killed_sweep_leaves_no_stale_lock(tmp_path: Path) -> None:
-    from dam_sim_bridge.sweep_lock import SweepLock, SweepLocked
+    from dam_experiments.sweep_lock import SweepLock, SweepLocked
 
     holder = subprocess.Popen(
         [sys.executable, '-c', 'import sys, time\n'
-         'from dam_sim_bridge.sweep_lock import SweepLock\n'
+         'from dam_experiments.sweep_lock import SweepLock\n'
          f'SweepLock({str(tmp_path)!r}).acquire(); print("locked", flush=True)\n'
          'time.sleep(60)'], env=_env(), stdout=subprocess.PIPE, text=True)
     try:

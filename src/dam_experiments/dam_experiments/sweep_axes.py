@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from dam_common.quantities import Quantity, has_unit, parse_quantity
-from dam_sim_bridge.errors import SweepError
+from dam_experiments.errors import SweepError
 
 #: Significant digits kept of a value computed from a range (``0.05:20:24:log``).
 _RANGE_DIGITS = 12

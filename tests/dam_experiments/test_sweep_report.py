@@ -27,13 +27,13 @@ import pytest
 from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.lift_map import compute_boundaries
 from dam_common.config import load_config
-from dam_sim_bridge.sweep import SweepSpec, input_columns, table_columns
-from dam_sim_bridge.sweep_cli import main as sweep_main
-from dam_sim_bridge.sweep_report import SweepReport, compute_report
-from dam_sim_bridge.sweep_report_cli import main
-from dam_sim_bridge.sweep_report_markdown import render_markdown
-from dam_sim_bridge.sweep_results import read_sweep
-from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE, TrialTable
+from dam_experiments.sweep import SweepSpec, input_columns, table_columns
+from dam_experiments.sweep_cli import main as sweep_main
+from dam_experiments.sweep_report import SweepReport, compute_report
+from dam_experiments.sweep_report_cli import main
+from dam_experiments.sweep_report_markdown import render_markdown
+from dam_experiments.sweep_results import read_sweep
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE, TrialTable
 from ros_testing import installed_executable
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -224,9 +224,9 @@ def _category_counts(text: str) -> dict[str, list[int]]:
 
 
 def test_the_synthetic_document_states_them(synthetic_report: SweepReport) -> None:
-    text = render_markdown(synthetic_report, 'ros2 run dam_sim_bridge sweep_report X',
+    text = render_markdown(synthetic_report, 'ros2 run dam_experiments sweep_report X',
                            {'fig7': 'results/fig7.png', 'boundaries': 'results/boundaries.png'})
-    assert text == render_markdown(synthetic_report, 'ros2 run dam_sim_bridge sweep_report X',
+    assert text == render_markdown(synthetic_report, 'ros2 run dam_experiments sweep_report X',
                                    {'fig7': 'results/fig7.png',
                                     'boundaries': 'results/boundaries.png'})
     assert 'Incomplete' not in text and '## Definitions' in text
@@ -504,7 +504,7 @@ def test_bad_outputs_and_arguments(synthetic: Path, tmp_path: Path,
 
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
-    exe = installed_executable('dam_sim_bridge', 'sweep_report')
+    exe = installed_executable('dam_experiments', 'sweep_report')
     assert exe.is_file(), f'{exe} missing: build the workspace with scripts/setup.sh'
     return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=180)
 

@@ -1,11 +1,11 @@
-"""``ros2 run dam_sim_bridge sweep_plot DIR -o fig7.png``: a sweep drawn as the paper's Fig. 7.
+"""``ros2 run dam_experiments sweep_plot DIR -o fig7.png``: a sweep drawn as the paper's Fig. 7.
 
 ::
 
-    ros2 run dam_sim_bridge sweep_plot DIR [-o fig7.png] [--config YAML]
+    ros2 run dam_experiments sweep_plot DIR [-o fig7.png] [--config YAML]
 
-Reads what ``sweep`` (:mod:`dam_sim_bridge.sweep_cli`) wrote into ``DIR`` (``trials.csv`` and
-``sweep.json``, :func:`dam_sim_bridge.sweep_results.read_sweep`; a sweep still running or
+Reads what ``sweep`` (:mod:`dam_experiments.sweep_cli`) wrote into ``DIR`` (``trials.csv`` and
+``sweep.json``, :func:`dam_experiments.sweep_results.read_sweep`; a sweep still running or
 interrupted is drawn as far as it got) and draws one panel per friction angle of the table: x
 the position-joint displacement ``delta_theta_p`` [deg], y the finger-1 compliant stiffness
 ``k_theta`` [N*m/rad] (a log axis when the sweep's ``k_theta`` axis was given as a log range).
@@ -44,10 +44,10 @@ import numpy as np
 
 from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
-from dam_sim_bridge.errors import SweepPlotError
-from dam_sim_bridge.sweep import config_digest
-from dam_sim_bridge.sweep_results import OUTCOMES, SweepData, k_axis_is_log, read_sweep
-from dam_sim_bridge.sweep_table import PARAMS_FILE, TABLE_FILE
+from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep import config_digest
+from dam_experiments.sweep_results import OUTCOMES, SweepData, k_axis_is_log, read_sweep
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 PROG = 'sweep_plot'
 #: Picture written into DIR when ``-o`` is not given.

@@ -10,7 +10,7 @@ import pytest
 
 from dam_analysis.model import finger_geometries, joint_positions
 from dam_common.config import load_config
-from dam_hand_driver.urdf import BASE_LINK, hand_urdf
+from dam_common.hand_urdf import BASE_LINK, hand_urdf
 from ros_testing import installed_executable
 
 

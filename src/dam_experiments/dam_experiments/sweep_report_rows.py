@@ -1,7 +1,7 @@
 """A sweep's trials with every column the results document reads, and what each one did.
 
-:func:`read_rows` reads, for the trials :func:`~dam_sim_bridge.sweep_results.read_sweep` kept,
-the columns of ``trials.csv`` the report (:mod:`dam_sim_bridge.sweep_report`) needs besides
+:func:`read_rows` reads, for the trials :func:`~dam_experiments.sweep_results.read_sweep` kept,
+the columns of ``trials.csv`` the report (:mod:`dam_experiments.sweep_report`) needs besides
 those of the picture: the phase and reason, the rises, the simulated mass, the peak torques and
 the analysis columns, checked (naming the file, the line, the trial and the value).
 :func:`rise_class`, :func:`ending` and :func:`trial_label` say in words what a trial did, from
@@ -18,13 +18,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from dam_sim_bridge.errors import SweepPlotError
-from dam_sim_bridge.sweep_results import SweepData
-from dam_sim_bridge.sweep_table import TABLE_FILE
+from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep_results import SweepData
+from dam_experiments.sweep_table import TABLE_FILE
 
 #: A trial "never rose" when its largest rise stayed below this share of the lift height [-].
 NEVER_ROSE_FRACTION = 0.1
-#: Columns the report needs besides those of :data:`~dam_sim_bridge.sweep_results.
+#: Columns the report needs besides those of :data:`~dam_experiments.sweep_results.
 #: REQUIRED_COLUMNS` (and at least one ``peak_tau_*_compliant_nm`` and ``*_position_nm``).
 REPORT_COLUMNS = ('phase', 'reason', 'rise_final_mm', 'rise_max_mm', 'rise_rolling_end_mm',
                   'object_mass_kg', 'check_lift_guaranteed', 'worst_case_margin_n',
@@ -90,7 +90,7 @@ class TrialRow:
 
 def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
     """Header and complete rows (with their line numbers) of ``trials.csv``, a row being
-    written left out as :func:`~dam_sim_bridge.sweep_results.read_sweep` does."""
+    written left out as :func:`~dam_experiments.sweep_results.read_sweep` does."""
     try:
         text = table.read_text(encoding='utf-8')
         if text and not text.endswith('\n') and '\n' in text:
