@@ -122,10 +122,38 @@ def test_command_line_writes_csv(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert main(['--k-theta', '0.5', '--delta-theta-p', '10deg', '--max-time', '3',
                  '--out', str(out)]) == 0
     text = out.read_text(encoding='utf-8').splitlines()
-    assert text[0].startswith('alpha_deg,k_theta_nm_per_rad,delta_theta_p_deg,phase')
-    assert len(text) == 2
+    assert text[0].startswith('object,alpha_deg,k_theta_nm_per_rad,delta_theta_p_deg,phase')
+    assert len(text) == 2 and text[1].startswith('cylinder,')  # the configured object
     assert 'no' in text[1]  # k 0.5 is outside both analysis regions
     assert 'k_theta' in capsys.readouterr().out
+
+
+def test_command_line_grasps_each_object_named(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """--object takes names of the library: a row per object, each grasping its own (the
+    analysis columns of that object, asked afresh here); an unknown name exits 2 naming the
+    known ones."""
+    import csv
+
+    from dam_analysis.analysis import LiftAnalyzer
+    from dam_common.config import load_config
+
+    out = tmp_path / 'grid.csv'
+    assert main(['--object', 'cylinder', 'hex_bar', '--k-theta', '3', '--delta-theta-p',
+                 '20deg', '--alpha', '5deg', '--max-time', '1', '--out', str(out)]) == 0
+    with out.open(encoding='utf-8', newline='') as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r['object'] for r in rows] == ['cylinder', 'hex_bar']
+    config = load_config()
+    for row in rows:
+        answer = LiftAnalyzer(config.with_object(row['object'])).check_lift(
+            [3.0], [math.radians(20.0)], friction_angle=math.radians(5.0))
+        assert row['csm_region'] == ('yes' if answer.csm_lift else 'no')
+        assert row['sufficient_region'] == ('yes' if answer.lift_guaranteed else 'no')
+    printed = capsys.readouterr().out
+    assert 'hex_bar' in printed and 'cylinder' in printed
+    assert main(['--object', 'pencil', '--k-theta', '3', '--delta-theta-p', '20deg']) == 2
+    assert "'pencil' is not in the object library" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('on_device, envelope_mode', [(True, 4), (False, 1)])

@@ -58,8 +58,9 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> str:
 def test_the_table_holds_every_trial(reference: str, tmp_path: Path) -> None:
     rows = [line.split(',') for line in reference.splitlines()]
     header = rows[0]
-    assert header[:6] == ['trial', 'friction_angle_deg', 'k_theta_nm_per_rad',
+    assert header[:7] == ['trial', 'object', 'friction_angle_deg', 'k_theta_nm_per_rad',
                           'delta_theta_p_deg', 'repeat', 'seed']
+    assert {r[1] for r in rows[1:]} == {'cylinder'}  # the configured object, named
     for name in ('outcome', 'lifted', 'rise_final_mm', 'peak_tau_finger1_compliant_nm',
                  'check_lift_guaranteed', 'worst_case_margin_n', 'csm_margin_n'):
         assert name in header
@@ -299,6 +300,9 @@ def test_sigint_stops_a_background_sweep_on_local_workers(tmp_path: Path) -> Non
     (['--k-theta', '1', '--mass-rel', '1.5'], ['--mass-rel (mass_rel): 1.5']),
     (['--repeats', '0'], ['--repeats (repeats): 0']),
     (['--workers', '0'], ['--workers: 0']),
+    (['--objects', 'cylinder', 'pencil'], ["--objects: 'pencil' is not in the object library",
+                                           'hex_bar']),
+    (['--objects', 'hex_bar', 'hex_bar'], ['--objects (objects)', 'distinct']),
 ])
 def test_bad_arguments_are_refused(args: list[str], words: list[str], tmp_path: Path,
                                    capsys: pytest.CaptureFixture[str]) -> None:
@@ -465,3 +469,42 @@ def test_an_object_the_analysis_cannot_answer_for_is_refused_before_any_trial(
     assert "object 'rod_1mm' cannot be analysed with this hand" in err, err
     assert 'does not reach the object' in err, err
     assert not (out / TABLE_FILE).exists()
+
+
+def test_objects_are_an_axis_each_trial_grasping_its_own(tmp_path: Path) -> None:
+    """Two objects of the library: each cell once per object, the object named in the table
+    and in cells.csv, the world's mass and the analysis columns the object's own (the
+    analysis asked afresh here for the object as configured), and the first object's trials
+    drawn as in a sweep of it alone."""
+    import math
+
+    import numpy as np
+
+    from dam_analysis.analysis import LiftAnalyzer
+    from dam_common.config import load_config
+
+    grid = ['--friction-angles', '5deg', '--k-theta', '10', '--delta-theta-p', '10deg',
+            '--mass-rel', '0.2', '--max-time', '0.6', '--config', str(CONFIG), '--quiet',
+            '--workers', '1']
+    assert main([*grid, '--objects', 'cylinder', 'hex_bar', '--out', str(tmp_path / 'two')]) == 0
+    assert main([*grid, '--out', str(tmp_path / 'one')]) == 0
+    rows = read_table(tmp_path / 'two' / TABLE_FILE)
+    assert [r['object'] for r in rows] == ['cylinder', 'hex_bar']
+    alone = read_table(tmp_path / 'one' / TABLE_FILE)
+    assert alone[0]['seed'] == rows[0]['seed'] and alone[0]['object'] == 'cylinder'
+    assert rows[1]['seed'] != rows[0]['seed']
+    config = load_config(CONFIG)
+    for row in rows:
+        obj = config.objects[row['object']]
+        u = (float(row['object_mass_kg']) / obj.mass_kg - 1.0) / 0.2  # the drawn U(-1, 1)
+        assert -1.0 <= u <= 1.0
+        answer = LiftAnalyzer(config.with_object(row['object'])).check_lift(
+            [10.0], [math.radians(10.0)], friction_angle=math.radians(5.0))
+        assert int(row['check_lift_guaranteed']) == int(answer.lift_guaranteed)
+        assert float(row['csm_margin_n']) == pytest.approx(float(answer.csm_margin), rel=1e-5)
+    margins = [float(r['csm_margin_n']) for r in rows]
+    assert not np.isclose(margins[0], margins[1])  # two objects, two analyses
+    cells = read_table(tmp_path / 'two' / CELLS_FILE)
+    assert [c['object'] for c in cells] == ['cylinder', 'hex_bar']
+    params = json.loads((tmp_path / 'two' / PARAMS_FILE).read_text(encoding='utf-8'))
+    assert params['sweep']['objects'] == ['cylinder', 'hex_bar']

@@ -530,3 +530,49 @@ def test_installed_executable(synthetic: Path, tmp_path: Path) -> None:
     proc = _run(str(tmp_path / 'nowhere'))
     assert proc.returncode == 2 and proc.stderr.splitlines() == [
         f'sweep_report: {tmp_path / "nowhere"}: no such directory']
+
+
+def test_a_sweep_of_two_objects_is_drawn_and_reported_one_object_at_a_time(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """sweep --objects cylinder hex_bar: the picture and the report refuse to mix them (exit 2,
+    naming both and --object); with --object each shows its own object, its trials only, and
+    boundaries of the analysis of that object (not of the configured default)."""
+    from dam_experiments.sweep_plot import main as plot_main
+    from dam_experiments.sweep_plot import plot_sweep
+
+    cfg_path = Path(__file__).resolve().parents[2] / 'config' / 'dam.yaml'
+    out = tmp_path / 'sweep'
+    assert sweep_main(['--objects', 'cylinder', 'hex_bar', '--friction-angles', '5deg',
+                       '--k-theta', '2', '10', '--delta-theta-p', '10deg', '--max-time', '0.6',
+                       '--config', str(cfg_path), '--quiet', '--workers', '1',
+                       '--out', str(out)]) == 0
+    capsys.readouterr()
+    assert plot_main([str(out), '-o', str(tmp_path / 'mixed.png'), '--config',
+                      str(cfg_path)]) == 2
+    err = capsys.readouterr().err
+    assert 'a sweep of 2 objects (cylinder, hex_bar)' in err and '--object NAME' in err, err
+    assert main([str(out), '-o', str(tmp_path / 'mixed.md'), '--config', str(cfg_path)]) == 2
+    assert 'choose one with --object' in capsys.readouterr().err
+    assert plot_main([str(out), '--object', 'pencil', '-o', str(tmp_path / 'p.png')]) == 2
+    assert "no trial of object 'pencil'" in capsys.readouterr().err
+
+    config = load_config(cfg_path)
+    data = read_sweep(out).of_object('hex_bar')
+    assert [t.object_name for t in data.trials] == ['hex_bar', 'hex_bar']
+    result = plot_sweep(data, tmp_path / 'hex.png', config=config, n_points=5)
+    assert 'hex_bar' in result.figure._suptitle.get_text()
+    assert result.config_matches  # the sweep's configuration, its object switched
+    grid = np.asarray(result.boundaries[0].delta_theta_p, dtype=float)  # [rad]
+    expected = compute_boundaries(LiftAnalyzer(config.with_object('hex_bar')), [5.0], grid,
+                                  progress=False)[0]
+    np.testing.assert_allclose(result.boundaries[0].csm, expected.csm, rtol=1e-9)
+    default = compute_boundaries(LiftAnalyzer(config), [5.0], grid, progress=False)[0]
+    assert not np.allclose(np.nan_to_num(default.csm), np.nan_to_num(expected.csm))
+
+    document = tmp_path / 'hex.md'
+    assert main([str(out), '--object', 'hex_bar', '-o', str(document), '--config',
+                 str(cfg_path), '--n-delta-theta-p', '5']) == 0
+    text = document.read_text(encoding='utf-8')
+    assert '| object | hex_bar |' in text
+    assert '--object hex_bar' in text  # the command that writes it again
+    assert 'trials present | 2 of 2' in text

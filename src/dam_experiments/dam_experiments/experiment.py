@@ -315,6 +315,10 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
                     'grid; prints outcome and ground-truth lift, optionally writes a CSV.')
+    p.add_argument('--object', '--objects', dest='objects', nargs='+', default=None,
+                   metavar='NAME',
+                   help='objects of the configuration\'s object library (default: the '
+                        'configured one)')
     p.add_argument('--alpha', type=in_degrees(argument(ANGLE)), nargs='+', default=None,
                    metavar='ANGLE',
                    help='friction angles (5deg, 0.09rad; bare: rad; default: the configured '
@@ -351,6 +355,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parse(sys.argv[1:] if argv is None else argv)
     try:
         config = load_config(args.config)
+        configs = [config.with_object(name) for name in (args.objects or [''])]
     except (DamAnalysisError, DamCommonError) as exc:
         sys.stderr.write(f'dam_experiment: {exc}\n')
         return 2
@@ -369,21 +374,38 @@ def main(argv: Sequence[str] | None = None) -> int:
               else [float(config.contact.friction_angle_rad)])
     if args.fixtures is not None:
         args.fixtures.mkdir(parents=True, exist_ok=True)
-    rows = []
-    header = (f'{"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} {"outcome":>17} '
-              f'{"lift":>7} {"max":>7} {"suff":>5} {"csm":>5}  reason')
+    rows: list[dict[str, object]] = []
+    width = max(6, *(len(c.object.name) for c in configs))
+    header = (f'{"object":>{width}} {"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} '
+              f'{"outcome":>17} {"lift":>7} {"max":>7} {"suff":>5} {"csm":>5}  reason')
     print(header)
+    overrides: dict[str, bool] = {
+        'envelope_constant_torque': args.envelope == 'constant-torque'}
+    if args.impedance is not None:
+        overrides['impedance_on_device'] = args.impedance == 'device'
+    for config in configs:
+        _run_object(config, args, alphas, overrides, width, rows)
+    if args.out is not None:
+        with args.out.open('w', newline='', encoding='utf-8') as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+        print(f'wrote {len(rows)} rows to {args.out}')
+    return 0
+
+
+def _run_object(config, args: argparse.Namespace, alphas: Sequence[float],
+                overrides: dict[str, bool], width: int, rows: list[dict[str, object]]) -> None:
+    """The grid of one object: its rows appended to ``rows`` and printed."""
     try:
         from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
 
         analyzer = LiftAnalyzer(config)
     except Exception as exc:  # noqa: BLE001 - the experiment runs without the analysis
-        sys.stderr.write(f'dam_experiment: analysis unavailable ({exc}); columns show -\n')
+        sys.stderr.write(f'dam_experiment: analysis of {config.object.name} unavailable '
+                         f'({exc}); columns show -\n')
         analyzer = None
-    overrides: dict[str, bool] = {
-        'envelope_constant_torque': args.envelope == 'constant-torque'}
-    if args.impedance is not None:
-        overrides['impedance_on_device'] = args.impedance == 'device'
+    name = config.object.name
     world = HandWorld(config)
     try:
         for alpha in alphas:
@@ -395,26 +417,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                                        record=args.fixtures is not None, **overrides)
                     suff, csm = (('-', '-') if analyzer is None else
                                  _analysis_region(analyzer, k, math.radians(dp), alpha))
-                    row = r.row()
+                    row = {'object': name, **r.row()}
                     row['sufficient_region'] = suff
                     row['csm_region'] = csm
                     rows.append(row)
-                    print(f'{math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} {r.phase.name:>8} '
+                    print(f'{name:>{width}} {math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} '
+                          f'{r.phase.name:>8} '
                           f'{r.outcome.name:>17} {r.lift_final * 1e3:6.1f}mm '
                           f'{r.lift_max * 1e3:5.1f}mm {suff:>5} {csm:>5}  '
                           f'{(r.failure_reason or r.joint_reason)[:70]}', flush=True)
                     if args.fixtures is not None:
-                        name = f'dam_a{math.degrees(alpha):g}_k{k:g}_dp{dp:g}.npz'
-                        save_signals(r, args.fixtures / name)
+                        stem = f'dam_{name}_a{math.degrees(alpha):g}_k{k:g}_dp{dp:g}.npz'
+                        save_signals(r, args.fixtures / stem)
     finally:
         world.close()
-    if args.out is not None:
-        with args.out.open('w', newline='', encoding='utf-8') as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
-        print(f'wrote {len(rows)} rows to {args.out}')
-    return 0
 
 
 if __name__ == '__main__':

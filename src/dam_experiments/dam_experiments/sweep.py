@@ -1,9 +1,10 @@
-"""The paper's Fig. 7 as a sweep: many lockstep DAM grasps over ``(alpha, k_theta,
+"""The paper's Fig. 7 as a sweep: many lockstep DAM grasps over ``(object, alpha, k_theta,
 delta_theta_p)``, each cell as a probability of lifting.
 
 The pure core of ``ros2 run dam_experiments sweep`` (:mod:`dam_experiments.sweep_cli`): no rclpy,
 no Dask. It defines a sweep (:class:`SweepSpec`: the three axes, the repeats, the seed, the
-perturbations and the trial options), lists its trials (:meth:`SweepSpec.trials`), draws each
+perturbations and the trial options; the objects of the configuration's library to grasp,
+one by default), lists its trials (:meth:`SweepSpec.trials`), draws each
 trial's perturbations from its seed (:meth:`Perturbations.draw`) and runs one trial
 (:func:`run_trial`): the stand-in world and the controller core in lockstep, exactly as
 ``dam_experiment`` does (:func:`~dam_experiments.experiment.run_experiment`), classified as in
@@ -15,8 +16,10 @@ answers for the pair (the sufficient condition, eq. 18, and the contact stiffnes
 Determinism: a trial's row depends only on its inputs (the cell, the sweep's perturbation
 scales and trial options, the configuration) and its seed. The seed of trial ``r`` of cell
 ``(i, j, l)`` (indices into the friction angle, ``delta_theta_p`` and ``k_theta`` axes) is
-drawn from ``numpy.random.SeedSequence(seed, spawn_key=(i, j, l, r))``; each trial builds a
-fresh world, so neither the order of the trials nor the process that runs them matters.
+drawn from ``numpy.random.SeedSequence(seed, spawn_key=(i, j, l, r))`` for the first object
+and ``spawn_key=(i, j, l, o, r)`` for object ``o > 0`` (so that a sweep of one object draws
+what it drew before objects were an axis); each trial builds a fresh world, so neither the
+order of the trials nor the process that runs them matters.
 
 Axes on the command line (:func:`dam_experiments.sweep_axes.parse_axis`) are values or ranges
 ``start:stop:count`` (evenly spaced, both ends included) and ``start:stop:count:log`` (evenly
@@ -47,7 +50,8 @@ from dam_experiments.errors import SweepError
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
 MAX_FRICTION_ANGLE_DEG = 89.0
 #: Command-line option of each sweep parameter (error messages name both).
-OPTIONS = {'friction_angles_deg': '--friction-angles', 'k_theta': '--k-theta',
+OPTIONS = {'objects': '--objects', 'friction_angles_deg': '--friction-angles',
+           'k_theta': '--k-theta',
            'delta_theta_p_deg': '--delta-theta-p', 'repeats': '--repeats', 'seed': '--seed',
            'mass_rel': '--mass-rel', 'position_sd_mm': '--position-sd',
            'table_friction_rel': '--table-friction-rel',
@@ -162,9 +166,10 @@ class Perturbations:
             friction_angle_deg=min(max(alpha, 0.0), MAX_FRICTION_ANGLE_DEG))
 
 
-def trial_seed(seed: int, cell: tuple[int, int, int], repeat: int) -> int:
+def trial_seed(seed: int, cell: tuple[int, ...], repeat: int) -> int:
     """Seed of repeat ``repeat`` of ``cell`` (axis indices: friction angle, delta_theta_p,
-    k_theta): 53 bits of ``SeedSequence(seed, spawn_key=(*cell, repeat))``, so that it is
+    k_theta, then the object's when it is not the first): 53 bits of
+    ``SeedSequence(seed, spawn_key=(*cell, repeat))``, so that it is
     exact in any CSV reader that turns numbers into doubles."""
     state = np.random.SeedSequence(int(seed), spawn_key=(*cell, int(repeat)))
     high, low = (int(v) for v in state.generate_state(2, dtype=np.uint32))
@@ -185,6 +190,8 @@ class TrialSpec:
     delta_theta_p_deg: float
     repeat: int
     seed: int
+    #: the object of the configuration's library; '': the configured default object
+    object_name: str = ''
 
 
 @dataclass(frozen=True)
@@ -196,6 +203,9 @@ class SweepSpec:
     friction_angles_deg, k_theta, delta_theta_p_deg
         The axes: friction angles alpha [deg], finger-1 stiffness [N*m/rad],
         position-joint displacements [deg].
+    objects
+        The objects grasped, by their names in the configuration's ``object.library`` (an
+        axis, outermost); empty: the configured default object alone.
     repeats
         Trials per cell (>= 1); with perturbations, each draws its own world.
     seed
@@ -226,8 +236,14 @@ class SweepSpec:
     trajectory_duration_s: float | None = None
     impedance: str | None = None
     envelope: str = 'impedance'
+    objects: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        names = tuple(self.objects)
+        if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+            raise SweepError(f'{_named("objects")}: {list(names)!r} must be distinct object '
+                             f'names')
+        object.__setattr__(self, 'objects', names)
         for name in ('friction_angles_deg', 'k_theta', 'delta_theta_p_deg'):
             values = tuple(float(v) for v in getattr(self, name))
             if not values:
@@ -260,19 +276,21 @@ class SweepSpec:
     @property
     def n_trials(self) -> int:
         """Number of trials: cells times repeats."""
-        return (len(self.friction_angles_deg) * len(self.k_theta)
+        return (max(len(self.objects), 1) * len(self.friction_angles_deg) * len(self.k_theta)
                 * len(self.delta_theta_p_deg) * self.repeats)
 
     def trials(self) -> list[TrialSpec]:
-        """Every trial, indexed in table order: friction angle, then ``delta_theta_p``, then
-        ``k_theta``, then the repeat."""
+        """Every trial, indexed in table order: object, friction angle, then
+        ``delta_theta_p``, then ``k_theta``, then the repeat."""
         out: list[TrialSpec] = []
-        for i, alpha in enumerate(self.friction_angles_deg):
-            for j, dp in enumerate(self.delta_theta_p_deg):
-                for l_, k in enumerate(self.k_theta):
-                    for r in range(self.repeats):
-                        out.append(TrialSpec(len(out), alpha, k, dp, r,
-                                             trial_seed(self.seed, (i, j, l_), r)))
+        for o, name in enumerate(self.objects or ('',)):
+            for i, alpha in enumerate(self.friction_angles_deg):
+                for j, dp in enumerate(self.delta_theta_p_deg):
+                    for l_, k in enumerate(self.k_theta):
+                        cell = (i, j, l_) if o == 0 else (i, j, l_, o)
+                        for r in range(self.repeats):
+                            out.append(TrialSpec(len(out), alpha, k, dp, r,
+                                                 trial_seed(self.seed, cell, r), name))
         return out
 
     def sequence_overrides(self) -> dict[str, Any]:
@@ -288,7 +306,7 @@ class SweepSpec:
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able form (:meth:`from_dict` reads it back)."""
         data = dataclasses.asdict(self)
-        for name in ('friction_angles_deg', 'k_theta', 'delta_theta_p_deg'):
+        for name in ('friction_angles_deg', 'k_theta', 'delta_theta_p_deg', 'objects'):
             data[name] = list(data[name])
         return data
 
@@ -318,10 +336,15 @@ class SweepSpec:
         Raises
         ------
         SweepError
-            A ``delta_theta_p`` above ``task.delta_theta_p_max_deg``, a ``k_theta`` whose
-            finger stiffnesses exceed ``device.max_stiffness_nm_per_rad`` (the driver would
-            refuse them), or a trajectory at least as long as ``controller.phase_timeout_s``.
+            An object not in the configuration's library, a ``delta_theta_p`` above
+            ``task.delta_theta_p_max_deg``, a ``k_theta`` whose finger stiffnesses exceed
+            ``device.max_stiffness_nm_per_rad`` (the driver would refuse them), or a
+            trajectory at least as long as ``controller.phase_timeout_s``.
         """
+        unknown = [n for n in self.objects if n not in config.objects]
+        if unknown:
+            raise SweepError(f'{OPTIONS["objects"]}: {unknown[0]!r} is not in the object '
+                             f'library (known: {", ".join(sorted(config.objects))})')
         dp_max = math.degrees(float(config.task.delta_theta_p_max_rad))
         for dp in self.delta_theta_p_deg:
             if dp > dp_max + 1e-9:
@@ -419,7 +442,8 @@ def _mm(value_m: float) -> str:
 
 def input_columns(spec: TrialSpec) -> dict[str, str]:
     """The table's input columns of a trial, as written (resume compares them)."""
-    return {'trial': str(spec.index), 'friction_angle_deg': f'{spec.friction_angle_deg:.12g}',
+    return {'trial': str(spec.index), 'object': spec.object_name,
+            'friction_angle_deg': f'{spec.friction_angle_deg:.12g}',
             'k_theta_nm_per_rad': f'{spec.k_theta:.12g}',
             'delta_theta_p_deg': f'{spec.delta_theta_p_deg:.12g}',
             'repeat': str(spec.repeat), 'seed': str(spec.seed)}
@@ -429,7 +453,7 @@ def table_columns(config: Any) -> list[str]:
     """Column names of the trial table for the configured hand."""
     peaks = [f'peak_tau_{f.name}_{role}_nm' for role in ('compliant', 'position')
              for f in config.hand.fingers]
-    return ['trial', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
+    return ['trial', 'object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
             'repeat', 'seed', 'object_mass_kg', 'object_offset_x_mm', 'object_offset_y_mm',
             'table_friction', 'friction_angle_sim_deg', 'phase', 'outcome', 'lifted',
             'rise_final_mm', 'rise_max_mm', 'rise_rolling_end_mm', *peaks,
@@ -449,11 +473,12 @@ class TrialResult:
 def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     """Run one trial: draw its world, grasp in lockstep, ask the analysis.
 
-    The world is the configured one with the trial's perturbations (:meth:`Perturbations.draw`);
+    The world is the configured one with the trial's object and perturbations
+    (:meth:`Perturbations.draw`);
     the grasp is :func:`~dam_experiments.experiment.run_experiment` of the cell's pair in a
     fresh world. The analysis columns are what ``/check_lift`` answers for the request the
-    controller would send, i.e. the cell's pair at the cell's friction angle with the
-    configured object: eq. (18) holds for every admissible contact force
+    controller would send, i.e. the cell's pair at the cell's friction angle with the trial's
+    object as configured: eq. (18) holds for every admissible contact force
     (``check_lift_guaranteed``, ``worst_case_margin_n = min c_z^T f_o - m_B g`` [N]) and the
     contact stiffness model's verdict and margin (``csm_lift``, ``csm_margin_n`` [N]). The
     perturbations are what the analysis does not know.
@@ -465,7 +490,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     sweep
         The sweep it belongs to (perturbation scales and trial options).
     config
-        ``DamConfig`` of the hand, object and controller.
+        ``DamConfig`` of the hand, the object library and the controller.
 
     Returns
     -------
@@ -476,7 +501,8 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     from dam_experiments.experiment import run_experiment  # noqa: PLC0415 - imports pybullet
     from dam_sim_bridge.world import HandWorld  # noqa: PLC0415
 
-    analyzer = analyzer_for(config)  # once per process, not part of the trial's cost
+    config = config.with_object(spec.object_name)
+    analyzer = analyzer_for(config)  # once per object and process, not the trial's cost
     wall0, cpu0 = time.monotonic(), time.process_time()
     obj = config.object
     draw = sweep.perturbations.draw(spec.seed, spec.friction_angle_deg, float(obj.mass_kg),

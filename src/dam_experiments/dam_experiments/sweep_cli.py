@@ -3,7 +3,8 @@
 ::
 
     ros2 run dam_experiments sweep --friction-angles 5deg 30deg --k-theta 0.05:20:24:log \\
-        --delta-theta-p 5deg:60deg:12 --out DIR [--repeats N] [--workers N] [--scheduler ADDRESS]
+        --delta-theta-p 5deg:60deg:12 --out DIR [--objects NAME ...] [--repeats N] \\
+        [--workers N] [--scheduler ADDRESS]
 
 Runs every trial of :class:`~dam_experiments.sweep.SweepSpec` (:func:`~dam_experiments.sweep.
 run_trial`) on all local cores (a Dask ``LocalCluster`` of one single-threaded worker process
@@ -71,14 +72,17 @@ def _millimetres(parse: Callable[[str], Any]) -> Callable[[str], float]:
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p = CommandLineParser(
         prog=PROG,
-        description='DAM grasps in the lockstep simulator over friction angles x k_theta x '
-                    'delta_theta_p (paper Fig. 7), optionally perturbed and repeated per '
-                    'cell; one CSV row per trial. Axes take values and ranges '
+        description='DAM grasps in the lockstep simulator over objects x friction angles x '
+                    'k_theta x delta_theta_p (paper Fig. 7), optionally perturbed and repeated '
+                    'per cell; one CSV row per trial. Axes take values and ranges '
                     'start:stop:count (linear) or start:stop:count:log; angles take their '
                     'unit (5deg:60deg:12; a bare number is radians).',
         epilog='Rerun the same command to resume an interrupted sweep: finished trials are '
                'kept. Exit status: 0 done, 1 trials failed, 2 bad arguments, 130 interrupted.')
     g = p.add_argument_group('the grid')
+    g.add_argument('--objects', '--object', nargs='+', metavar='NAME', default=None,
+                   help='objects of the configuration\'s object library to grasp, an axis '
+                        '(default: the configured one)')
     g.add_argument('--friction-angles', '--alpha', nargs='+', metavar='ANGLE', default=None,
                    help='finger-object friction angles, e.g. 5deg 30deg (default: the '
                         'configured one)')
@@ -153,7 +157,8 @@ def build_sweep(args: argparse.Namespace, config: Any) -> SweepSpec:
             friction_angle_sd_deg=args.friction_angle_sd),
         max_time_s=args.max_time, latency_cycles=args.latency_cycles,
         trajectory_duration_s=args.trajectory_duration, impedance=args.impedance,
-        envelope=args.envelope)
+        envelope=args.envelope,
+        objects=tuple(args.objects) if args.objects else (config.object.name,))
     sweep.check_against(config)
     if args.workers is not None and args.workers < 1:
         raise SweepError(f'--workers: {args.workers} must be at least 1')
@@ -266,11 +271,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     # fails every trial the same way: refused before anything runs, naming the object.
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415 - slow import
 
-    try:
-        analyzer_for(config)
-    except DamAnalysisError as exc:
-        return fail(f'object {config.object.name!r} cannot be analysed with this hand, so no '
-                    f'trial can run: {exc}')
+    for name in sweep.objects:
+        try:
+            analyzer_for(config.with_object(name))
+        except DamAnalysisError as exc:
+            return fail(f'object {name!r} cannot be analysed with this hand, so no trial can '
+                        f'run: {exc}')
     client = None
     if args.scheduler:  # before any file is written: a wrong address leaves nothing behind
         try:
@@ -285,6 +291,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         table = TrialTable(args.out, sweep, config,
                            info={'software_version': software_version(),
                                  'axes_as_given': {
+                                     'objects': args.objects,
                                      'friction_angles': args.friction_angles,
                                      'k_theta': args.k_theta,
                                      'delta_theta_p': args.delta_theta_p}})
@@ -316,7 +323,9 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     workers = args.workers if args.workers is not None else _local_cores()
     where = (f'the Dask cluster at {args.scheduler}' if args.scheduler else
              'this process' if workers == 1 else f'{workers} local worker processes')
-    print(f'{PROG}: {n} trials ({len(sweep.friction_angles_deg)} friction angles x '
+    objects = (f'{len(sweep.objects)} objects x ' if len(sweep.objects) > 1 else
+               f'object {sweep.objects[0]}, ' if sweep.objects else '')
+    print(f'{PROG}: {n} trials ({objects}{len(sweep.friction_angles_deg)} friction angles x '
           f'{len(sweep.k_theta)} k_theta x {len(sweep.delta_theta_p_deg)} delta_theta_p x '
           f'{sweep.repeats} repeats) into {args.out}', flush=True)
     if done or table.dropped:

@@ -46,7 +46,14 @@ from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
 from dam_experiments.errors import SweepPlotError
 from dam_experiments.sweep import config_digest
-from dam_experiments.sweep_results import OUTCOMES, SweepData, k_axis_is_log, read_sweep
+from dam_experiments.sweep_results import (
+    OUTCOMES,
+    SweepData,
+    analysis_config,
+    k_axis_is_log,
+    one_object,
+    read_sweep,
+)
 from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 PROG = 'sweep_plot'
@@ -287,8 +294,9 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
     n = len(data.trials)
     done = f'{n} trials' if n == data.n_planned else f'{n} of {data.n_planned} trials'
     per_cell = f', {data.repeats} per cell' if probability else ''
-    fig.suptitle(f'{data.directory.name}: {done}{per_cell}: k_theta - delta_theta_p map '
-                 f'(paper Fig. 7){title_note}', fontsize=10)
+    shown = ', '.join(n for n in data.objects if n)
+    fig.suptitle(f'{data.directory.name}: {shown + ", " if shown else ""}{done}{per_cell}: '
+                 f'k_theta - delta_theta_p map (paper Fig. 7){title_note}', fontsize=10)
     return fig
 
 
@@ -414,6 +422,7 @@ def plot_sweep(sweep: SweepData | str | os.PathLike[str],
     if n_points < 2:
         raise SweepPlotError(f'n_points {n_points} must be at least 2')
     data = sweep if isinstance(sweep, SweepData) else read_sweep(sweep)
+    data = one_object(data, None)
     out = Path(output) if output is not None else None
     if out is not None:
         check_output(out)
@@ -421,11 +430,12 @@ def plot_sweep(sweep: SweepData | str | os.PathLike[str],
         from dam_common.config import load_config  # noqa: PLC0415
 
         config = load_config()
+    matches = data.parameters.get('config_sha256') == config_digest(config)
+    config = analysis_config(data, config)
     if analyzer is None:
         from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
 
         analyzer = LiftAnalyzer(config)
-    matches = data.parameters.get('config_sha256') == config_digest(config)
     log_k = k_axis_is_log(data.parameters) if k_scale == 'auto' else k_scale == 'log'
     boundaries = sweep_boundaries(data, analyzer, n_points)
     note = '' if matches else '\nboundaries of a configuration other than the sweep\'s'
@@ -455,6 +465,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration of the boundaries: the sweep\'s (default: DAM_CONFIG or '
                         'the installed config/dam.yaml)')
+    p.add_argument('--object', default=None, metavar='NAME',
+                   help='the object to draw, of a sweep of several (one picture per object)')
     p.add_argument('--k-scale', choices=K_SCALES, default='auto',
                    help='k_theta axis (default auto: log when the sweep\'s k_theta axis was a '
                         'log range)')
@@ -485,7 +497,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
     output = args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
     try:
-        data = read_sweep(args.directory)  # bad input is named before the configuration
+        data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)
         config = load_config(args.config)
         result = plot_sweep(data, output, config=config,

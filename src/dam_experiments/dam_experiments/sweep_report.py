@@ -43,7 +43,7 @@ from dam_experiments.sweep_report_rows import (
     rise_class,
     trial_label,
 )
-from dam_experiments.sweep_results import SweepData, k_axis_is_log
+from dam_experiments.sweep_results import SweepData, analysis_config, k_axis_is_log, one_object
 
 #: A cell lifts when at least this share of its trials lifted [-].
 LIFT_PROBABILITY = 0.5
@@ -475,7 +475,10 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
 
     if n_points < 2:
         raise SweepPlotError(f'n_points {n_points} must be at least 2')
+    data = one_object(data, None)
     rows = read_rows(data)
+    matches = data.parameters.get('config_sha256') == config_digest(config)
+    config = analysis_config(data, config)
     if analyzer is None:
         from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
 
@@ -513,7 +516,7 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
                                  limits) for key, title, boundary, lifts in CATEGORIES)
     return SweepReport(
         data=data, limits=limits,
-        config_matches=data.parameters.get('config_sha256') == config_digest(config),
+        config_matches=matches,
         log_k=k_axis_is_log(data.parameters), cells=cells, angles=angles,
         false_guarantees=listed, n_false_guarantee_cells=len(false),
         n_guaranteed_unlifted_trials=others, categories=categories, boundaries=tuple(dense),

@@ -44,7 +44,7 @@ from dam_experiments.sweep_plot import (
 )
 from dam_experiments.sweep_report import SweepReport, compute_report
 from dam_experiments.sweep_report_markdown import decades, render_markdown, share
-from dam_experiments.sweep_results import read_sweep
+from dam_experiments.sweep_results import one_object, read_sweep
 from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 PROG = 'sweep_report'
@@ -210,6 +210,9 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration of the analysis: the sweep\'s (default: DAM_CONFIG or '
                         'the installed config/dam.yaml)')
+    p.add_argument('--object', default=None, metavar='NAME',
+                   help='the object to report on, of a sweep of several (one document per '
+                        'object)')
     p.add_argument('--n-delta-theta-p', type=int, default=DEFAULT_BOUNDARY_POINTS, metavar='N',
                    help=f'delta_theta_p samples of the drawn boundaries (default '
                         f'{DEFAULT_BOUNDARY_POINTS})')
@@ -228,6 +231,8 @@ def _command(args: argparse.Namespace, output: Path) -> str:
              shlex.quote(str(output))]
     if args.config is not None:
         parts += ['--config', shlex.quote(str(args.config))]
+    if args.object is not None:
+        parts += ['--object', shlex.quote(args.object)]
     if args.n_delta_theta_p != DEFAULT_BOUNDARY_POINTS:
         parts += ['--n-delta-theta-p', str(args.n_delta_theta_p)]
     return ' '.join(parts)
@@ -248,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
     output = args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
     try:
-        data = read_sweep(args.directory)  # bad input is named before the configuration
+        data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)
         config = load_config(args.config)
         report = compute_report(data, config, n_points=args.n_delta_theta_p)

@@ -11,6 +11,7 @@ far as it got (a row cut short is left out and counted).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -53,6 +54,9 @@ class Trial:
         The controller's classification: ``FAILURE``, ``LIFTED_DAM_FAILED`` or ``SUCCESS``.
     lifted
         Ground truth: the object centre ended at least ``classification.lift_height_m`` up.
+    object_name
+        The object of the configuration's library (column ``object``; '' in a table from
+        before objects were an axis: the configured default object).
     """
 
     index: int
@@ -62,6 +66,7 @@ class Trial:
     repeat: int
     outcome: str
     lifted: bool
+    object_name: str = ''
 
     @property
     def disagrees(self) -> bool:
@@ -120,6 +125,28 @@ class SweepData:
     skipped: int = 0
 
     @property
+    def objects(self) -> tuple[str, ...]:
+        """The objects found in the table, in table order ('' for a table without the
+        column)."""
+        return tuple(dict.fromkeys(t.object_name for t in self.trials))
+
+    def of_object(self, name: str) -> SweepData:
+        """The trials of one object (``objects`` of the spec reduced to it), for a picture or
+        a report of that object.
+
+        Raises
+        ------
+        SweepPlotError
+            ``name`` is not an object of the table (the message lists them).
+        """
+        if name not in self.objects:
+            raise SweepPlotError(f'{self.directory}: no trial of object {name!r} (its objects: '
+                                 f'{", ".join(repr(n) for n in self.objects)})')
+        spec = dataclasses.replace(self.spec, objects=(name,) if name else ())
+        return dataclasses.replace(
+            self, spec=spec, trials=tuple(t for t in self.trials if t.object_name == name))
+
+    @property
     def friction_angles_deg(self) -> tuple[float, ...]:
         """The friction angles found in the table, ascending [deg]."""
         return tuple(sorted({t.friction_angle_deg for t in self.trials}))
@@ -145,6 +172,46 @@ class SweepData:
             groups.setdefault((t.k_theta, t.delta_theta_p_deg), []).append(t)
         return [Cell(k, dp, len(g), sum(t.lifted for t in g),
                      sum(t.outcome == 'SUCCESS' for t in g)) for (k, dp), g in groups.items()]
+
+
+def one_object(data: SweepData, name: str | None) -> SweepData:
+    """The sweep's trials of the object ``name``; ``None``: of its only object.
+
+    Raises
+    ------
+    SweepPlotError
+        ``name`` is None and the sweep has several objects (the message lists them and
+        says how to choose), or ``name`` is not one of them.
+    """
+    if name is not None:
+        return data.of_object(name)
+    if len(data.objects) > 1:
+        raise SweepPlotError(f'{data.directory}: a sweep of {len(data.objects)} objects '
+                             f'({", ".join(data.objects)}): choose one with --object NAME '
+                             f'(one picture or report per object)')
+    return data
+
+
+def analysis_config(data: SweepData, config: Any) -> Any:
+    """``config`` with the object of the sweep ``data`` (of one object) in place of its
+    default: what the analysis of its trials assumes.
+
+    Raises
+    ------
+    SweepPlotError
+        The sweep has several objects, or its object is not in the configuration's library.
+    """
+    names = data.objects
+    if len(names) > 1:
+        raise SweepPlotError(f'{data.directory}: {len(names)} objects: choose one first')
+    if not names or not names[0]:
+        return config
+    if names[0] not in config.objects:
+        raise SweepPlotError(f'the sweep\'s object {names[0]!r} is not in the object library '
+                             f'of the configuration {str(config.source)!r} (known: '
+                             f'{", ".join(sorted(config.objects))}); pass the sweep\'s with '
+                             f'--config')
+    return config.with_object(names[0])
 
 
 def _fail_row(table: Path, line: int, trial: str, message: str) -> SweepPlotError:
@@ -185,7 +252,8 @@ def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
                                             low_open=False),
                  k_theta=_number(table, line, row, 'k_theta_nm_per_rad', 0.0),
                  delta_theta_p_deg=_number(table, line, row, 'delta_theta_p_deg', 0.0),
-                 repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1')
+                 repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1',
+                 object_name=row.get('object') or '')
 
 
 def read_sweep(directory: str | os.PathLike[str]) -> SweepData:

@@ -49,7 +49,7 @@ FORMAT_VERSION = 1
 #: Keys of ``sweep.json`` that must match to resume (the others are information).
 _MATCHING_KEYS = ('format', 'sweep', 'config_sha256', 'columns')
 
-CELL_COLUMNS = ['friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg', 'trials',
+CELL_COLUMNS = ['object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg', 'trials',
                 'lifted', 'p_lift', 'success', 'lifted_dam_failed', 'failure', 'p_success',
                 'rise_final_mm_mean', 'check_lift_guaranteed', 'worst_case_margin_n',
                 'csm_lift', 'csm_margin_n']
@@ -301,18 +301,20 @@ def read_table(path: str | os.PathLike[str]) -> list[dict[str, str]]:
 
 
 def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
-    """Per cell (in order of first appearance): trials, lifts, outcomes, the analysis.
+    """Per cell of an object (in order of first appearance): trials, lifts, outcomes, the
+    analysis.
 
     ``p_lift`` is the share of trials whose object lifted (ground truth), ``p_success`` the
     share the controller classified SUCCESS; the analysis columns are the cell's (the same
     for every trial of a cell).
     """
-    cells: dict[tuple[str, str, str], list[Mapping[str, str]]] = {}
+    cells: dict[tuple[str, str, str, str], list[Mapping[str, str]]] = {}
     for row in rows:
-        key = (row['friction_angle_deg'], row['k_theta_nm_per_rad'], row['delta_theta_p_deg'])
+        key = (row.get('object', ''), row['friction_angle_deg'], row['k_theta_nm_per_rad'],
+               row['delta_theta_p_deg'])
         cells.setdefault(key, []).append(row)
     out = []
-    for (alpha, k, dp), group in cells.items():
+    for (name, alpha, k, dp), group in cells.items():
         n = len(group)
         lifted = sum(int(r['lifted']) for r in group)
         counts = {o: sum(r['outcome'] == o for r in group)
@@ -320,7 +322,8 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
         rises = [float(r['rise_final_mm']) for r in group]
         first = group[0]
         out.append({
-            'friction_angle_deg': alpha, 'k_theta_nm_per_rad': k, 'delta_theta_p_deg': dp,
+            'object': name, 'friction_angle_deg': alpha, 'k_theta_nm_per_rad': k,
+            'delta_theta_p_deg': dp,
             'trials': str(n), 'lifted': str(lifted), 'p_lift': f'{lifted / n:.6g}',
             'success': str(counts['SUCCESS']),
             'lifted_dam_failed': str(counts['LIFTED_DAM_FAILED']),
