@@ -575,4 +575,5 @@ def test_a_sweep_of_two_objects_is_drawn_and_reported_one_object_at_a_time(
     text = document.read_text(encoding='utf-8')
     assert '| object | hex_bar |' in text
     assert '--object hex_bar' in text  # the command that writes it again
+    assert '--objects cylinder hex_bar --friction-angles 5deg' in text  # the sweep's command
     assert 'trials present | 2 of 2' in text

@@ -74,6 +74,10 @@ def sweep_command(report: SweepReport) -> str:
     given = report.data.parameters.get('axes_as_given')
     given = given if isinstance(given, Mapping) else {}
     parts = ['ros2 run dam_experiments sweep']
+    recorded = report.data.parameters.get('sweep')
+    objects = recorded.get('objects') if isinstance(recorded, Mapping) else None
+    if isinstance(objects, list) and objects and all(isinstance(n, str) for n in objects):
+        parts.append(f'--objects {" ".join(objects)}')  # the whole sweep's, not the report's
     for option, key, values in (('--friction-angles', 'friction_angles',
                                  spec.friction_angles_deg),
                                 ('--k-theta', 'k_theta', spec.k_theta),
