@@ -154,6 +154,28 @@ def test_command_line_grasps_each_object_named(tmp_path: Path,
     assert 'hex_bar' in printed and 'cylinder' in printed
     assert main(['--object', 'pencil', '--k-theta', '3', '--delta-theta-p', '20deg']) == 2
     assert "'pencil' is not in the object library" in capsys.readouterr().err
+    assert main(['--object', 'hex_bar', 'hex_bar', '--k-theta', '3']) == 2
+    assert 'must be distinct, non-empty names' in capsys.readouterr().err
+
+
+def test_an_object_the_analysis_cannot_answer_for_is_no_grasp(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 1 mm rod no finger reaches: refused, exit 2, the object named (it was grasped and
+    called SUCCESS with the object never touched)."""
+    import yaml
+
+    from dam_common.config import default_config_path
+
+    data = yaml.safe_load(default_config_path().read_text(encoding='utf-8'))
+    data['object']['library']['rod_1mm'] = {'shape': 'circle', 'radius_m': 0.001,
+                                            'length_m': 0.1, 'mass_kg': 0.002}
+    config = tmp_path / 'dam.yaml'
+    config.write_text(yaml.safe_dump(data), encoding='utf-8')
+    assert main(['--config', str(config), '--object', 'rod_1mm', '--k-theta', '5',
+                 '--delta-theta-p', '10deg']) == 2
+    captured = capsys.readouterr()
+    assert "object 'rod_1mm' cannot be analysed with this hand" in captured.err, captured.err
+    assert 'SUCCESS' not in captured.out
 
 
 @pytest.mark.parametrize('on_device, envelope_mode', [(True, 4), (False, 1)])

@@ -569,6 +569,10 @@ def test_a_sweep_of_two_objects_is_drawn_and_reported_one_object_at_a_time(
     default = compute_boundaries(LiftAnalyzer(config), [5.0], grid, progress=False)[0]
     assert not np.allclose(np.nan_to_num(default.csm), np.nan_to_num(expected.csm))
 
+    assert plot_main([str(out), '--object', 'cylinder', '--config', str(cfg_path),
+                      '--n-delta-theta-p', '5']) == 0
+    assert (out / 'fig7_cylinder.png').is_file() and not (out / 'fig7.png').exists()
+    assert 'sweep: cylinder, 2 of 2 trials' in capsys.readouterr().out
     document = tmp_path / 'hex.md'
     assert main([str(out), '--object', 'hex_bar', '-o', str(document), '--config',
                  str(cfg_path), '--n-delta-theta-p', '5']) == 0

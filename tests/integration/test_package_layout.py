@@ -14,8 +14,9 @@ SRC = REPO_ROOT / 'src'
 INSTALL = REPO_ROOT / 'ros2_ws' / 'install'
 PYTHON_PACKAGES = ['dam_common', 'dam_analysis', 'dam_sim_bridge', 'dam_hand_driver',
                    'dam_spcm_controller', 'dam_recorder', 'dam_experiments']
-#: The suite's packages each package may import (besides itself and dam_interfaces): the
-#: stand-in hand sits beside the driver, below the controller; the experiments on top.
+#: The suite's packages each package may import (besides itself and the message definitions,
+#: dam_interfaces): the stand-in hand sits beside the driver, below the controller; the
+#: experiments on top.
 LAYERS = {
     'dam_common': set(),
     'dam_analysis': {'dam_common'},

@@ -314,7 +314,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     p = CommandLineParser(
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
-                    'grid; prints outcome and ground-truth lift, optionally writes a CSV.')
+                    'grid, per object and friction angle; prints outcome and ground-truth '
+                    'lift, optionally writes a CSV.')
     p.add_argument('--object', '--objects', dest='objects', nargs='+', default=None,
                    metavar='NAME',
                    help='objects of the configuration\'s object library (default: the '
@@ -324,7 +325,7 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
                    help='friction angles (5deg, 0.09rad; bare: rad; default: the configured '
                         'one)')
     p.add_argument('--k-theta', type=float, nargs='+', default=[0.5, 2.0, 7.0, 15.0],
-                   help='finger-1 stiffness values [N*m/rad]')
+                   help='finger-1 stiffness values [N*m/rad] (default: 0.5 2 7 15)')
     p.add_argument('--delta-theta-p', type=in_degrees(argument(ANGLE)), nargs='+',
                    default=[5.0, 10.0, 25.0, 40.0], metavar='ANGLE',
                    help='position-joint displacements (10deg, 0.17rad; bare: rad; default: '
@@ -353,9 +354,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(sys.argv[1:] if argv is None else argv)
+    names = args.objects or ['']
+    if args.objects is not None and (len(set(names)) != len(names) or '' in names):
+        sys.stderr.write(f'dam_experiment: --object: {names!r} must be distinct, non-empty '
+                         f'names\n')
+        return 2
     try:
         config = load_config(args.config)
-        configs = [config.with_object(name) for name in (args.objects or [''])]
+        configs = [config.with_object(name) for name in names]
     except (DamAnalysisError, DamCommonError) as exc:
         sys.stderr.write(f'dam_experiment: {exc}\n')
         return 2
@@ -370,6 +376,20 @@ def main(argv: Sequence[str] | None = None) -> int:
                 sys.stderr.write(f'dam_experiment: {option}: {v:g} {unit} must be {bound} '
                                  f'{unit}\n')
                 return 2
+    analyzers = []
+    for each in configs:  # an object the analysis cannot answer for is no grasp to run
+        try:
+            from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
+
+            analyzers.append(LiftAnalyzer(each))
+        except DamAnalysisError as exc:
+            sys.stderr.write(f'dam_experiment: object {each.object.name!r} cannot be analysed '
+                             f'with this hand, so no grasp of it can run: {exc}\n')
+            return 2
+        except Exception as exc:  # noqa: BLE001 - the experiment runs without the analysis
+            sys.stderr.write(f'dam_experiment: analysis of {each.object.name} unavailable '
+                             f'({exc}); columns show -\n')
+            analyzers.append(None)
     alphas = ([math.radians(a) for a in args.alpha] if args.alpha
               else [float(config.contact.friction_angle_rad)])
     if args.fixtures is not None:
@@ -383,8 +403,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         'envelope_constant_torque': args.envelope == 'constant-torque'}
     if args.impedance is not None:
         overrides['impedance_on_device'] = args.impedance == 'device'
-    for config in configs:
-        _run_object(config, args, alphas, overrides, width, rows)
+    for each, analyzer in zip(configs, analyzers, strict=True):
+        _run_object(each, analyzer, args, alphas, overrides, width, rows)
     if args.out is not None:
         with args.out.open('w', newline='', encoding='utf-8') as handle:
             writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
@@ -394,19 +414,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _run_object(config, args: argparse.Namespace, alphas: Sequence[float],
+def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[float],
                 overrides: dict[str, bool], width: int, rows: list[dict[str, object]]) -> None:
     """The grid of one object: its rows appended to ``rows`` and printed."""
-    try:
-        from dam_analysis.analysis import LiftAnalyzer  # noqa: PLC0415 - slow import
+    from dam_experiments.sweep import quiet_stdout  # noqa: PLC0415
 
-        analyzer = LiftAnalyzer(config)
-    except Exception as exc:  # noqa: BLE001 - the experiment runs without the analysis
-        sys.stderr.write(f'dam_experiment: analysis of {config.object.name} unavailable '
-                         f'({exc}); columns show -\n')
-        analyzer = None
     name = config.object.name
-    world = HandWorld(config)
+    with quiet_stdout():  # PyBullet's 'argv[0]=' line, amid the table
+        world = HandWorld(config)
     try:
         for alpha in alphas:
             for dp in args.delta_theta_p:

@@ -241,8 +241,8 @@ class SweepSpec:
     def __post_init__(self) -> None:
         names = tuple(self.objects)
         if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
-            raise SweepError(f'{_named("objects")}: {list(names)!r} must be distinct object '
-                             f'names')
+            raise SweepError(f'{_named("objects")}: {list(names)!r} must be distinct, non-empty '
+                             f'object names')
         object.__setattr__(self, 'objects', names)
         for name in ('friction_angles_deg', 'k_theta', 'delta_theta_p_deg'):
             values = tuple(float(v) for v in getattr(self, name))
@@ -408,7 +408,7 @@ _STDOUT_LOCK = threading.Lock()
 
 
 @contextlib.contextmanager
-def _quiet_stdout() -> Iterator[None]:
+def quiet_stdout() -> Iterator[None]:
     """Send what C code writes to file descriptor 1 to /dev/null meanwhile: PyBullet prints
     ``argv[0]=`` at every connection, a line per trial in the middle of the progress bar.
     One thread at a time (a Dask worker may run trials in threads)."""
@@ -514,7 +514,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
     position = np.asarray(obj.position_m, dtype=float).copy()
     position[:2] += draw.object_offset_m
     dp = math.radians(spec.delta_theta_p_deg)
-    with _quiet_stdout():
+    with quiet_stdout():
         world = HandWorld(trial_config)
     with world:
         r = run_experiment(trial_config, spec.k_theta, dp, world=world,

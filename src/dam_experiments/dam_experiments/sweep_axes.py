@@ -5,7 +5,7 @@
 (``numpy.linspace``, both ends included); plain numbers and ranges mix freely. An angle takes
 its unit, and a bare one is radians, as in every command of the suite
 (:mod:`dam_common.quantities`). A bad token is refused with the option and
-the token named (:class:`~dam_sim_bridge.errors.SweepError`).
+the token named (:class:`~dam_experiments.errors.SweepError`).
 """
 
 from __future__ import annotations

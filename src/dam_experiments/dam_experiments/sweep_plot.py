@@ -308,7 +308,9 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
     """The text summary: the sweep, then per friction angle the trials, how many lifted
     (ground truth), the outcome counts and the lowest boundary values."""
     n = len(data.trials)
-    lines = [f'{PROG}: {data.directory}: {n} of {data.n_planned} trials, {data.repeats} per '
+    shown = ', '.join(o for o in data.objects if o)
+    lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{n} of '
+             f'{data.n_planned} trials, {data.repeats} per '
              f'cell, k_theta axis {"log" if log_k else "linear"}'
              + (f' ({data.skipped} incomplete row(s) left out)' if data.skipped else '')]
     for alpha, b in zip(data.friction_angles_deg, boundaries, strict=True):
@@ -461,7 +463,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('directory', type=Path, metavar='DIR',
                    help=f'a sweep --out directory ({TABLE_FILE}, {PARAMS_FILE})')
     p.add_argument('-o', '--output', type=Path, default=None, metavar='FILE',
-                   help=f'picture, PNG, PDF or SVG by its suffix (default: DIR/{DEFAULT_OUTPUT})')
+                   help=f'picture, PNG, PDF or SVG by its suffix (default: DIR/{DEFAULT_OUTPUT}, '
+                        f'with --object DIR/fig7_NAME.png)')
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration of the boundaries: the sweep\'s (default: DAM_CONFIG or '
                         'the installed config/dam.yaml)')
@@ -495,7 +498,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    output = args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
+    output = (args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
+              if args.object is None else args.directory / f'fig7_{args.object}.png')
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

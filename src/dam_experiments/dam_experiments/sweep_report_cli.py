@@ -143,7 +143,9 @@ def boundary_figure(report: SweepReport) -> Any:
         ax.tick_params(labelbottom=True, labelleft=True)
         ax.grid(True, which='major', linewidth=0.3)
         ax.legend(fontsize=7, loc='upper right')
-    fig.suptitle(f'{report.data.directory.name}: simulated lift boundary against the analysis',
+    shown = ', '.join(n for n in report.data.objects if n)
+    fig.suptitle(f'{report.data.directory.name}: {shown + ": " if shown else ""}simulated lift '
+                 f'boundary against the analysis',
                  fontsize=10)
     return fig
 
@@ -181,7 +183,9 @@ def summary_lines(report: SweepReport) -> list[str]:
     """The short summary printed after writing: the sweep, then one line per friction
     angle."""
     data = report.data
-    lines = [f'{PROG}: {data.directory}: {report.n_present} of {data.n_planned} trials, '
+    shown = ', '.join(n for n in data.objects if n)
+    lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{report.n_present} of '
+             f'{data.n_planned} trials, '
              f'{data.repeats} per cell' + ('' if report.complete else ' (incomplete)')]
     for a in report.angles:
         lines.append(
@@ -205,7 +209,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('directory', type=Path, metavar='DIR',
                    help=f'a sweep --out directory ({TABLE_FILE}, {PARAMS_FILE})')
     p.add_argument('-o', '--output', type=Path, default=None, metavar='FILE.md',
-                   help=f'the document (default: DIR/{DEFAULT_OUTPUT}); its figures go into '
+                   help=f'the document (default: DIR/{DEFAULT_OUTPUT}, with --object '
+                        f'DIR/results_NAME.md); its figures go into '
                         f'FILE/ beside it')
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration of the analysis: the sweep\'s (default: DAM_CONFIG or '
@@ -251,7 +256,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    output = args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
+    output = (args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
+              if args.object is None else args.directory / f'results_{args.object}.md')
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

@@ -180,7 +180,7 @@ def _definitions(report: SweepReport) -> list[str]:
         f'`p_lift` is the share of its trials that lifted; the cell **lifts** when `p_lift >= '
         f'{LIFT_PROBABILITY:g}`.',
         '* **Analysis.** Per cell, the `/check_lift` answer for the cell\'s pair at its friction '
-        'angle with the configured object (columns `check_lift_guaranteed`, '
+        'angle with the sweep\'s object as configured (columns `check_lift_guaranteed`, '
         '`worst_case_margin_n`, `csm_lift`, `csm_margin_n`; the first trial\'s, they are the '
         'same for every trial of a cell). A trial\'s perturbations do not enter it.',
         '* **1. False guarantee.** A cell with `check_lift_guaranteed` 1 that does not lift. '

@@ -55,10 +55,12 @@ CELL_COLUMNS = ['object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_the
                 'csm_lift', 'csm_margin_n']
 
 _UNITS = {
+    'object': 'the object grasped: its name in the configuration\'s object.library',
     'friction_angle_deg': 'cell friction angle alpha [deg]',
     'k_theta_nm_per_rad': 'finger-1 compliant stiffness [N*m/rad] (others by stiffness_ratio)',
     'delta_theta_p_deg': 'position-joint displacement [deg]',
-    'seed': 'the trial\'s seed (SeedSequence(seed, spawn_key=(i_alpha, i_dp, i_k, repeat)))',
+    'seed': 'the trial\'s seed (SeedSequence(seed, spawn_key=(i_alpha, i_dp, i_k, repeat)) for '
+            'the first object, spawn_key=(i_alpha, i_dp, i_k, i_object, repeat) for the others)',
     'object_mass_kg': 'object mass as simulated [kg]',
     'object_offset_x_mm': 'object start offset, x [mm]',
     'object_offset_y_mm': 'object start offset along its axis, y [mm]',

@@ -85,6 +85,9 @@ _EMULATED_PACKET_MARGIN_MS = 1000.0
 _QUIET_MS = 2.0 * 16.0 + 2.0
 #: A drain ends after this many quiet times even if bytes keep coming.
 _DRAIN_LIMIT = 8
+#: Reads of a Hardware Error Status in :meth:`DynamixelDevice.recover` before a servo that
+#: answers only with stale answers counts as not answering.
+_STATUS_READ_TRIES = 3
 _KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
 #: Failed reads in a row after which the compliant (current) joints get zero current.
@@ -556,15 +559,29 @@ class DynamixelDevice(HandDevice):
                 self._ph.write1ByteTxRx(self._port, servo_id, ADDR_BUS_WATCHDOG, 0)
             self.armed = False
 
+    def _read_error_status(self, servo_id: int) -> int | None:
+        """The Hardware Error Status of one servo; ``None`` when it does not answer, or only
+        with answers of earlier transactions (bits no error has: the SDK matches an answer
+        by ID only), :data:`_STATUS_READ_TRIES` times with the input drained in between."""
+        for _ in range(_STATUS_READ_TRIES):
+            bits, result, _ = self._ph.read1ByteTxRx(self._port, servo_id, ADDR_HARDWARE_ERROR)
+            if result != self._sdk.COMM_SUCCESS:
+                return None
+            if not bits & ~_KNOWN_BITS:
+                return int(bits)
+            self.read_failures += 1
+            self.last_read_failure = 'hardware error read: a stale answer'
+            self._clear_input()
+        return None
+
     def recover(self) -> str:
         """Reboot the servos in an overload or overheating error, wait for them, write their
         settings again (torque stays off until :meth:`arm`). Returns what was done."""
         done = []
         with self._lock:
             for j, servo_id in enumerate(self.table.ids):
-                bits, result, _ = self._ph.read1ByteTxRx(self._port, servo_id,
-                                                         ADDR_HARDWARE_ERROR)
-                if result != self._sdk.COMM_SUCCESS:
+                bits = self._read_error_status(servo_id)
+                if bits is None:
                     done.append(f'servo {self.table.label(j)} does not answer')
                     continue
                 self.hardware_errors[j] = bits
