@@ -98,3 +98,5 @@ def test_the_cli_prints_it_and_refuses_a_bad_file(tmp_path) -> None:
     bad.write_text('format_version: 2\n', encoding='utf-8')
     out = subprocess.run([exe, str(bad)], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and 'hand' in out.stderr and 'Traceback' not in out.stderr
+    out = subprocess.run([exe, str(bad), 'extra'], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and 'one configuration at most' in out.stderr and not out.stdout

@@ -22,6 +22,10 @@ def main() -> None:
         print('usage: hand_urdf [CONFIG.yaml]\nPrint the URDF of the hand described by the '
               'configuration (default: DAM_CONFIG or the installed config/dam.yaml).')
         return
+    if len(sys.argv) > 2:
+        print(f'usage: hand_urdf [CONFIG.yaml]\nhand_urdf: one configuration at most, got '
+              f'{len(sys.argv) - 1} arguments: {" ".join(sys.argv[1:])}', file=sys.stderr)
+        raise SystemExit(2)
     try:
         config = load_config(sys.argv[1] if len(sys.argv) > 1 else None)
     except ConfigError as exc:
