@@ -80,14 +80,14 @@ def _bare_physics(sim_time_s: float, n: int) -> list[float]:
     """Wall time [s] of a fresh world (same model) stepping ``sim_time_s`` with no
     controller: construction and bare ``stepSimulation`` calls, ``n`` times."""
     from dam_common.config import load_config
-    from dam_experiments.sweep import _quiet_stdout
+    from dam_experiments.sweep import quiet_stdout
     from dam_sim_bridge.world import HandWorld
 
     config = load_config()
     walls = []
     for _ in range(n):
         start = time.monotonic()
-        with _quiet_stdout():
+        with quiet_stdout():
             world = HandWorld(config)
         with world:
             steps = round(sim_time_s / world.time_step_s)
