@@ -294,7 +294,7 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
     n = len(data.trials)
     done = f'{n} trials' if n == data.n_planned else f'{n} of {data.n_planned} trials'
     per_cell = f', {data.repeats} per cell' if probability else ''
-    shown = ', '.join(n for n in data.objects if n)
+    shown = data.object_label
     fig.suptitle(f'{data.directory.name}: {shown + ", " if shown else ""}{done}{per_cell}: '
                  f'k_theta - delta_theta_p map (paper Fig. 7){title_note}', fontsize=10)
     return fig
@@ -308,7 +308,7 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
     """The text summary: the sweep, then per friction angle the trials, how many lifted
     (ground truth), the outcome counts and the lowest boundary values."""
     n = len(data.trials)
-    shown = ', '.join(o for o in data.objects if o)
+    shown = data.object_label
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{n} of '
              f'{data.n_planned} trials, {data.repeats} per '
              f'cell, k_theta axis {"log" if log_k else "linear"}'
@@ -498,8 +498,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    output = (args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
-              if args.object is None else args.directory / f'fig7_{args.object}.png')
+    if args.output is not None:
+        output = args.output
+    elif args.object is not None:  # one picture per object of the sweep
+        output = args.directory / f'fig7_{args.object}.png'
+    else:
+        output = args.directory / DEFAULT_OUTPUT
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

@@ -143,7 +143,7 @@ def boundary_figure(report: SweepReport) -> Any:
         ax.tick_params(labelbottom=True, labelleft=True)
         ax.grid(True, which='major', linewidth=0.3)
         ax.legend(fontsize=7, loc='upper right')
-    shown = ', '.join(n for n in report.data.objects if n)
+    shown = report.data.object_label
     fig.suptitle(f'{report.data.directory.name}: {shown + ": " if shown else ""}simulated lift '
                  f'boundary against the analysis',
                  fontsize=10)
@@ -183,7 +183,7 @@ def summary_lines(report: SweepReport) -> list[str]:
     """The short summary printed after writing: the sweep, then one line per friction
     angle."""
     data = report.data
-    shown = ', '.join(n for n in data.objects if n)
+    shown = data.object_label
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{report.n_present} of '
              f'{data.n_planned} trials, '
              f'{data.repeats} per cell' + ('' if report.complete else ' (incomplete)')]
@@ -256,8 +256,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    output = (args.output if args.output is not None else args.directory / DEFAULT_OUTPUT
-              if args.object is None else args.directory / f'results_{args.object}.md')
+    if args.output is not None:
+        output = args.output
+    elif args.object is not None:  # one document per object of the sweep
+        output = args.directory / f'results_{args.object}.md'
+    else:
+        output = args.directory / DEFAULT_OUTPUT
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

@@ -145,7 +145,7 @@ def _header(report: SweepReport, command: str, figures: Mapping[str, str]) -> li
         note = f'typed `{" ".join(str(t) for t in typed)}`; {note}'
     k_values += f' ({note})'
     rows = [
-        ('object', ', '.join(n for n in data.objects if n) or 'the configured one'),
+        ('object', data.object_label or 'the configured one'),
         ('friction angles alpha [deg]', ', '.join(f'{a:g}' for a in spec.friction_angles_deg)),
         ('k_theta, finger 1 [N*m/rad]', k_values),
         ('delta_theta_p [deg]', ', '.join(f'{d:g}' for d in spec.delta_theta_p_deg)),

@@ -130,6 +130,11 @@ class SweepData:
         column)."""
         return tuple(dict.fromkeys(t.object_name for t in self.trials))
 
+    @property
+    def object_label(self) -> str:
+        """The named objects, comma-separated, for titles and summaries ('' for none)."""
+        return ', '.join(name for name in self.objects if name)
+
     def of_object(self, name: str) -> SweepData:
         """The trials of one object (``objects`` of the spec reduced to it), for a picture or
         a report of that object.

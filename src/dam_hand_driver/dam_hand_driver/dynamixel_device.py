@@ -95,6 +95,12 @@ LIMP_AFTER_FAILED_READS = 3
 _REBOOT_WAIT_S = 2.0
 
 
+def _stale_error_bits(bits: int | np.ndarray) -> int | np.ndarray:
+    """Bits that no Hardware Error Status has: an answer of an earlier transaction, which the
+    SDK took for this one (it matches status packets by ID only)."""
+    return bits & ~_KNOWN_BITS
+
+
 def hardware_error_names(bits: int) -> str:
     """``overload error, overheating error`` for Hardware Error Status ``bits``."""
     names = [name for bit, name in HARDWARE_ERROR_BITS.items() if bits & (1 << bit)]
@@ -445,7 +451,7 @@ class DynamixelDevice(HandDevice):
                          for servo_id in self.table.ids], dtype=np.int64)
         torque = np.array([self._error_reader.getData(servo_id, ADDR_TORQUE_ENABLE, 1)
                            for servo_id in self.table.ids], dtype=np.int64)
-        if np.any(bits & ~_KNOWN_BITS) or np.any(torque > 1):
+        if np.any(_stale_error_bits(bits)) or np.any(torque > 1):
             # Not a Hardware Error Status: an answer of an earlier transaction (the SDK
             # matches by ID only). Dropped, like the rest of the input.
             self.read_failures += 1
@@ -567,7 +573,7 @@ class DynamixelDevice(HandDevice):
             bits, result, _ = self._ph.read1ByteTxRx(self._port, servo_id, ADDR_HARDWARE_ERROR)
             if result != self._sdk.COMM_SUCCESS:
                 return None
-            if not bits & ~_KNOWN_BITS:
+            if not _stale_error_bits(bits):
                 return int(bits)
             self.read_failures += 1
             self.last_read_failure = 'hardware error read: a stale answer'
