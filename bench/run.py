@@ -2,7 +2,7 @@
 
 Each module defines ``run(args) -> dict``; the dict is printed and written to
 ``bench/results/<name>.json``. Usage: ``python bench/run.py [name ...] [--quick] [--grid]``
-(``--grid``: also the long grid measurement of ``bench_sweep``, about 10 minutes).
+(``--grid``: also the long grid measurement of ``bench_sweep``, about 15 minutes).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def main() -> int:
     parser.add_argument('--quick', action='store_true', help='fewer samples, for a smoke run')
     parser.add_argument('--grid', action='store_true',
                         help='sweep: also run the 480-trial grid with 1 and 2 workers (about '
-                             '10 minutes; for a quiet machine)')
+                             '15 minutes; for a quiet machine)')
     args = parser.parse_args()
     available = {p.stem[len('bench_'):]: p for p in sorted(BENCH_DIR.glob('bench_*.py'))}
     names = args.names or list(available)

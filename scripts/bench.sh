@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Run the benchmarks in bench/ (all, or those named): bash scripts/bench.sh [check_lift ...]
-# Options: --quick (fewer samples), --grid (sweep: also the 480-trial grid, ~10 minutes).
+# Options: --quick (fewer samples), --grid (sweep: also the 480-trial grid and the parallel
+# efficiency against its bare-physics ceiling, ~15 minutes).
 #
 # Each benchmark measures its target and a baseline in the same run and reports the ratio;
 # results are printed and written as JSON to bench/results/ (not tracked by git).
