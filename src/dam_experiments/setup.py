@@ -23,10 +23,10 @@ setup(
     entry_points={
         # Executables land in lib/<package>/ (setup.cfg), where `ros2 run` looks for them.
         'console_scripts': [
-            'dam_experiment = dam_experiments.experiment:main',
-            'sweep = dam_experiments.sweep_cli:main',
-            'sweep_plot = dam_experiments.sweep_plot:main',
-            'sweep_report = dam_experiments.sweep_report_cli:main',
+            'dam_experiment = dam_experiments.entry_points:dam_experiment',
+            'sweep = dam_experiments.entry_points:sweep',
+            'sweep_plot = dam_experiments.entry_points:sweep_plot',
+            'sweep_report = dam_experiments.entry_points:sweep_report',
         ],
     },
 )

@@ -17,8 +17,10 @@ from ros_testing import installed_executable  # noqa: E402
 
 def _parser() -> CommandLineParser:
     parser = CommandLineParser(prog='t')
-    parser.add_argument('--many', nargs='+', default=[])
+    parser.add_argument('--many', '--much', nargs='+', default=[])
     parser.add_argument('--one')
+    parser.add_argument('--each', action='append', default=[])
+    parser.add_argument('-q', action='count', default=0)
     parser.add_argument('-v', '--verbose', action='store_true')
     sub = parser.add_subparsers(dest='command')
     plot = sub.add_parser('plot')
@@ -48,6 +50,41 @@ def test_options_are_still_options() -> None:
 def test_an_option_that_looks_like_a_negative_value_is_refused() -> None:
     with pytest.raises(ValueError, match="'-1' looks like a negative value"):
         CommandLineParser().add_argument('-1')
+
+
+@pytest.mark.parametrize(('words', 'error'), [
+    (['--one', 'a', '--one', 'b'], '--one given twice: give it once'),
+    (['--one=a', '--one', 'b'], '--one given twice: give it once'),
+    (['--many', '1', '2', '--much', '3'], '--much given twice (as --many): give it once'),
+    (['-v', '--one', 'a', '--verbose'], '--verbose given twice (as -v): give it once'),
+    (['--one', 'a', '--on', 'b'], '--on given twice (as --one): give it once'),
+    (['plot', '--start', '1', '--start', '2'], '--start given twice: give it once'),
+])
+def test_an_option_given_twice_is_refused_not_replaced(
+        words: list[str], error: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as stopped:
+        _parser().parse_args(words)
+    assert stopped.value.code == 2
+    assert f't{" plot" if words[0] == "plot" else ""}: error: {error}' in capsys.readouterr().err
+
+
+def test_options_made_to_repeat_and_words_for_others_may_repeat() -> None:
+    parser = CommandLineParser(prog='t')
+    parser.add_argument('--one')
+    parser.add_argument('--each', action='append', default=[])
+    parser.add_argument('-q', action='count', default=0)
+    options, rest = parser.parse_known_args(
+        ['--each', 'a', '-q', '--each', 'b', '-q', '--one', 'x', '--ros-args', '-p', 'a:=1',
+         '-p', 'b:=2'])
+    assert options.each == ['a', 'b'] and options.q == 2 and options.one == 'x'
+    assert rest == ['--ros-args', '-p', 'a:=1', '-p', 'b:=2']
+
+
+def test_a_sweep_told_two_object_lists_runs_neither() -> None:
+    result = _run('dam_experiments', 'sweep', '--object', 'hex_bar', '--objects', 'cylinder',
+                  '--k-theta', '3', '--delta-theta-p', '10deg', '--out', '/nonexistent/never')
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    assert 'sweep: error: --objects given twice (as --object): give it once' in result.stderr
 
 
 def _run(package: str, executable: str, *args: str) -> subprocess.CompletedProcess:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -335,7 +336,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
                    'or the installed config/dam.yaml)')
     p.add_argument('--latency-cycles', type=int, default=2,
                    help='device cycles from a state to its command (default 2)')
-    p.add_argument('--max-time', type=float, default=20.0, help='simulated time limit [s]')
+    p.add_argument('--max-time', type=float, default=20.0,
+                   help='simulated time limit per grasp [s] (default 20)')
     p.add_argument('--fixtures', type=Path, default=None,
                    help='directory: also save every run\'s signals as .npz there')
     p.add_argument('--impedance', choices=('device', 'controller'), default=None,
@@ -347,13 +349,67 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+class _RowSink:
+    """The CSV of ``--out``, opened before the first grasp and written a row at a time (a
+    grasp done is never lost to a later error or to Ctrl-C); or nothing without ``--out``."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.count = 0
+        self._handle = None if path is None else path.open('w', newline='', encoding='utf-8')
+        self._writer: csv.DictWriter | None = None
+
+    def write(self, row: dict[str, object]) -> None:
+        self.count += 1
+        if self._handle is None:
+            return
+        if self._writer is None:
+            self._writer = csv.DictWriter(self._handle, fieldnames=list(row))
+            self._writer.writeheader()
+        self._writer.writerow(row)
+        self._handle.flush()
+
+    def close(self) -> None:
+        """Close the file; one that holds no row is removed."""
+        if self._handle is not None:
+            self._handle.close()
+            self._handle = None
+            if self._writer is None and self.path is not None:
+                self.path.unlink(missing_ok=True)
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments."""
+    """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments, 130 when
+    interrupted (SIGINT or SIGTERM; the rows done are in ``--out``)."""
+    args = _parse(sys.argv[1:] if argv is None else argv)
+    # A shell starts a background job with SIGINT ignored; kill -INT is to stop it all the same.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    sink: list[_RowSink] = []
+    try:
+        return _main(args, sink)
+    except KeyboardInterrupt:
+        done = sink[0].count if sink else 0
+        kept = (f'; {done} rows written to {args.out}' if done and args.out is not None
+                else '')
+        sys.stderr.write(f'dam_experiment: interrupted after {done} grasps{kept}\n')
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        for each in sink:
+            each.close()
+
+
+def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415
     from dam_common.config import load_config  # noqa: PLC0415
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
-    args = _parse(sys.argv[1:] if argv is None else argv)
     names = args.objects or ['']
     if args.objects is not None and (len(set(names)) != len(names) or '' in names):
         sys.stderr.write(f'dam_experiment: --object: {names!r} must be distinct, non-empty '
@@ -392,9 +448,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             analyzers.append(None)
     alphas = ([math.radians(a) for a in args.alpha] if args.alpha
               else [float(config.contact.friction_angle_rad)])
-    if args.fixtures is not None:
-        args.fixtures.mkdir(parents=True, exist_ok=True)
-    rows: list[dict[str, object]] = []
+    try:  # the outputs before the first grasp: a bad path costs no computation
+        if args.fixtures is not None:
+            args.fixtures.mkdir(parents=True, exist_ok=True)
+        sink.append(_RowSink(args.out))
+    except OSError as exc:
+        sys.stderr.write(f'dam_experiment: cannot write {exc.filename}: '
+                         f'{exc.strerror or exc}\n')
+        return 2
     width = max(6, *(len(c.object.name) for c in configs))
     header = (f'{"object":>{width}} {"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} '
               f'{"outcome":>17} {"lift":>7} {"max":>7} {"suff":>5} {"csm":>5}  reason')
@@ -404,19 +465,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.impedance is not None:
         overrides['impedance_on_device'] = args.impedance == 'device'
     for each, analyzer in zip(configs, analyzers, strict=True):
-        _run_object(each, analyzer, args, alphas, overrides, width, rows)
+        _run_object(each, analyzer, args, alphas, overrides, width, sink[0])
     if args.out is not None:
-        with args.out.open('w', newline='', encoding='utf-8') as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-            writer.writeheader()
-            writer.writerows(rows)
-        print(f'wrote {len(rows)} rows to {args.out}')
+        print(f'wrote {sink[0].count} rows to {args.out}')
     return 0
 
 
 def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[float],
-                overrides: dict[str, bool], width: int, rows: list[dict[str, object]]) -> None:
-    """The grid of one object: its rows appended to ``rows`` and printed."""
+                overrides: dict[str, bool], width: int, sink: _RowSink) -> None:
+    """The grid of one object: its rows printed and written to ``sink``."""
     from dam_experiments.sweep import quiet_stdout  # noqa: PLC0415
 
     name = config.object.name
@@ -435,7 +492,6 @@ def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[flo
                     row = {'object': name, **r.row()}
                     row['sufficient_region'] = suff
                     row['csm_region'] = csm
-                    rows.append(row)
                     print(f'{name:>{width}} {math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} '
                           f'{r.phase.name:>8} '
                           f'{r.outcome.name:>17} {r.lift_final * 1e3:6.1f}mm '
@@ -444,6 +500,7 @@ def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[flo
                     if args.fixtures is not None:
                         stem = f'dam_{name}_a{math.degrees(alpha):g}_k{k:g}_dp{dp:g}.npz'
                         save_signals(r, args.fixtures / stem)
+                    sink.write(row)
     finally:
         world.close()
 

@@ -249,24 +249,46 @@ def _run_stoppable(pending: Sequence[TrialSpec], sweep: SweepSpec, config: Any,
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``sweep``: run the sweep; see the module docstring for the exit status."""
+    args = _parse(sys.argv[1:] if argv is None else argv)
+    # A shell starts a background job with SIGINT ignored; ``kill -INT`` is to stop the sweep
+    # all the same, as it stops a node. SIGTERM stops it as SIGINT does, from the start.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        try:
+            prepared = _prepare(args)
+        except KeyboardInterrupt:  # loading, the analyses, the scheduler, the table's lock
+            return _fail('interrupted before any trial ran', 130)
+        if isinstance(prepared, int):
+            return prepared
+        config, sweep, table, done, client = prepared
+        try:
+            return _run(args, sweep, config, table, done, client)
+        finally:
+            table.release()
+            if client is not None:
+                client.close()
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _fail(message: str, status: int = 2) -> int:
+    sys.stderr.write(f'{PROG}: {message}\n')
+    return status
+
+
+def _prepare(args: argparse.Namespace) -> int | tuple[Any, SweepSpec, TrialTable, int, Any]:
+    """The configuration, the sweep, its table (opened and locked), the trials already done
+    and the Dask client of ``--scheduler`` (or ``None``); an exit status when refused."""
     from dam_common.config import load_config  # noqa: PLC0415
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
-    args = _parse(sys.argv[1:] if argv is None else argv)
-
-    def fail(message: str, status: int = 2) -> int:
-        sys.stderr.write(f'{PROG}: {message}\n')
-        return status
-
-    # A shell starts a background job with SIGINT ignored; ``kill -INT`` is to stop the sweep
-    # all the same, as it stops a node.
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         config = load_config(args.config)
         sweep = build_sweep(args, config)
     except (SweepError, DamCommonError, OSError) as exc:
-        return fail(str(exc))
+        return _fail(str(exc))
     # An object the loader takes but the analysis cannot (a finger that never reaches it)
     # fails every trial the same way: refused before anything runs, naming the object.
     from dam_analysis.errors import DamAnalysisError  # noqa: PLC0415 - slow import
@@ -275,16 +297,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             analyzer_for(config.with_object(name))
         except DamAnalysisError as exc:
-            return fail(f'object {name!r} cannot be analysed with this hand, so no trial can '
-                        f'run: {exc}')
+            return _fail(f'object {name!r} cannot be analysed with this hand, so no trial can '
+                         f'run: {exc}')
     client = None
     if args.scheduler:  # before any file is written: a wrong address leaves nothing behind
         try:
             client = _connect(args.scheduler)
-        except KeyboardInterrupt:
-            return 130
         except SweepError as exc:
-            return fail(str(exc), 1)
+            return _fail(str(exc), 1)
     try:
         from dam_common.version import software_version  # noqa: PLC0415
 
@@ -299,19 +319,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SweepLocked as exc:  # not a bad argument: the same command works later
         if client is not None:
             client.close()
-        return fail(str(exc), 1)
+        return _fail(str(exc), 1)
     except (SweepError, DamCommonError, OSError) as exc:
         if client is not None:
             client.close()
-        return fail(str(exc))
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    try:
-        return _run(args, sweep, config, table, done, client)
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        table.release()
+        return _fail(str(exc))
+    except BaseException:
         if client is not None:
             client.close()
+        raise
+    return config, sweep, table, done, client
 
 
 def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTable,
