@@ -42,6 +42,9 @@ def main() -> int:
     for name in names:
         spec = importlib.util.spec_from_file_location(f'bench_{name}', available[name])
         module = importlib.util.module_from_spec(spec)
+        # registered by its name, so that worker processes (multiprocessing's spawn) find
+        # the benchmark's functions by reference, as they import it from BENCH_DIR
+        sys.modules[spec.name] = module
         assert spec.loader is not None
         spec.loader.exec_module(module)
         print(f'--- {name} ---', flush=True)
