@@ -151,7 +151,7 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
     # stream stalled, the driver is in ERROR first: docs/simulation_grasp.md, "The CPU budget
     # of two cores".)
     _ready(client)
-    released = client.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
+    released = client.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=120.0)
     assert released.success, released.message
     assert client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request()).success
     since_ns = _ready(client)

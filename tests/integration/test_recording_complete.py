@@ -75,7 +75,7 @@ def _grasp_cycles(client: RosClient, until: float) -> list[str]:
             assert client.wait_future(result, 40.0)
             outcomes.append(result.result().result.outcome_name)
             client.spin_until(lambda: False, 0.5)
-            client.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
+            client.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=120.0)
             client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request(), timeout=30.0)
             client.spin_until(lambda: False, 0.3)
             client.call(Trigger, '/hand_driver/reset', Trigger.Request(), timeout=30.0)
