@@ -55,16 +55,23 @@ def _spread(samples: list[float], unit: str, digits: int = 3) -> dict[str, float
             f'max_{unit}': round(max(samples), digits)}
 
 
-def _trials(n: int) -> dict:
-    """Wall and CPU time [s] of ``n`` default trials, and the simulated time of one [s]."""
+def _default_trial():
+    """The configuration, the one-cell sweep of the configured default pair and its trial."""
     from dam_common.config import load_config
-    from dam_experiments.sweep import SweepSpec, TrialSpec, analyzer_for, run_trial
+    from dam_experiments.sweep import SweepSpec
 
     config = load_config()
     sweep = SweepSpec(friction_angles_deg=(math.degrees(config.contact.friction_angle_rad),),
                       k_theta=(float(config.task.k_theta_nm_per_rad),),
                       delta_theta_p_deg=(math.degrees(config.task.delta_theta_p_rad),))
-    spec: TrialSpec = sweep.trials()[0]
+    return config, sweep, sweep.trials()[0]
+
+
+def _trials(n: int) -> dict:
+    """Wall and CPU time [s] of ``n`` default trials, and the simulated time of one [s]."""
+    from dam_experiments.sweep import analyzer_for, run_trial
+
+    config, sweep, spec = _default_trial()
     analyzer_for(config)  # once per process, as in a sweep worker
     run_trial(spec, sweep, config)  # warm-up: imports, caches
     walls: list[float] = []
@@ -85,14 +92,9 @@ def _trials(n: int) -> dict:
 def _physics_in_trials(n: int) -> list[float]:
     """Time [s] spent in ``stepSimulation`` during each of ``n`` default trials."""
     import dam_sim_bridge.world as world_module
-    from dam_common.config import load_config
-    from dam_experiments.sweep import SweepSpec, run_trial
+    from dam_experiments.sweep import run_trial
 
-    config = load_config()
-    sweep = SweepSpec(friction_angles_deg=(math.degrees(config.contact.friction_angle_rad),),
-                      k_theta=(float(config.task.k_theta_nm_per_rad),),
-                      delta_theta_p_deg=(math.degrees(config.task.delta_theta_p_rad),))
-    spec = sweep.trials()[0]
+    config, sweep, spec = _default_trial()
     spent = [0.0]
     untimed = world_module.HandWorld
 

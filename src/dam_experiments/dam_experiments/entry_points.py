@@ -16,29 +16,39 @@ import sys
 INTERRUPTED = 130
 
 
-class _Signals:
-    """SIGINT and SIGTERM raise :class:`KeyboardInterrupt`; remembers that one came."""
+class InterruptOnSignals:
+    """Within ``with``: SIGINT and SIGTERM raise :class:`KeyboardInterrupt` (SIGINT too when a
+    shell started the command as a background job, which ignores it: ``kill -INT`` stops it as
+    it stops a node); ``received`` says one came. The previous handlers are restored after."""
 
     def __init__(self) -> None:
         self.received = False
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, self)
+        self._previous: dict[int, object] = {}
 
-    def __call__(self, signum: int, frame: object) -> None:
+    def __enter__(self) -> InterruptOnSignals:
+        self._previous = {signum: signal.signal(signum, self._interrupt)
+                          for signum in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _interrupt(self, signum: int, frame: object) -> None:
         self.received = True
         raise KeyboardInterrupt
 
 
 def _run(module: str, prog: str) -> None:
-    signals = _Signals()  # (a background job's ignored SIGINT is caught too: kill -INT works)
-    try:
-        status = importlib.import_module(module).main()
-    except KeyboardInterrupt:
-        status = _interrupted(prog)
-    except Exception:
-        if not signals.received:
-            raise
-        status = _interrupted(prog)  # the interrupt surfaced as another error (an extension's)
+    with InterruptOnSignals() as signals:
+        try:
+            status = importlib.import_module(module).main()
+        except KeyboardInterrupt:
+            status = _interrupted(prog)
+        except Exception:
+            if not signals.received:
+                raise
+            status = _interrupted(prog)  # the interrupt surfaced as another error
     sys.exit(status)
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -378,21 +377,16 @@ class _RowSink:
                 self.path.unlink(missing_ok=True)
 
 
-def _raise_interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """``dam_experiment``: run the grid, print a table; exit 0, 2 on bad arguments, 130 when
     interrupted (SIGINT or SIGTERM; the rows done are in ``--out``)."""
+    from dam_experiments.entry_points import InterruptOnSignals  # noqa: PLC0415
+
     args = _parse(sys.argv[1:] if argv is None else argv)
-    # A shell starts a background job with SIGINT ignored; kill -INT is to stop it all the same.
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     sink: list[_RowSink] = []
     try:
-        return _main(args, sink)
+        with InterruptOnSignals():
+            return _main(args, sink)
     except KeyboardInterrupt:
         done = sink[0].count if sink else 0
         kept = (f'; {done} rows written to {args.out}' if done and args.out is not None
@@ -400,7 +394,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f'dam_experiment: interrupted after {done} grasps{kept}\n')
         return 130
     finally:
-        signal.signal(signal.SIGTERM, previous)
         for each in sink:
             each.close()
 

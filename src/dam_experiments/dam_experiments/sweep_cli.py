@@ -231,10 +231,6 @@ def run_on_dask(client: Any, pending: Sequence[TrialSpec], sweep: SweepSpec, con
         client.cancel(futures)
 
 
-def _raise_interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def _run_stoppable(pending: Sequence[TrialSpec], sweep: SweepSpec, config: Any,
                    on_result: OnResult) -> None:
     """:func:`run_in_process` with :class:`StopRequest` on SIGINT and SIGTERM."""
@@ -249,13 +245,10 @@ def _run_stoppable(pending: Sequence[TrialSpec], sweep: SweepSpec, config: Any,
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``sweep``: run the sweep; see the module docstring for the exit status."""
+    from dam_experiments.entry_points import InterruptOnSignals  # noqa: PLC0415
+
     args = _parse(sys.argv[1:] if argv is None else argv)
-    # A shell starts a background job with SIGINT ignored; ``kill -INT`` is to stop the sweep
-    # all the same, as it stops a node. SIGTERM stops it as SIGINT does, from the start.
-    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
-    try:
+    with InterruptOnSignals():  # SIGTERM as SIGINT, from the start; a background job's too
         try:
             prepared = _prepare(args)
         except KeyboardInterrupt:  # loading, the analyses, the scheduler, the table's lock
@@ -269,8 +262,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             table.release()
             if client is not None:
                 client.close()
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 def _fail(message: str, status: int = 2) -> int:

@@ -52,6 +52,7 @@ from dam_experiments.sweep_results import (
     analysis_config,
     k_axis_is_log,
     one_object,
+    output_path,
     read_sweep,
 )
 from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
@@ -498,12 +499,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    if args.output is not None:
-        output = args.output
-    elif args.object is not None:  # one picture per object of the sweep
-        output = args.directory / f'fig7_{args.object}.png'
-    else:
-        output = args.directory / DEFAULT_OUTPUT
+    output = output_path(args.output, args.directory, DEFAULT_OUTPUT, args.object)
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

@@ -44,7 +44,7 @@ from dam_experiments.sweep_plot import (
 )
 from dam_experiments.sweep_report import SweepReport, compute_report
 from dam_experiments.sweep_report_markdown import decades, render_markdown, share
-from dam_experiments.sweep_results import one_object, read_sweep
+from dam_experiments.sweep_results import one_object, output_path, read_sweep
 from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
 
 PROG = 'sweep_report'
@@ -256,12 +256,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    if args.output is not None:
-        output = args.output
-    elif args.object is not None:  # one document per object of the sweep
-        output = args.directory / f'results_{args.object}.md'
-    else:
-        output = args.directory / DEFAULT_OUTPUT
+    output = output_path(args.output, args.directory, DEFAULT_OUTPUT, args.object)
     try:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)

@@ -179,6 +179,18 @@ class SweepData:
                      sum(t.outcome == 'SUCCESS' for t in g)) for (k, dp), g in groups.items()]
 
 
+def output_path(given: Path | None, directory: Path, default_name: str,
+                object_name: str | None) -> Path:
+    """Where a picture or document of a sweep goes: ``given``, else ``directory /
+    default_name``, with ``_NAME`` before the suffix for one object (``fig7_hex_bar.png``)."""
+    if given is not None:
+        return given
+    default = Path(default_name)
+    if object_name is not None:  # one output per object of the sweep
+        return directory / f'{default.stem}_{object_name}{default.suffix}'
+    return directory / default
+
+
 def one_object(data: SweepData, name: str | None) -> SweepData:
     """The sweep's trials of the object ``name``; ``None``: of its only object.
 

@@ -297,6 +297,13 @@ class _JointTable:
     upper_list: list[float] = field(default_factory=list)
 
 
+def _toward(current: float, target: float, max_change: float) -> float:
+    """``current`` moved towards ``target`` by at most ``max_change`` (``target`` itself,
+    exactly, when it is that close)."""
+    gap = target - current
+    return target if abs(gap) <= max_change else current + math.copysign(max_change, gap)
+
+
 class HandWorld:
     """The simulated hand, table and cylinder, steppable in lockstep.
 
@@ -828,36 +835,22 @@ class HandWorld:
         get_states = self._get_joint_states
         set_torques = self._set_joint_motor_control_array
         torque_control = pybullet.TORQUE_CONTROL
-        torque_rows = range(n_t)
-        imp_rows = tuple(enumerate(range(n_t, n_t + n_i)))
-        # The per-step loop in plain floats, the slew and the clip written out: on three
-        # joints a Python call per number costs more than the arithmetic.
         for _ in range(steps):
-            for j in torque_rows:  # TORQUE: slewed towards the setpoint
-                force, goal = forces[j], target[j]
-                gap = goal - force
-                forces[j] = (goal if -max_change <= gap <= max_change
-                             else force + max_change if gap > 0.0 else force - max_change)
-            if n_i:
-                states = get_states(hand, imp_joints)
-                for j, row in imp_rows:  # IMPEDANCE: the law, then the slew
+            states = get_states(hand, imp_joints) if n_i else ()
+            for j in range(n_i):
+                theta, theta_dot = states[j][0], states[j][1]
+                eff = _toward(theta_0_eff[j], theta_0[j], max_shift[j])
+                raw = k[j] * (eff - theta) - d[j] * theta_dot
+                raw_imp[j] = raw
+                target[n_t + j] = clip(raw, -limit, limit)
+                theta_0_eff[j] = eff
+            for j in range(n_t + n_i):
+                forces[j] = _toward(forces[j], target[j], max_change)
+            for j in range(n_i):
+                force = forces[n_t + j]
+                if force != target[n_t + j]:  # slewed: the spring yields, no wind-up
                     theta, theta_dot = states[j][0], states[j][1]
-                    eff, goal, shift = theta_0_eff[j], theta_0[j], max_shift[j]
-                    gap = goal - eff
-                    eff = (goal if -shift <= gap <= shift
-                           else eff + shift if gap > 0.0 else eff - shift)
-                    raw = k[j] * (eff - theta) - d[j] * theta_dot
-                    raw_imp[j] = raw
-                    goal = (raw if raw != raw or -limit < raw < limit  # clip, NaN kept
-                            else -limit if raw <= -limit else limit)
-                    force = forces[row]
-                    gap = goal - force
-                    force = (goal if -max_change <= gap <= max_change
-                             else force + max_change if gap > 0.0 else force - max_change)
-                    if force != goal:  # slewed: the spring yields, no wind-up
-                        eff = theta + (force + d[j] * theta_dot) / k[j]
-                    forces[row] = force
-                    theta_0_eff[j] = eff
+                    theta_0_eff[j] = theta + (force + d[j] * theta_dot) / k[j]
             set_torques(hand, joints, torque_control, forces=forces)
             step_simulation()
         self._steps += steps
