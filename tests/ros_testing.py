@@ -141,6 +141,19 @@ def caught_signals(pid: int) -> set[int]:
     return set()
 
 
+def wait_for_signal_handlers(proc: subprocess.Popen, timeout_s: float = 20.0) -> None:
+    """Return once ``proc`` handles SIGTERM (its entry point's first lines have run); a
+    signal sent earlier is the interpreter's to handle, not the program's.
+
+    Raises AssertionError when ``proc`` exits first or ``timeout_s`` [s] passes.
+    """
+    give_up = time.monotonic() + timeout_s
+    while signal.SIGTERM not in caught_signals(proc.pid):
+        assert proc.poll() is None, 'the program exited before installing its handlers'
+        assert time.monotonic() < give_up, 'no SIGTERM handler installed'
+        time.sleep(0.002)
+
+
 def child_pids(pid: int) -> list[int]:
     """PIDs of the direct children of process ``pid`` (from /proc; empty once it is gone)."""
     out: list[int] = []

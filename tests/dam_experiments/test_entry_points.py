@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_testing import caught_signals, installed_executable
+from ros_testing import installed_executable, wait_for_signal_handlers
 
 #: Long enough that no command ends before its signal (a 0.6 s grasp costs about 0.2 s).
 GRID = ['--k-theta', *[str(k) for k in (0.5, 1, 2, 3, 5, 7, 10, 12, 15, 20)],
@@ -25,10 +25,7 @@ def _start(executable: str, *args: str) -> subprocess.Popen:
     """The command, once its signal handlers are in place (its entry point's first lines)."""
     proc = subprocess.Popen([str(installed_executable('dam_experiments', executable)), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 20.0
-    while signal.SIGTERM not in caught_signals(proc.pid):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-        time.sleep(0.002)
+    wait_for_signal_handlers(proc)
     return proc
 
 

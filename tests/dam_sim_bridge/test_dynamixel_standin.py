@@ -21,7 +21,7 @@ from dynamixel_testing import fast_gil_handoff
 
 from dam_common.config import DamConfig, load_config
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
-from ros_testing import caught_signals
+from ros_testing import wait_for_signal_handlers
 
 sdk = pytest.importorskip('dynamixel_sdk')
 
@@ -282,10 +282,7 @@ def test_executable_signal_during_start_up() -> None:
     """SIGTERM while the program imports (its handlers are its first lines: a signal before
     them is the interpreter's to handle, so the test waits for them, not for a fixed time)."""
     proc = _start()
-    deadline = time.monotonic() + 20.0
-    while signal.SIGTERM not in caught_signals(proc.pid):
-        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
-        time.sleep(0.002)
+    wait_for_signal_handlers(proc)
     time.sleep(0.05)  # importing
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=10)

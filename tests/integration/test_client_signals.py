@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from ros_testing import caught_signals, installed_executable
+from ros_testing import installed_executable, wait_for_signal_handlers
 
 pytestmark = [pytest.mark.integration]
 
@@ -69,11 +69,7 @@ def run_trial(command: list[str], delay_s: float, signum: signal.Signals) -> Tri
         proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env,
                                 stdin=subprocess.DEVNULL)
         try:
-            give_up = time.monotonic() + 20.0
-            while signal.SIGTERM not in caught_signals(proc.pid):
-                assert proc.poll() is None, 'the client exited before installing its handlers'
-                assert time.monotonic() < give_up, 'no SIGTERM handler installed'
-                time.sleep(0.002)
+            wait_for_signal_handlers(proc)
             time.sleep(delay_s)
             t_signal = time.monotonic()
             proc.send_signal(signum)

@@ -26,13 +26,13 @@ import pytest
 
 from ros_testing import (
     RosClient,
-    caught_signals,
     child_pids,
     config_with_free_ports,
     fixture_command,
     installed_executable,
     node_process,
     process_gone,
+    wait_for_signal_handlers,
 )
 
 # 30 real-time trials per node on a shared 2-core machine: a storm that fails is run once more
@@ -71,14 +71,6 @@ class Trial:
         return ''
 
 
-def _wait_handlers(proc: subprocess.Popen, timeout_s: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while signal.SIGTERM not in caught_signals(proc.pid):
-        assert proc.poll() is None, 'the node exited before installing its handlers'
-        assert time.monotonic() < deadline, 'no SIGTERM handler installed'
-        time.sleep(0.002)
-
-
 def run_trial(command: list[str], env: dict[str, str] | None, delay_s: float,
               signum: signal.Signals,
               while_waiting: Callable[[float], str] | None = None) -> Trial:
@@ -94,7 +86,7 @@ def run_trial(command: list[str], env: dict[str, str] | None, delay_s: float,
         proc = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=full_env,
                                 stdin=subprocess.DEVNULL)
         try:
-            _wait_handlers(proc)
+            wait_for_signal_handlers(proc)
             deadline = time.monotonic() + delay_s
             moment = while_waiting(deadline) if while_waiting else ''
             while time.monotonic() < deadline:
