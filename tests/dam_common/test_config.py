@@ -179,6 +179,20 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
          r'sim\.compliant_rotor_inertia_kg_m2: missing key'),
         ('sim.palm_thickness_m', 'thick', r"sim\.palm_thickness_m.*number.*'thick'"),
         ('sim.palm_thickness_m', _DELETE, r'sim\.palm_thickness_m: missing key'),
+        ('sim.contact_model', 'soft',
+         r"sim\.contact_model: expected one of \['compliant', 'rigid'\], got 'soft'"),
+        ('sim.contact_model', 'Rigid', r"sim\.contact_model.*got 'Rigid'"),
+        ('sim.contact_model', True, r'sim\.contact_model.*got True'),
+        ('sim.contact_model', _DELETE, r'sim\.contact_model: missing key'),
+        ('sim.contact_damping_n_s_per_m', 0.05,
+         r'sim\.contact_damping_n_s_per_m: 0\.05 N\*s/m is below 0\.1 N\*s/m'),
+        ('sim.contact_damping_n_s_per_m', -1.0, r'sim\.contact_damping_n_s_per_m: -1\.0 N'),
+        ('sim.contact_damping_n_s_per_m', 'critical',
+         r"sim\.contact_damping_n_s_per_m.*number.*'critical'"),
+        ('sim.contact_damping_n_s_per_m', float('nan'),
+         r'sim\.contact_damping_n_s_per_m.*finite.*nan'),
+        ('sim.contact_damping_n_s_per_m', _DELETE,
+         r'sim\.contact_damping_n_s_per_m: missing key'),
         ('controller.contact_confirm_time_s', -0.03,
          r'controller\.contact_confirm_time_s.*non-negative.*-0\.03'),
         ('controller.contact_confirm_time_s', _DELETE,
@@ -208,6 +222,20 @@ def test_default_path_honours_environment(monkeypatch: pytest.MonkeyPatch,
 def test_bad_values_are_named(raw: dict[str, Any], path: str, value: Any, expected: str) -> None:
     with pytest.raises(ConfigError, match=expected):
         config_from_dict(_with(raw, path, value))
+
+
+def test_sim_contact_model(raw: dict[str, Any]) -> None:
+    """The shipped stand-in uses compliant contacts damped critically for the cylinder
+    (2 sqrt(k_n m)); rigid is the other choice."""
+    cfg = load_config(CONFIG_FILE)
+    assert cfg.sim.contact_model == 'compliant'
+    k_n, m = cfg.contact.contact_stiffness_n_per_m[0], cfg.object.mass_kg
+    assert cfg.sim.contact_damping_n_s_per_m == pytest.approx(2.0 * math.sqrt(k_n * m),
+                                                              rel=1e-3)
+    rigid = config_from_dict(_with(raw, 'sim.contact_model', 'rigid'))
+    assert rigid.sim.contact_model == 'rigid'
+    low = config_from_dict(_with(raw, 'sim.contact_damping_n_s_per_m', 0.1))
+    assert low.sim.contact_damping_n_s_per_m == 0.1
 
 
 def test_object_library(raw: dict[str, Any]) -> None:
@@ -341,3 +369,58 @@ def test_objects_the_hand_and_the_standin_cannot_take_are_refused(entry, match) 
     data['object']['library']['odd'] = dict(entry, length_m=0.1, mass_kg=0.04)
     with pytest.raises(ConfigError, match=match):
         config_from_dict(data)
+
+
+# --------------------------------------------------------------------------------------------
+# Overlays
+
+
+def test_an_overlay_merges_key_by_key_and_replaces_values(tmp_path: Path) -> None:
+    from dam_common.config import load_config
+
+    overlay = tmp_path / 'overlay.yaml'
+    overlay.write_text('contact:\n  friction_angle_deg: 12.5\n'
+                       '  contact_stiffness_n_per_m: [2.0e+5, 40.0, 3.0e+5]\n', encoding='utf-8')
+    base = load_config(CONFIG_FILE)
+    merged = load_config(CONFIG_FILE, [overlay])
+    assert merged.contact.friction_angle_rad == pytest.approx(math.radians(12.5))
+    np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m, [2e5, 40.0, 3e5])
+    # keys the overlay does not name keep the file's values
+    assert merged.contact.cone_faces == base.contact.cone_faces
+    assert merged.task == base.task
+    assert merged.contact.series_stiffness_n_per_m == math.inf
+    assert merged.contact.tangential_stiffness_n_per_m == 40.0
+    assert str(overlay) in merged.source
+
+
+def test_overlays_apply_in_order(tmp_path: Path) -> None:
+    from dam_common.config import load_config
+
+    first, second = tmp_path / 'a.yaml', tmp_path / 'b.yaml'
+    first.write_text('contact:\n  friction_angle_deg: 10.0\n', encoding='utf-8')
+    second.write_text('contact:\n  friction_angle_deg: 20.0\n', encoding='utf-8')
+    assert load_config(CONFIG_FILE, [first, second]).contact.friction_angle_rad == \
+        pytest.approx(math.radians(20.0))
+
+
+@pytest.mark.parametrize('text, match', [
+    ('- 1\n- 2\n', 'must be a mapping'),
+    ('contact:\n  friction_angle_deg: 95.0\n', 'friction_angle_deg'),
+    ('contact:\n  stiffnes: 1\n', 'unknown key'),
+    ('contact: [1\n', 'not valid YAML'),
+])
+def test_a_bad_overlay_is_refused_naming_it(tmp_path: Path, text: str, match: str) -> None:
+    from dam_common.config import load_config
+
+    overlay = tmp_path / 'bad.yaml'
+    overlay.write_text(text, encoding='utf-8')
+    with pytest.raises(ConfigError, match=match) as info:
+        load_config(CONFIG_FILE, [overlay])
+    assert 'bad.yaml' in str(info.value)
+
+
+def test_a_missing_overlay_is_refused(tmp_path: Path) -> None:
+    from dam_common.config import load_config
+
+    with pytest.raises(ConfigError, match='cannot read'):
+        load_config(CONFIG_FILE, [tmp_path / 'nope.yaml'])

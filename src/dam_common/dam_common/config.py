@@ -39,6 +39,12 @@ CONFIG_ENV_VAR = 'DAM_CONFIG'
 #: 2: the object is a library of column objects (``object.library``, ``object.default``);
 #: version 1 described one cylinder (``object.shape``, ``object.radius_m``).
 _FORMAT_VERSION = 2
+#: The values of ``sim.contact_model``.
+CONTACT_MODELS: tuple[str, str] = ('compliant', 'rigid')
+#: Smallest ``sim.contact_damping_n_s_per_m`` [N*s/m]: Bullet adds the contact damping of the
+#: two bodies of a contact, and the object, which keeps Bullet's default parameters (its table
+#: contact stays rigid), contributes 0.1 N*s/m of its own.
+SIM_MIN_CONTACT_DAMPING_N_S_PER_M = 0.1
 #: Longest the device's slew-limited safe stop may take from the actuator limit to zero [s]
 #: (``device.torque_limit_nm / device.torque_rate_limit_nm_per_s``).
 _SAFE_STOP_RAMP_MAX_S = 0.2
@@ -148,11 +154,34 @@ class ContactConfig:
     contact_stiffness_n_per_m: np.ndarray  # (3,) diagonal of K_pi
     table_friction_coefficient: float
     csm_max_penetration_m: float  # the CSM's domain of validity: f_n / k_n at most this [m]
+    #: Tangential stiffness of the finger in series with the contact's tangential spring
+    #: [N/m]; ``inf`` (the default): the finger is rigid, the CSM is the paper's.
+    series_stiffness_n_per_m: float = math.inf
 
     @property
     def friction_coefficient(self) -> float:
         """mu = tan(alpha)."""
         return math.tan(self.friction_angle_rad)
+
+    @property
+    def tangential_stiffness_n_per_m(self) -> float:
+        """Effective tangential stiffness of the CSM's spring-slider [N/m].
+
+        The contact's in-plane tangential stiffness ``k_t`` (``contact_stiffness_n_per_m[1]``)
+        in series with ``series_stiffness_n_per_m``: ``1 / (1/k_t + 1/k_s)``; exactly ``k_t``
+        when ``k_s`` is infinite.
+        """
+        return series_stiffness(float(self.contact_stiffness_n_per_m[1]),
+                                self.series_stiffness_n_per_m)
+
+
+def series_stiffness(k_a: float, k_b: float) -> float:
+    """Two springs in series, ``1 / (1/k_a + 1/k_b)`` [N/m]; an infinite one drops out."""
+    if math.isinf(k_b):
+        return k_a
+    if math.isinf(k_a):
+        return k_b
+    return k_a * k_b / (k_a + k_b)
 
 
 @dataclass(frozen=True)
@@ -211,6 +240,12 @@ class SimConfig:
     #: state frame, for the command that answers the previous joint state while a commander
     #: streams (see ``docs/simulation_grasp.md``, "Simulated time").
     command_wait_s: float = 0.5
+    #: Contact model of the finger links: ``'compliant'`` (a normal spring of the CSM's
+    #: ``contact.contact_stiffness_n_per_m[0]`` and a damper per finger-object contact) or
+    #: ``'rigid'`` (Bullet's rigid contacts); see ``docs/simulation_grasp.md``, "Contact model".
+    contact_model: str = 'rigid'
+    #: Normal damping of a compliant finger-object contact [N*s/m] (unused when rigid).
+    contact_damping_n_s_per_m: float = 126.5
 
 
 @dataclass(frozen=True)
@@ -312,30 +347,59 @@ def default_config_path() -> Path:
     )
 
 
-def load_config(path: str | os.PathLike[str] | None = None) -> DamConfig:
-    """Read and validate a configuration file.
+def load_config(path: str | os.PathLike[str] | None = None,
+                overlays: Sequence[str | os.PathLike[str]] = ()) -> DamConfig:
+    """Read and validate a configuration file, with optional overlays.
 
     Parameters
     ----------
     path
         YAML file; ``None`` uses :func:`default_config_path`.
+    overlays
+        YAML files holding part of a configuration (e.g. the ``contact`` values a calibration
+        fitted, ``docs/analysis.md``), applied in order: a mapping merges key by key into the
+        mapping below it, any other value (a number, a list) replaces it. The merged result is
+        validated as a whole, by the same rules.
 
     Raises
     ------
     ConfigError
-        The file is missing, is not YAML, holds a key twice in one mapping, or any key is
-        missing, unknown or has a bad value.
+        A file is missing, is not YAML, holds a key twice in one mapping, an overlay is not a
+        mapping, or any key of the result is missing, unknown or has a bad value.
     """
     cfg_path = Path(path) if path is not None else default_config_path()
+    data = _read_yaml(cfg_path)
+    source = str(cfg_path)
+    for overlay in overlays:
+        overlay_path = Path(overlay)
+        patch = _read_yaml(overlay_path)
+        if not isinstance(patch, Mapping):
+            raise ConfigError(f'configuration overlay {str(overlay_path)!r} must be a mapping '
+                              f'of configuration keys, got {patch!r}')
+        data = merge_overlay(data, patch)
+        source += f' + {overlay_path}'
+    return config_from_dict(data, source=source)
+
+
+def _read_yaml(cfg_path: Path) -> Any:
     try:
         text = cfg_path.read_text(encoding='utf-8')
     except OSError as exc:
         raise ConfigError(f'cannot read configuration file {str(cfg_path)!r}: {exc}') from exc
     try:
-        data = safe_load_unique(text, str(cfg_path))
+        return safe_load_unique(text, str(cfg_path))
     except yaml.YAMLError as exc:
         raise ConfigError(f'{str(cfg_path)!r} is not valid YAML: {exc}') from exc
-    return config_from_dict(data, source=str(cfg_path))
+
+
+def merge_overlay(base: Any, patch: Any) -> Any:
+    """``patch`` over ``base``: mappings merge key by key, other values replace (new object)."""
+    if isinstance(base, Mapping) and isinstance(patch, Mapping):
+        merged = dict(base)
+        for key, value in patch.items():
+            merged[key] = merge_overlay(base[key], value) if key in base else value
+        return merged
+    return patch
 
 
 def config_from_dict(data: Any, source: str = '<dict>') -> DamConfig:
@@ -562,7 +626,8 @@ def _convex_polygon(node: _Node, name: str) -> ConvexPolygon:
 
 def _contact(node: _Node) -> ContactConfig:
     node.only_keys({'friction_angle_deg', 'cone_faces', 'contact_stiffness_n_per_m',
-                    'table_friction_coefficient', 'csm_max_penetration_m'})
+                    'table_friction_coefficient', 'csm_max_penetration_m',
+                    'series_stiffness_n_per_m'})
     alpha = node.child('friction_angle_deg')
     alpha_deg = alpha.number()
     if not 0.0 <= alpha_deg < 90.0:
@@ -575,7 +640,19 @@ def _contact(node: _Node) -> ContactConfig:
         table_friction_coefficient=node.child('table_friction_coefficient').number(
             nonnegative=True),
         csm_max_penetration_m=node.child('csm_max_penetration_m').number(positive=True),
+        series_stiffness_n_per_m=_series_stiffness(node),
     )
+
+
+def _series_stiffness(node: _Node) -> float:
+    """``contact.series_stiffness_n_per_m``: optional, positive, ``.inf`` allowed."""
+    if 'series_stiffness_n_per_m' not in node.require_mapping():
+        return math.inf
+    child = node.child('series_stiffness_n_per_m')
+    value = child.raw
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
+        return math.inf
+    return child.number(positive=True)
 
 
 def _task(node: _Node, hand: HandConfig) -> TaskConfig:
@@ -652,7 +729,8 @@ def _classification(node: _Node) -> ClassificationConfig:
 def _sim(node: _Node, hand: HandConfig) -> SimConfig:
     node.only_keys({'time_step_s', 'solver_iterations', 'initial_compliant_angle_deg',
                     'servo_force_limit_nm', 'object_faces', 'compliant_rotor_inertia_kg_m2',
-                    'palm_thickness_m', 'stall_timeout_s', 'command_wait_s'})
+                    'palm_thickness_m', 'stall_timeout_s', 'command_wait_s', 'contact_model',
+                    'contact_damping_n_s_per_m'})
     step = node.child('time_step_s')
     step_s = step.number(positive=True)
     if step_s > 0.01:
@@ -660,6 +738,17 @@ def _sim(node: _Node, hand: HandConfig) -> SimConfig:
     angle = node.child('initial_compliant_angle_deg')
     angle_rad = math.radians(angle.number())
     _check_within(angle, angle_rad, hand.joint_limits_rad['compliant'])
+    model = node.child('contact_model')
+    model_name = model.raw
+    if not isinstance(model_name, str) or model_name not in CONTACT_MODELS:
+        raise model.error(f'expected one of {list(CONTACT_MODELS)}, got {model_name!r}')
+    damping = node.child('contact_damping_n_s_per_m')
+    damping_value = damping.number()
+    if damping_value < SIM_MIN_CONTACT_DAMPING_N_S_PER_M:
+        raise damping.error(
+            f'{damping_value!r} N*s/m is below {SIM_MIN_CONTACT_DAMPING_N_S_PER_M} N*s/m, the '
+            f'contact damping Bullet gives the object of its own (it adds the two bodies\' '
+            f'dampings)')
     return SimConfig(
         time_step_s=step_s,
         solver_iterations=node.child('solver_iterations').integer(minimum=1, maximum=1000),
@@ -671,6 +760,8 @@ def _sim(node: _Node, hand: HandConfig) -> SimConfig:
         palm_thickness_m=node.child('palm_thickness_m').number(nonnegative=True),
         stall_timeout_s=_wall_bound(node.child('stall_timeout_s')),
         command_wait_s=_wall_bound(node.child('command_wait_s')),
+        contact_model=model_name,
+        contact_damping_n_s_per_m=damping_value,
     )
 
 

@@ -62,6 +62,21 @@ def declare_config_file(node: Node) -> str:
         ParameterDescriptor(description=CONFIG_FILE_DESCRIPTION, read_only=True)).value)
 
 
+def declare_config_overlay(node: Node) -> tuple[str, ...]:
+    """Declare the read-only ``config_overlay`` parameter on ``node``; the overlay files.
+
+    The value is a YAML file holding part of a configuration (the ``contact`` values a
+    calibration fitted, ``docs/analysis.md``), merged over ``config_file`` by
+    :func:`dam_common.config.load_config`; empty (the default): no overlay.
+    """
+    value = str(node.declare_parameter(
+        'config_overlay', '',
+        ParameterDescriptor(description='configuration overlay (YAML, part of a '
+                                        'configuration) merged over config_file; empty: none',
+                            read_only=True)).value)
+    return (value,) if value else ()
+
+
 def declare_object(node: Node, config: DamConfig) -> DamConfig:
     """Declare the read-only ``object`` parameter on ``node``; ``config`` with that object.
 

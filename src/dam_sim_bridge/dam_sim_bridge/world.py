@@ -37,6 +37,20 @@ Model
   the table coefficient, exactly, also for ``alpha = 0``. Finger-table is their product
   ``tan(alpha) * table coefficient`` (the fingers are not meant to touch the table). Rolling and
   spinning friction are zero, restitution is zero.
+* Contact model (:attr:`WorldOptions.contact_model`). ``'rigid'``: Bullet's rigid contacts
+  (penetration corrected by the solver's error reduction, a slop of 1e-5 m). ``'compliant'``:
+  every contact of a finger link is Bullet's implicit normal spring-damper (``changeDynamics``
+  ``contactStiffness`` / ``contactDamping`` on the nine links, contact slop 0): the force of a
+  contact point is ``k_n * penetration + d * approach speed``, the CSM's contact spring of
+  ``contact.contact_stiffness_n_per_m[0]``. Bullet combines the two bodies of a contact in
+  series, ``1/k = 1/k_0 + 1/k_1``, and adds their dampings; a body whose parameters were never
+  set has a stiffness of 1e30 N/m (rigid in series) and a damping of 0.1 N*s/m. The object
+  and the static table and palm keep those defaults, so the links get ``k_n`` and ``d - 0.1``
+  and a finger-object contact has exactly ``k_n`` and ``d``
+  (:meth:`HandWorld.pair_contact`), while the table's and the palm's contacts with the object
+  stay rigid: Bullet's contact manifold of a flat face (at most four points, found one per
+  step) makes springs there rock and roll the resting prism away. Friction stays Bullet's
+  impulse friction (no tangential spring).
 
 Joint control
 -------------
@@ -115,6 +129,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from dam_common.config import CONTACT_MODELS, SIM_MIN_CONTACT_DAMPING_N_S_PER_M
 from dam_common.cross_section import Circle
 from dam_common.device_protocol import JointFault, JointMode
 from dam_common.hand_urdf import hand_urdf
@@ -135,6 +150,10 @@ _TABLE_HALF_EXTENTS_M = (0.25, 0.25, 0.02)
 _TORQUE, _POSITION, _HOLD = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 _IMPEDANCE = int(JointMode.IMPEDANCE)
 _MODES = frozenset((_TORQUE, _POSITION, _HOLD, _IMPEDANCE))
+#: Bullet's contact stiffness [N/m] and damping [N*s/m] of a body whose contact parameters
+#: were never set (``btCollisionObject``: ``BT_LARGE_FLOAT`` in double precision, 0.1); the
+#: damping is ``SIM_MIN_CONTACT_DAMPING_N_S_PER_M`` of the configuration.
+_BULLET_DEFAULT_CONTACT = (1.0e30, SIM_MIN_CONTACT_DAMPING_N_S_PER_M)
 
 
 @dataclass(frozen=True)
@@ -179,6 +198,17 @@ class WorldOptions:
         ``k_theta`` = 10 and 4 cycles at 15. Zero disables it.
     palm_thickness_m
         Thickness of the palm box above the base plane [m]; zero: no palm.
+    contact_model
+        ``'rigid'``: Bullet's rigid contacts; ``'compliant'``: every finger-object contact is a
+        normal spring of ``contact_stiffness_n_per_m`` with the damper
+        ``contact_damping_n_s_per_m`` (see the module docstring, "Contact model").
+    contact_stiffness_n_per_m
+        Normal stiffness ``k_n`` of a compliant finger-object contact point [N/m] (the CSM's
+        ``contact.contact_stiffness_n_per_m[0]``).
+    contact_damping_n_s_per_m
+        Normal damping of a compliant finger-object contact [N*s/m], at least 0.1 (the
+        object's own share in Bullet). The default, 126.5, critically damps the 0.04 kg
+        cylinder on 1e5 N/m: ``2 sqrt(k_n m)``.
     """
 
     time_step_s: float = 1.0e-3
@@ -194,6 +224,9 @@ class WorldOptions:
     object_faces: int = 64
     compliant_rotor_inertia_kg_m2: float = 2.0e-3
     palm_thickness_m: float = 0.01
+    contact_model: str = 'rigid'
+    contact_stiffness_n_per_m: float = 1.0e5
+    contact_damping_n_s_per_m: float = 126.5
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.time_step_s) and 1e-5 <= self.time_step_s <= 0.01):
@@ -222,11 +255,25 @@ class WorldOptions:
                 raise WorldConfigError(f'{name} {value!r} must be a number >= 0')
         if int(self.solver_iterations) < 1:
             raise WorldConfigError(f'solver_iterations {self.solver_iterations!r} must be >= 1')
+        if self.contact_model not in CONTACT_MODELS:
+            raise WorldConfigError(f'contact_model {self.contact_model!r} is not one of '
+                                   f'{list(CONTACT_MODELS)}')
+        k_n = self.contact_stiffness_n_per_m
+        if not (isinstance(k_n, (int, float)) and math.isfinite(k_n) and k_n > 0.0):
+            raise WorldConfigError(f'contact_stiffness_n_per_m {k_n!r} must be a positive '
+                                   f'number')
+        d = self.contact_damping_n_s_per_m
+        if not (isinstance(d, (int, float)) and math.isfinite(d)
+                and d >= SIM_MIN_CONTACT_DAMPING_N_S_PER_M):
+            raise WorldConfigError(f'contact_damping_n_s_per_m {d!r} must be a number >= '
+                                   f'{SIM_MIN_CONTACT_DAMPING_N_S_PER_M} (the object\'s own '
+                                   f'contact damping in Bullet)')
 
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: object) -> WorldOptions:
         """Options from ``config``: ``sim`` section, ``hand.link_masses_kg``,
-        ``device.torque_limit_nm`` and ``device.torque_rate_limit_nm_per_s``; ``overrides``
+        ``device.torque_limit_nm``, ``device.torque_rate_limit_nm_per_s`` and
+        ``contact.contact_stiffness_n_per_m[0]`` (the normal stiffness); ``overrides``
         (field name -> value) win.
 
         Raises
@@ -246,6 +293,9 @@ class WorldOptions:
             'object_faces': int(sim.object_faces),
             'compliant_rotor_inertia_kg_m2': float(sim.compliant_rotor_inertia_kg_m2),
             'palm_thickness_m': float(sim.palm_thickness_m),
+            'contact_model': str(sim.contact_model),
+            'contact_stiffness_n_per_m': float(config.contact.contact_stiffness_n_per_m[0]),
+            'contact_damping_n_s_per_m': float(sim.contact_damping_n_s_per_m),
         }
         names = {f.name for f in fields(cls)}
         for key, value in overrides.items():
@@ -426,6 +476,23 @@ class HandWorld:
         self._pb.setJointMotorControlArray(
             self.hand_id, self._joints.indices, pybullet.VELOCITY_CONTROL,
             forces=[0.0] * self.n_joints)
+        self._set_contact_model()
+
+    def _set_contact_model(self) -> None:
+        """Compliant contacts: the finger links get ``k_n`` and ``d - 0.1`` (the object's
+        own damping in Bullet), so that every finger-object contact has the normal stiffness
+        ``k_n`` and the damping ``d``; the contact slop is zero (the spring's rest length).
+        Rigid: nothing changes. ``changeDynamics`` calls without ``contactStiffness`` (the
+        friction settings) keep these values."""
+        options = self.options
+        if options.contact_model != 'compliant':
+            return
+        self._pb.setPhysicsEngineParameter(contactSlop=0.0)
+        link_damping = options.contact_damping_n_s_per_m - SIM_MIN_CONTACT_DAMPING_N_S_PER_M
+        for j in self._joints.indices:
+            self._pb.changeDynamics(self.hand_id, j,
+                                    contactStiffness=options.contact_stiffness_n_per_m,
+                                    contactDamping=link_damping)
 
     def _build_palm(self) -> int | None:
         """The static palm box (see the module docstring); ``None`` if disabled."""
@@ -537,6 +604,39 @@ class HandWorld:
         table = mu(self.table_id, -1)
         return {'finger_object': finger * obj, 'table_object': table * obj,
                 'finger_table': finger * table}
+
+    def pair_contact(self) -> dict[str, tuple[float, float] | None]:
+        """Normal stiffness [N/m] and damping [N*s/m] of the body pairs' compliant contacts,
+        as Bullet combines the bodies' values (stiffness in series, damping summed; a body
+        without values counts as 1e30 N/m and 0.1 N*s/m); ``None`` for a rigid pair (neither
+        body has values).
+
+        Returns
+        -------
+        dict
+            ``finger_object``, ``table_object``, ``palm_object`` (``None`` too without a
+            palm), ``finger_table`` (each link of every finger has the same values; the
+            first is read).
+        """
+        def values(body: int, link: int) -> tuple[float, float] | None:
+            info = self._pb.getDynamicsInfo(body, link)
+            damping, stiffness = float(info[8]), float(info[9])
+            return None if stiffness < 0.0 else (stiffness, damping)
+
+        def pair(a: tuple[float, float] | None,
+                 b: tuple[float, float] | None) -> tuple[float, float] | None:
+            if a is None and b is None:
+                return None
+            k0, d0 = a if a is not None else _BULLET_DEFAULT_CONTACT
+            k1, d1 = b if b is not None else _BULLET_DEFAULT_CONTACT
+            return 1.0 / (1.0 / k0 + 1.0 / k1), d0 + d1
+
+        finger = values(self.hand_id, self._joints.indices[0])
+        obj = values(self.object_id, -1)
+        table = values(self.table_id, -1)
+        palm = None if self.palm_id is None else pair(values(self.palm_id, -1), obj)
+        return {'finger_object': pair(finger, obj), 'table_object': pair(table, obj),
+                'palm_object': palm, 'finger_table': pair(finger, table)}
 
     # ---------------------------------------------------------------------------------------
     # Reset and commands
