@@ -312,7 +312,7 @@ class LiftAnalyzer:
         self._ratios: list[float] = np.asarray(self.model.stiffness_ratios,
                                                dtype=np.float64).tolist()
         self._dp_limit = float(self.model.delta_theta_p_max + 1e-12)
-        self._k_t = float(self.model.contact_stiffness[1])
+        self._k_t = float(self.model.tangential_stiffness)
         self._frames = [(g.base_position.tolist(), g.inward_direction.tolist())
                         for g in self.model.fingers]
         self._csm_data: tuple | None = None

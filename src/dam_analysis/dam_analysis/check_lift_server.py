@@ -6,6 +6,9 @@ Parameters
 ----------
 config_file : string, read-only
     The DAM configuration file; empty means the installed ``config/dam.yaml`` (or ``DAM_CONFIG``).
+config_overlay : string, read-only
+    A YAML file with part of a configuration merged over it, e.g. the overlay written by
+    ``calibrate_csm`` (``docs/analysis.md``); empty means none.
 default_friction_angle : double [rad], in [0, pi/2)
     Friction angle used when a request's ``friction_angle`` is negative. Defaults to the
     configured ``contact.friction_angle_deg``. May be changed at run time.
@@ -61,7 +64,7 @@ from dam_analysis.planner import LiftPlanner, PlanResult, plan_verdict, ranges_f
 from dam_common.config import DamConfig, load_config
 from dam_common.echo import brief_repr, brief_text
 from dam_common.errors import ConfigError
-from dam_common.node import declare_config_file, run_node
+from dam_common.node import declare_config_file, declare_config_overlay, run_node
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import CheckLift, PlanLift
@@ -76,7 +79,8 @@ class CheckLiftServer(Node):
     def __init__(self) -> None:
         super().__init__('check_lift_server')
         config_file = declare_config_file(self)
-        self._config = load_config(config_file or None)
+        overlays = declare_config_overlay(self)
+        self._config = load_config(config_file or None, overlays)
         #: one analysis per object, built on its first request (each executor thread keeps
         #: its own: /check_lift's analyzers and /plan_lift's planners share nothing)
         self._analyzers: dict[str, LiftAnalyzer | InputError] = {

@@ -245,6 +245,8 @@ class HandModel:
     cone_faces : L of eq. (7).
     contact_stiffness : (3,) diagonal of K_pi [N/m] (normal, in-plane tangent, axial).
     delta_theta_p_max : largest accepted delta_theta_p [rad].
+    tangential_stiffness : the CSM's tangential spring [N/m]: ``contact_stiffness[1]`` in
+        series with ``contact.series_stiffness_n_per_m`` (equal to it when that is infinite).
     """
 
     fingers: tuple[FingerGeometry, ...]
@@ -260,6 +262,11 @@ class HandModel:
     cone_faces: int
     contact_stiffness: np.ndarray
     delta_theta_p_max: float
+    tangential_stiffness: float = math.nan
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.tangential_stiffness):  # built without one: the contact's own
+            object.__setattr__(self, 'tangential_stiffness', float(self.contact_stiffness[1]))
 
     @property
     def n_fingers(self) -> int:
@@ -370,4 +377,5 @@ def build_hand_model(config: DamConfig) -> HandModel:
         friction_angle=config.contact.friction_angle_rad, cone_faces=config.contact.cone_faces,
         contact_stiffness=np.asarray(config.contact.contact_stiffness_n_per_m,
                                      dtype=np.float64),
-        delta_theta_p_max=config.task.delta_theta_p_max_rad)
+        delta_theta_p_max=config.task.delta_theta_p_max_rad,
+        tangential_stiffness=config.contact.tangential_stiffness_n_per_m)

@@ -242,14 +242,18 @@ class CsmEval:
 
 
 def csm_evaluate(table: PathTable, index: int, end: FingerTable, k_theta_i: np.ndarray,
-                 friction_angle: float) -> CsmEval:
+                 friction_angle: float, tangential_stiffness: float | None = None) -> CsmEval:
     """CSM forces of one finger at the displacements of ``end`` (exact SPCM end states).
+
+    ``tangential_stiffness`` [N/m] replaces the model's (``HandModel.tangential_stiffness``)
+    when given.
 
     The slip history is taken from the grid nodes below each displacement; the play operator
     is evaluated in closed form (cumulative minimum) when the slip is monotone, otherwise step
     by step (:func:`dam_analysis.csm.csm_forces_sequential`).
     """
-    k_t = float(table.model.contact_stiffness[1])
+    k_t = float(table.model.tangential_stiffness if tangential_stiffness is None
+                else tangential_stiffness)
     k = np.atleast_1d(np.asarray(k_theta_i, dtype=np.float64))
     mu = math.tan(friction_angle)
     full = table.csm_path(index)
@@ -339,8 +343,10 @@ def end_tables(table: PathTable, delta_theta_p: np.ndarray) -> list[FingerTable]
 
 
 def lift_map(table: PathTable, friction_angle: np.ndarray, delta_theta_p: np.ndarray,
-             k_theta: np.ndarray) -> LiftMap:
+             k_theta: np.ndarray, tangential_stiffness: float | None = None) -> LiftMap:
     """Both margins on a full grid; ``k_theta`` is finger 1's stiffness (others by ratio).
+
+    ``tangential_stiffness`` [N/m] replaces the model's CSM tangential stiffness when given.
 
     Vectorised: the SPCM states are solved once per displacement, the sufficient margin is
     ``k_theta A(dp) - m_B g`` and the CSM play operator is a cumulative minimum.
@@ -363,7 +369,7 @@ def lift_map(table: PathTable, friction_angle: np.ndarray, delta_theta_p: np.nda
             a_plus, unb = sufficient_coefficients(end, float(alpha), model.cone_faces)
             coeff += ratio * end.tau_hat * np.where(end.tau_hat > 0.0, a_plus, 0.0)
             unbounded |= unb & (end.tau_hat > 0.0)
-            ev = csm_evaluate(table, i, end, ratio * k, float(alpha))
+            ev = csm_evaluate(table, i, end, ratio * k, float(alpha), tangential_stiffness)
             fz_csm += ev.fz
             bad_csm |= ev.separated
         s = k[None, :] * coeff[:, None] - weight
@@ -389,8 +395,8 @@ class Boundaries:
     csm: np.ndarray
 
 
-def region_boundaries(table: PathTable, friction_angle: float, delta_theta_p: np.ndarray
-                      ) -> Boundaries:
+def region_boundaries(table: PathTable, friction_angle: float, delta_theta_p: np.ndarray,
+                      tangential_stiffness: float | None = None) -> Boundaries:
     """Region boundaries from the linear structure in k_theta (no grid search over k).
 
     Sufficient: ``k* = m_B g / A(dp)``. CSM: ``k* = m_B g / B(dp)`` from the all-sliding slope,
@@ -426,7 +432,7 @@ def region_boundaries(table: PathTable, friction_angle: float, delta_theta_p: np
                               end.contact_point[d:d + 1], end.normal_object[d:d + 1],
                               end.jacobian[d:d + 1], end.slip_rate[d:d + 1], end.axis)
             ev = csm_evaluate(table, i, one, np.array([k_val * model.stiffness_ratios[i]]),
-                              friction_angle)
+                              friction_angle, tangential_stiffness)
             if ev.separated[0, 0]:
                 return math.nan
             total += float(ev.fz[0, 0])

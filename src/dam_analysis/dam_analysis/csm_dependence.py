@@ -1,0 +1,101 @@
+"""``ros2 run dam_analysis csm_dependence -o csm_dependence.png``: what the CSM boundary
+depends on.
+
+Draws the CSM's lower boundary ``k_theta*(delta_theta_p)`` (the smallest finger-1 stiffness
+the CSM lifts with, :func:`dam_analysis.regions.region_boundaries`) for several effective
+tangential stiffnesses ``k_t`` (the contact's in series with the finger's,
+``contact.series_stiffness_n_per_m``) at each of the given friction angles, and prints the
+boundary at a few displacements. The normal stiffness enters no boundary (the SPCM geometry is
+rigid, ``docs/analysis.md`` section 4) and the boundary is proportional to the object's weight
+(``k* = m_B g / B(delta_theta_p)`` where every contact slides), so neither gets a panel.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from dam_common.command_line import CommandLineParser
+from dam_common.config import load_config
+from dam_common.errors import ConfigError
+from dam_common.ros_args import strip_ros_args
+
+PROG = 'csm_dependence'
+DEFAULT_K_T = (10.0, 30.0, 100.0, 300.0, 1e3, 1e5)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = CommandLineParser(prog=PROG, description='Draw the CSM lift boundary for several '
+                                                 'tangential stiffnesses and friction angles.')
+    p.add_argument('-o', '--out', type=Path, default=Path('csm_dependence.png'),
+                   metavar='FILE.png', help='the figure (default csm_dependence.png)')
+    p.add_argument('--config', type=Path, default=None, metavar='YAML',
+                   help='configuration (default: DAM_CONFIG or the installed config/dam.yaml)')
+    p.add_argument('--object', default='', metavar='NAME', help='object of the library')
+    p.add_argument('--friction-angles-deg', type=float, nargs='+', default=[5.0, 30.0],
+                   metavar='DEG', help='friction angles, one panel each (default 5 30)')
+    p.add_argument('--k-t', type=float, nargs='+', default=list(DEFAULT_K_T), metavar='N_PER_M',
+                   help='effective tangential stiffnesses [N/m] (default 10 ... 1e5)')
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the tool; ``argv`` without the program name (``sys.argv[1:]`` if None)."""
+    parser = build_parser()
+    options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
+    if any(not (math.isfinite(k) and k > 0.0) for k in options.k_t):
+        parser.error(f'--k-t: every stiffness must be a positive number, got {options.k_t}')
+    if any(not 0.0 <= a < 90.0 for a in options.friction_angles_deg):
+        parser.error(f'--friction-angles-deg: each must lie in [0, 90), got '
+                     f'{options.friction_angles_deg}')
+    if not options.out.parent.is_dir():
+        parser.error(f'{options.out}: the directory {str(options.out.parent)!r} does not exist')
+    try:
+        config = load_config(options.config).with_object(options.object)
+    except ConfigError as exc:
+        print(f'{PROG}: {exc}', file=sys.stderr)
+        return 2
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    from dam_analysis.model import build_hand_model  # noqa: PLC0415
+    from dam_analysis.regions import PathTable, region_boundaries  # noqa: PLC0415
+
+    table = PathTable(build_hand_model(config))
+    dp = np.radians(np.linspace(1.0, math.degrees(table.model.delta_theta_p_max), 60))
+    fig, axes = plt.subplots(1, len(options.friction_angles_deg), squeeze=False,
+                             figsize=(5.5 * len(options.friction_angles_deg), 4.2))
+    for ax, alpha_deg in zip(axes[0], options.friction_angles_deg, strict=True):
+        for k_t in options.k_t:
+            b = region_boundaries(table, math.radians(alpha_deg), dp, tangential_stiffness=k_t)
+            ax.semilogy(np.degrees(dp), b.csm, label=f'k_t = {k_t:g} N/m')
+            at = [f'{float(np.interp(math.radians(d), dp, b.csm)):.3g}' for d in (10, 20, 30)]
+            print(f'{PROG}: alpha {alpha_deg:g} deg, k_t {k_t:g} N/m: k* at 10/20/30 deg = '
+                  f'{", ".join(at)} N*m/rad')
+        ax.set_title(f'alpha = {alpha_deg:g} deg, {config.object.name}')
+        ax.set_xlabel('delta_theta_p [deg]')
+        ax.set_ylabel('CSM boundary k_theta* [N*m/rad]')
+        ax.grid(True, which='both', alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    try:
+        fig.savefig(options.out, format='png', dpi=110)
+    except OSError as exc:
+        print(f'{PROG}: cannot write {options.out}: {exc}', file=sys.stderr)
+        return 1
+    print(f'{PROG}: wrote {options.out}', file=sys.stderr)
+    return 0
+
+
+def entry_point() -> None:
+    sys.exit(main())
+
+if __name__ == '__main__':
+    entry_point()
