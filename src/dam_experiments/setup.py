@@ -27,6 +27,7 @@ setup(
             'sweep = dam_experiments.entry_points:sweep',
             'sweep_plot = dam_experiments.entry_points:sweep_plot',
             'sweep_report = dam_experiments.entry_points:sweep_report',
+            'calibrate_csm = dam_experiments.entry_points:calibrate_csm',
         ],
     },
 )

@@ -581,3 +581,44 @@ def test_a_sweep_of_two_objects_is_drawn_and_reported_one_object_at_a_time(
     assert '--object hex_bar' in text  # the command that writes it again
     assert '--objects cylinder hex_bar --friction-angles 5deg' in text  # the sweep's command
     assert 'trials present | 2 of 2' in text
+
+
+def test_a_small_sweep_calibrates_end_to_end(real_document: tuple[Path, str],
+                                             tmp_path: Path) -> None:
+    """calibrate_csm on the real sweep writes an overlay the loader accepts, and sweep_report
+    --calibrate states the configured CSM's agreement as an independent count of the table
+    gives it (csm_lift against lifted, per friction angle)."""
+    from dam_experiments.calibrate_csm import main as calibrate_main
+
+    sweep_dir, _ = real_document
+    overlay = tmp_path / 'cal.yaml'
+    assert calibrate_main([str(sweep_dir), '-o', str(overlay), '--config', str(CONFIG),
+                           '--folds', '2']) == 0
+    merged = load_config(CONFIG, [overlay])
+    assert merged.contact.series_stiffness_n_per_m == math.inf
+    assert merged.contact.tangential_stiffness_n_per_m > 0.0
+    out = tmp_path / 'docs' / 'results.md'
+    out.parent.mkdir()
+    assert main([str(sweep_dir), '-o', str(out), '--config', str(CONFIG), '--calibrate',
+                 '--folds', '2']) == 0
+    text = out.read_text(encoding='utf-8')
+    assert '## 6. The CSM calibrated on this sweep' in text
+    with open(sweep_dir / TABLE_FILE, encoding='utf-8', newline='') as stream:
+        rows = list(csv.DictReader(stream))
+    for alpha in ('5', '30'):
+        mine = [r for r in rows if r['friction_angle_deg'] == alpha]
+        agree = sum(r['csm_lift'] == r['lifted'] for r in mine)
+        row = next(line for line in text.splitlines()
+                   if line.startswith(f'| {alpha} | ') and 'of' in line and '[' in line)
+        cells = [c.strip() for c in row.strip('|').split('|')]
+        assert cells[3] == str(len(mine))
+        assert cells[4].startswith(f'{agree} of {len(mine)}')
+
+
+def test_calibrate_csm_refuses_bad_input_with_one_line(tmp_path: Path) -> None:
+    from dam_experiments.calibrate_csm import main as calibrate_main
+
+    assert calibrate_main([str(tmp_path / 'missing')]) == 2
+    assert calibrate_main([str(tmp_path), '-o', str(tmp_path / 'x.txt')]) == 2
+    with pytest.raises(SystemExit):
+        calibrate_main([str(tmp_path), '--folds', '1'])

@@ -474,3 +474,42 @@ def test_command_line_client_shows_the_hand_s_limits(server: object) -> None:
     assert 'torque within the hand   : no   limit 0.6 N*m' in stiff.stdout
     assert 'OUTSIDE its domain' in stiff.stdout
     assert 'guaranteed by eq. 18 but not for this hand' in stiff.stdout
+
+
+def test_a_calibration_overlay_round_trips_through_check_lift(tmp_path: Path) -> None:
+    """An overlay as calibrate_csm writes it (a soft tangential stiffness and a friction
+    angle) changes the served answer to the core's answer with the merged configuration."""
+    from dam_interfaces.srv import CheckLift
+
+    overlay = tmp_path / 'csm_calibration.yaml'
+    overlay.write_text('contact:\n  contact_stiffness_n_per_m: [100000.0, 20.0, 100000.0]\n'
+                       '  series_stiffness_n_per_m: .inf\n  friction_angle_deg: 27.5\n',
+                       encoding='utf-8')
+    merged = LiftAnalyzer(load_config(REPO_ROOT / 'config' / 'dam.yaml', [overlay]))
+    plain = LiftAnalyzer(CONFIG)
+    k, dp = 2.0, math.radians(20.0)
+    expected = merged.check_lift(k, dp, math.radians(27.5))
+    assert expected.csm_margin != pytest.approx(plain.check_lift(k, dp, math.radians(27.5))
+                                                .csm_margin, abs=1e-3)
+    with node_process([SERVER, '--ros-args', '-r', '__ns:=/overlaytest',
+                       '-p', f'config_file:={REPO_ROOT / "config" / "dam.yaml"}',
+                       '-p', f'config_overlay:={overlay}']):
+        ros = RosClient()
+        try:
+            req = _request([k], [dp], CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG)
+            got = ros.call(CheckLift, '/overlaytest/check_lift', req)
+        finally:
+            ros.close()
+    assert got.ok, got.message
+    assert got.friction_angle == pytest.approx(math.radians(27.5))
+    assert got.csm_margin == pytest.approx(expected.csm_margin, abs=1e-12)
+    assert got.csm_lift == expected.csm_lift
+
+
+def test_a_bad_overlay_stops_the_server_with_its_name(tmp_path: Path) -> None:
+    overlay = tmp_path / 'bad.yaml'
+    overlay.write_text('contact:\n  series_stiffness_n_per_m: -1\n', encoding='utf-8')
+    proc = subprocess.run([str(SERVER), '--ros-args', '-p', f'config_overlay:={overlay}'],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode != 0
+    assert 'series_stiffness_n_per_m' in proc.stderr + proc.stdout

@@ -76,3 +76,8 @@ def sweep_plot() -> None:
 def sweep_report() -> None:
     """``ros2 run dam_experiments sweep_report``."""
     _run('dam_experiments.sweep_report_cli', 'sweep_report')
+
+
+def calibrate_csm() -> None:
+    """``ros2 run dam_experiments calibrate_csm``."""
+    _run('dam_experiments.calibrate_csm', 'calibrate_csm')

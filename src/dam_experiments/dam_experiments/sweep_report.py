@@ -389,6 +389,12 @@ class SweepReport:
         The CSM's contact stiffness ``contact.contact_stiffness_n_per_m`` [N/m].
     solver_iterations
         ``sim.solver_iterations``: the simulator's contact solver iterations per step.
+    contact_model
+        ``sim.contact_model``: the simulator's contacts (``compliant`` or ``rigid``).
+    calibration
+        Section 6, the CSM calibrated on the sweep
+        (:class:`~dam_experiments.sweep_report_calibration.CalibrationSection`); None when
+        not asked for.
     """
 
     data: SweepData
@@ -405,6 +411,8 @@ class SweepReport:
     dense_right_deg: float
     contact_stiffness_n_per_m: tuple[float, ...]
     solver_iterations: int
+    contact_model: str = 'rigid'
+    calibration: Any = None
 
     @property
     def n_present(self) -> int:
@@ -444,7 +452,7 @@ def _angle(alpha: float, cells: list[CellRow], sufficient_exists: bool) -> Angle
 
 
 def compute_report(data: SweepData, config: Any, analyzer: Any = None,
-                   n_points: int = 200) -> SweepReport:
+                   n_points: int = 200, calibrate_folds: int | None = None) -> SweepReport:
     """The report's numbers for a sweep.
 
     Parameters
@@ -459,6 +467,9 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
     n_points
         Samples of the dense boundaries
         (:func:`~dam_experiments.sweep_plot.sweep_boundaries`), at least 2.
+    calibrate_folds
+        When given, calibrate the CSM on the sweep (section 6) with this many folds of the
+        held-out check (0: none).
 
     Returns
     -------
@@ -514,6 +525,16 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
     }
     categories = tuple(_category(key, title, boundary, lifts, members[key], alphas, k_grid,
                                  limits) for key, title, boundary, lifts in CATEGORIES)
+    calibration = None
+    if calibrate_folds is not None:
+        from dam_experiments.sweep_report_calibration import (  # noqa: PLC0415
+            calibration_section,
+        )
+
+        def make(key: str, title: str, boundary: str, lifts: bool, members: list) -> Category:
+            return _category(key, title, boundary, lifts, members, alphas, k_grid, limits)
+
+        calibration = calibration_section(data, config, cells, make, calibrate_folds)
     return SweepReport(
         data=data, limits=limits,
         config_matches=matches,
@@ -523,7 +544,9 @@ def compute_report(data: SweepData, config: Any, analyzer: Any = None,
         dense_right_deg=right,
         contact_stiffness_n_per_m=tuple(
             float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)),
-        solver_iterations=int(config.sim.solver_iterations))
+        solver_iterations=int(config.sim.solver_iterations),
+        contact_model=str(getattr(config.sim, 'contact_model', 'rigid')),
+        calibration=calibration)
 
 
 def _finite(value: float) -> float:

@@ -223,11 +223,18 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
                         f'{DEFAULT_BOUNDARY_POINTS})')
     p.add_argument('--dpi', type=int, default=120, help='resolution of the figures (default '
                                                         '120)')
+    p.add_argument('--calibrate', action='store_true',
+                   help='add section 6: the CSM calibrated on the sweep (calibrate_csm), its '
+                        'agreement with the fitted parameters beside the configured ones')
+    p.add_argument('--folds', type=int, default=5, metavar='K',
+                   help='with --calibrate: folds of the held-out check (default 5; 0: none)')
     args = p.parse_args(argv)
     if args.n_delta_theta_p < 2:
         p.error(f'--n-delta-theta-p: {args.n_delta_theta_p} must be at least 2')
     if args.dpi < 1:
         p.error(f'--dpi: {args.dpi} must be positive')
+    if args.folds < 0 or args.folds == 1:
+        p.error(f'--folds: {args.folds} must be 0 or at least 2')
     return args
 
 
@@ -240,6 +247,8 @@ def _command(args: argparse.Namespace, output: Path) -> str:
         parts += ['--object', shlex.quote(args.object)]
     if args.n_delta_theta_p != DEFAULT_BOUNDARY_POINTS:
         parts += ['--n-delta-theta-p', str(args.n_delta_theta_p)]
+    if args.calibrate:
+        parts += ['--calibrate'] + ([] if args.folds == 5 else ['--folds', str(args.folds)])
     return ' '.join(parts)
 
 
@@ -261,7 +270,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         data = one_object(read_sweep(args.directory), args.object)  # named before the config
         check_output(output)
         config = load_config(args.config)
-        report = compute_report(data, config, n_points=args.n_delta_theta_p)
+        report = compute_report(data, config, n_points=args.n_delta_theta_p,
+                                calibrate_folds=args.folds if args.calibrate else None)
         written = write_report(report, output, _command(args, output), dpi=args.dpi)
     except (SweepPlotError, DamCommonError) as exc:
         sys.stderr.write(f'{PROG}: {" ".join(str(exc).split())}\n')

@@ -379,17 +379,26 @@ MODEL_GAPS = (
     'tell whether an object that starts to rise keeps rising, falls back, or rises only after '
     'the rolling-up phase; "rose then fell back", "rose partly" and "lifted after rolling-up" '
     'count the trials where this shows.',
-    '**Bullet\'s contact is not a linear spring.** The CSM makes the statically indeterminate '
-    'contact forces unique with a linear contact stiffness at every contact and a '
-    'spring-slider for friction. PyBullet resolves contacts as rigid constraints with an '
-    'iterative solver ({iterations} iterations per step, `sim.solver_iterations`) and friction '
-    'as impulses bounded by the friction coefficient, without a tangential spring: the forces '
-    'are shared among the fingers and the table as its solver settles them, not as the CSM\'s '
-    'springs would. A CSM boundary off the simulated one by a steady factor is what another '
-    'effective contact stiffness gives (the paper\'s "when the contact stiffness is chosen '
-    'properly"). The table cannot separate this gap from the first: where no check holds, the '
-    'disagreement stays unexplained.',
+    '**Bullet\'s contact is not the CSM\'s spring-slider.** The CSM makes the statically '
+    'indeterminate contact forces unique with a linear contact stiffness at every contact and '
+    'a spring-slider for friction. The stand-in\'s contacts are {contact}; PyBullet resolves '
+    'them with an iterative solver ({iterations} iterations per step, '
+    '`sim.solver_iterations`) and friction as impulses bounded by the friction coefficient, '
+    'without a tangential spring: the forces are shared among the fingers and the table as its '
+    'solver settles them, not as the CSM\'s springs would. A CSM boundary off the simulated one '
+    'by a steady factor is what another effective tangential stiffness gives (the paper\'s '
+    '"when the contact stiffness is chosen properly"; section 6 when present). The table '
+    'cannot separate this gap from the first: where no check holds, the disagreement stays '
+    'unexplained.',
 )
+
+
+#: How section 4 names the stand-in's contact model (``sim.contact_model``).
+CONTACT_TEXT = {
+    'compliant': 'compliant at the fingers (`sim.contact_model`: the CSM\'s normal stiffness '
+                 '`k_n` per contact point, critically damped) and rigid at the table',
+    'rigid': 'rigid constraints (`sim.contact_model: rigid`)',
+}
 
 
 def _disagreements(report: SweepReport) -> list[str]:
@@ -403,7 +412,9 @@ def _disagreements(report: SweepReport) -> list[str]:
         lines += _category_lines(c, report)
     lines += ['### Two known gaps between the models', '']
     for paragraph in MODEL_GAPS:
-        lines += [paragraph.format(iterations=report.solver_iterations), '']
+        lines += [paragraph.format(iterations=report.solver_iterations,
+                                   contact=CONTACT_TEXT.get(report.contact_model,
+                                                            report.contact_model)), '']
     return lines
 
 
@@ -436,6 +447,13 @@ def render_markdown(report: SweepReport, command: str,
     lines += _missed(report)
     lines += _disagreements(report)
     lines += _controller(report)
+    if report.calibration is not None:
+        from dam_experiments.sweep_report_calibration import (  # noqa: PLC0415
+            calibration_lines,
+        )
+
+        lines += calibration_lines(report.calibration,
+                                   lambda c: _category_lines(c, report), share)
     while lines and lines[-1] == '':
         lines.pop()
     return '\n'.join(lines) + '\n'

@@ -57,6 +57,9 @@ class Trial:
     object_name
         The object of the configuration's library (column ``object``; '' in a table from
         before objects were an axis: the configured default object).
+    object_mass_kg
+        The object's mass in the trial [kg] (column ``object_mass_kg``; NaN when absent or
+        not a positive number: the configured mass).
     """
 
     index: int
@@ -67,6 +70,7 @@ class Trial:
     outcome: str
     lifted: bool
     object_name: str = ''
+    object_mass_kg: float = math.nan
 
     @property
     def disagrees(self) -> bool:
@@ -270,7 +274,16 @@ def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
                  k_theta=_number(table, line, row, 'k_theta_nm_per_rad', 0.0),
                  delta_theta_p_deg=_number(table, line, row, 'delta_theta_p_deg', 0.0),
                  repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1',
-                 object_name=row.get('object') or '')
+                 object_name=row.get('object') or '',
+                 object_mass_kg=_optional_mass(row.get('object_mass_kg')))
+
+
+def _optional_mass(text: str | None) -> float:
+    try:
+        value = float(text) if text else math.nan
+    except ValueError:
+        return math.nan
+    return value if math.isfinite(value) and value > 0.0 else math.nan
 
 
 def read_sweep(directory: str | os.PathLike[str]) -> SweepData:

@@ -1,0 +1,197 @@
+"""One calibration of the CSM against observed grasps: fit, k-fold check, agreement, overlay.
+
+The fit itself is :mod:`dam_analysis.csm_calibration`; this module gathers what a user asks of
+a calibration (``docs/analysis.md``, "Calibrating the CSM"): the parameters with their
+intervals, the CSM's agreement with the outcomes before and after (in-sample and on held-out
+folds), how many grasps a given interval width needs, and the configuration overlay with the
+fitted values. ``calibrate_csm`` prints and writes it; ``sweep_report --calibrate`` puts it in
+the results document.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import yaml
+
+from dam_analysis.csm_calibration import (
+    DEFAULT_LAPSE,
+    DEFAULT_LEVEL,
+    CsmFit,
+    fit_outcomes,
+    margin_cube,
+)
+from dam_analysis.csm_outcomes import CellMargins, GraspCells
+from dam_experiments.errors import SweepPlotError
+
+DEFAULT_FOLDS = 5
+
+
+@dataclass(frozen=True)
+class GroupAgreement:
+    """The CSM's agreement with the outcomes of one friction-angle group.
+
+    Attributes
+    ----------
+    recorded_deg : the group's recorded friction angle [deg].
+    cells : its cells.
+    configured_end, configured_path : cells whose verdict equals the outcome with the
+        configured parameters, ``'end'`` and ``'path'`` verdict.
+    fitted : with the fitted parameters (in-sample, the calibration's verdict).
+    held_out : the same on held-out folds (each cell predicted by a fit without it); -1 when
+        no k-fold check ran.
+    fitted_lift : (N_g,) bool, the fitted verdict of each cell of the group (table order).
+    """
+
+    recorded_deg: float
+    cells: int
+    configured_end: int
+    configured_path: int
+    fitted: int
+    held_out: int
+    fitted_lift: np.ndarray
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """What :func:`calibrate` found.
+
+    Attributes
+    ----------
+    fit : the maximum-likelihood fit on all cells.
+    verdict : ``'path'`` or ``'end'``.
+    configured_tangential_stiffness : the configuration's effective ``k_t`` [N/m].
+    tangential_stiffness : the value the overlay takes [N/m] (``CsmFit.tangential_stiffness``).
+    friction_angles : per group, the value a configuration takes [rad].
+    groups : per group, the agreements.
+    folds : folds of the k-fold check (0: none).
+    members : per group, the indices of its cells.
+    """
+
+    fit: CsmFit
+    verdict: str
+    configured_tangential_stiffness: float
+    tangential_stiffness: float
+    friction_angles: tuple[float, ...]
+    groups: tuple[GroupAgreement, ...]
+    folds: int
+    members: tuple[np.ndarray, ...]
+
+
+def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
+              fit_friction_angle: bool = True, lapse: float = DEFAULT_LAPSE,
+              level: float = DEFAULT_LEVEL, folds: int = DEFAULT_FOLDS, seed: int = 0
+              ) -> Calibration:
+    """Fit the CSM to ``cells`` with the analysis of ``config`` (its object); see the module.
+
+    Raises
+    ------
+    SweepPlotError
+        ``folds`` is 1 or more than the cells, or the analysis refuses a cell.
+    """
+    from dam_analysis.errors import InputError  # noqa: PLC0415
+    from dam_analysis.model import build_hand_model  # noqa: PLC0415 - slow import
+    from dam_analysis.regions import PathTable  # noqa: PLC0415
+
+    if folds == 1 or folds < 0 or folds > cells.size:
+        raise SweepPlotError(f'folds {folds} must be 0 (none) or from 2 to the number of cells '
+                             f'({cells.size})')
+    try:
+        table = PathTable(build_hand_model(config))
+        margins = CellMargins(table, cells.k_theta, cells.delta_theta_p, cells.object_mass,
+                              config.task.gravity_m_per_s2)
+        cube = margin_cube(cells, margins, fit_friction_angle=fit_friction_angle,
+                           verdict=verdict)
+        fit = fit_outcomes(cube, cells.lifted, lapse=lapse, level=level)
+    except InputError as exc:
+        raise SweepPlotError(f'calibration: {exc}') from exc
+    k_conf = float(config.contact.tangential_stiffness_n_per_m)
+    k_fit = fit.tangential_stiffness(k_conf)
+    angles = tuple(fit.friction_angle_of(a) for a in fit.recorded_friction_angle)
+    held = np.full(cells.size, -1, dtype=int)  # held-out verdict per cell (1/0), -1 none
+    if folds:
+        order = np.random.default_rng(seed).permutation(cells.size)
+        for part in np.array_split(order, folds):
+            train = np.setdiff1d(order, part)
+            sub = fit_outcomes(cube, cells.lifted, lapse=lapse, level=level, cells=train)
+            k_sub = sub.tangential_stiffness(k_conf)
+            for rec, members in zip(cube.recorded, cube.members, strict=True):
+                test = np.intersect1d(members, part)
+                if test.size == 0:
+                    continue
+                alpha = sub.friction_angle_of(rec)
+                m = margins.margins(alpha, k_sub, verdict)
+                held[test] = (m[test] > 0.0).astype(int)
+    groups = []
+    for rec, members, alpha in zip(cube.recorded, cube.members, angles, strict=True):
+        truth = cells.lifted[members] > 0.5
+
+        def agree(lift: np.ndarray, truth: np.ndarray = truth) -> int:
+            return int(np.sum(lift == truth))
+
+        end = margins.margins(rec, k_conf, 'end')[members] > 0.0
+        path = margins.margins(rec, k_conf, 'path')[members] > 0.0
+        fitted = margins.margins(alpha, k_fit, verdict)[members] > 0.0
+        groups.append(GroupAgreement(
+            recorded_deg=math.degrees(rec), cells=int(members.size),
+            configured_end=agree(end), configured_path=agree(path), fitted=agree(fitted),
+            held_out=agree(held[members] == 1) if folds else -1, fitted_lift=fitted))
+    return Calibration(fit=fit, verdict=verdict, configured_tangential_stiffness=k_conf,
+                       tangential_stiffness=k_fit, friction_angles=angles,
+                       groups=tuple(groups), folds=folds, members=cube.members)
+
+
+def grasps_for_width(cells: int, width: float, target: float) -> float:
+    """Grasps an interval of ``target`` width needs, from one of ``width`` with ``cells``.
+
+    A profile-likelihood interval narrows as ``1 / sqrt(n)`` (the Fisher information grows
+    linearly with the number of grasps of the same design): ``n (width / target)^2``.
+    """
+    if not (math.isfinite(width) and width > 0.0 and target > 0.0):
+        return math.nan
+    return cells * (width / target) ** 2
+
+
+def overlay(calibration: Calibration, config: Any, source: str) -> str:
+    """The configuration overlay (YAML text) with the fitted values.
+
+    ``contact.contact_stiffness_n_per_m[1]`` takes the fitted effective tangential stiffness
+    and ``contact.series_stiffness_n_per_m`` becomes ``.inf`` (the fit is of the series
+    combination); ``contact.friction_angle_deg`` is written only when the cells hold one
+    friction-angle group whose angle was fitted (a sweep over several angles sets each).
+    """
+    fit = calibration.fit
+    stiffness = [float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)]
+    stiffness[1] = float(f'{calibration.tangential_stiffness:.6g}')
+    contact: dict[str, Any] = {'contact_stiffness_n_per_m': stiffness,
+                               'series_stiffness_n_per_m': math.inf}
+    one_group = len(fit.friction_angle) == 1 and fit.fitted_friction_angle
+    if one_group:
+        contact['friction_angle_deg'] = float(
+            f'{math.degrees(calibration.friction_angles[0]):.6g}')
+    kt = fit.log10_tangential_stiffness
+    lines = [
+        '# CSM calibration overlay: merge over the configuration (load_config(path, [this]),',
+        '# check_lift_server -p config_overlay:=THIS, calibrate_csm/sweep_report --overlay).',
+        f'# Fitted from {source}: {fit.cells} grasp(s), verdict {calibration.verdict!r}, '
+        f'{fit.level:.0%} profile-likelihood intervals.',
+        f'# log10 k_t [N/m]: {_interval_text(kt.estimate, kt.low, kt.high)} ({kt.status}).',
+    ]
+    for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
+        lines.append(f'# friction angle recorded {math.degrees(rec):g} deg: fitted '
+                     f'{_interval_text(*(math.degrees(v) for v in (iv.estimate, iv.low, iv.high)))}'
+                     f' deg ({iv.status}).')
+    if not one_group and fit.fitted_friction_angle:
+        lines.append('# (several friction-angle groups: contact.friction_angle_deg is left as '
+                     'configured)')
+    return '\n'.join(lines) + '\n' + yaml.safe_dump({'contact': contact}, sort_keys=False)
+
+
+def _interval_text(estimate: float, low: float, high: float) -> str:
+    def fmt(v: float) -> str:
+        return f'{v:.4g}' if math.isfinite(v) else ('-inf' if v < 0 else 'inf')
+
+    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'

@@ -1,0 +1,129 @@
+"""Section 6 of the results document: the CSM calibrated on the sweep itself.
+
+``sweep_report --calibrate`` fits the CSM to the sweep's outcomes
+(:func:`dam_experiments.csm_calibration_run.calibrate`) and reports its agreement with the
+fitted parameters beside the configured ones, and where the fitted CSM still disagrees, classed
+as section 4 classes the configured CSM's disagreements.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from dam_experiments.csm_calibration_run import Calibration, calibrate
+
+#: The disagreement categories of the fitted CSM (key, title, boundary, simulation lifts).
+FITTED_CATEGORIES = (
+    ('fitted_csm_not_sim', 'fitted CSM lifts, simulation does not', 'csm', False),
+    ('sim_not_fitted_csm', 'simulation lifts, fitted CSM does not', 'csm', True),
+)
+
+
+@dataclass(frozen=True)
+class CalibrationSection:
+    """The calibration of a report.
+
+    Attributes
+    ----------
+    calibration : the fit and its agreements (one calibration cell per trial).
+    categories : section 4's categories for the fitted CSM's verdict (``Category``).
+    """
+
+    calibration: Calibration
+    categories: tuple[Any, ...]
+
+
+def calibration_section(data: Any, config: Any, cells: Sequence[Any],
+                        make_category: Callable[..., Any], folds: int) -> CalibrationSection:
+    """Fit the CSM to the sweep ``data`` and class the fitted verdict's disagreements.
+
+    ``cells`` are the report's ``CellRow`` objects, ``make_category(key, title, boundary,
+    sim_lifts, cells)`` builds a section 4 category.
+    """
+    from dam_experiments.calibrate_csm import cells_of_sweep  # noqa: PLC0415
+
+    grasps, config = cells_of_sweep(data, config)
+    result = calibrate(grasps, config, folds=min(folds, grasps.size))
+    fitted_by_trial: dict[int, bool] = {}
+    for group, members in zip(result.groups, result.members, strict=True):
+        for lift, member in zip(group.fitted_lift, members, strict=True):
+            fitted_by_trial[data.trials[int(member)].index] = bool(lift)
+
+    def fitted(cell: Any) -> bool:
+        votes = [fitted_by_trial[t.index] for t in cell.trials]
+        return sum(votes) * 2 > len(votes)
+
+    members = {
+        'fitted_csm_not_sim': [c for c in cells if fitted(c) and not c.lifts],
+        'sim_not_fitted_csm': [c for c in cells if c.lifts and not fitted(c)],
+    }
+    categories = tuple(make_category(key, title, boundary, lifts, members[key])
+                       for key, title, boundary, lifts in FITTED_CATEGORIES)
+    return CalibrationSection(calibration=result, categories=categories)
+
+
+def _deg_interval(estimate: float, low: float, high: float) -> str:
+    import math  # noqa: PLC0415
+
+    def fmt(v: float) -> str:
+        return f'{math.degrees(v):.3g}' if math.isfinite(v) else ('-inf' if v < 0 else 'inf')
+
+    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'
+
+
+def _pow_interval(estimate: float, low: float, high: float) -> str:
+    import math  # noqa: PLC0415
+
+    def fmt(v: float) -> str:
+        if math.isnan(v):
+            return 'nan'
+        return f'{10.0 ** v:.3g}' if math.isfinite(v) else ('0' if v < 0 else 'inf')
+
+    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'
+
+
+def calibration_lines(section: CalibrationSection,
+                      category_lines: Callable[[Any], list[str]],
+                      share: Callable[[int, int], str]) -> list[str]:
+    """Markdown of section 6; ``category_lines`` renders a category as section 4 does."""
+    result = section.calibration
+    fit = result.fit
+    kt = fit.log10_tangential_stiffness
+    lines = [
+        '## 6. The CSM calibrated on this sweep', '',
+        'The paper: the CSM matches the experiments "when the contact stiffness is chosen '
+        'properly". `calibrate_csm` (`docs/analysis.md`, "Calibrating the CSM") fits, by '
+        'maximum likelihood of lift / no lift with a probit link on the CSM margin, the '
+        'friction angle of each recorded friction angle (the analysis is told nothing of it) '
+        'and the effective tangential stiffness `k_t`, with '
+        f'{fit.level:.0%} profile-likelihood intervals, on the `{result.verdict}` verdict '
+        '(the largest margin on the way to `delta_theta_p`: the object lifts as soon as the '
+        'margin turns positive). Agreement counts trials whose verdict equals `lifted`; '
+        '"held out" predicts each trial with a fit that did not see it '
+        f'({result.folds}-fold).', '',
+        f'* Tangential stiffness `k_t` [N/m]: configured '
+        f'{result.configured_tangential_stiffness:.3g}; fitted '
+        f'{_pow_interval(kt.estimate, kt.low, kt.high)} ({kt.status}); taken '
+        f'{result.tangential_stiffness:.3g}.',
+        f'* Link spread sigma: {fit.sigma.estimate:.3g} N.', '',
+    ]
+    header = ('alpha recorded [deg]', 'alpha fitted [deg] (interval)', 'status', 'trials',
+              'configured, end verdict', 'configured, path verdict', 'fitted',
+              'fitted, held out')
+    rows = []
+    for iv, g in zip(fit.friction_angle, result.groups, strict=True):
+        rows.append((f'{g.recorded_deg:g}', _deg_interval(iv.estimate, iv.low, iv.high),
+                     iv.status if fit.fitted_friction_angle else 'not fitted', str(g.cells),
+                     share(g.configured_end, g.cells), share(g.configured_path, g.cells),
+                     share(g.fitted, g.cells),
+                     share(g.held_out, g.cells) if g.held_out >= 0 else '-'))
+    lines += ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    lines += ['| ' + ' | '.join(r) + ' |' for r in rows] + ['']
+    lines += ['### Where the fitted CSM still disagrees', '',
+              'Classed by the checks of section 4 ("next to the boundary" uses the configured '
+              'CSM boundary).', '']
+    for category in section.categories:
+        lines += category_lines(category)
+    return lines
