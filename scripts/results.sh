@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The results document: run the Fig. 7 sweep (resumable; a finished sweep is not run again)
-# and generate docs/results.md from it, with its figures in docs/results/ (not tracked).
+# and generate docs/results.md from it, with its figures in docs/results/ (not tracked); the
+# document's section 6 calibrates the CSM on the sweep (calibrate_csm, docs/analysis.md).
 #
 #   bash scripts/results.sh                    # the sweep of docs/results.md into sweeps/fig7
 #   bash scripts/results.sh --workers 1        # extra arguments go to `sweep`
@@ -27,4 +28,4 @@ mkdir -p "$(dirname "$SWEEP_DIR")"
 bin=ros2_ws/install/dam_experiments/lib/dam_experiments
 "$bin/sweep" --friction-angles 5deg 30deg --k-theta 0.05:20:20:log --delta-theta-p 5deg:60deg:12 \
   --config config/dam.yaml --out "$SWEEP_DIR" "$@"
-"$bin/sweep_report" "$SWEEP_DIR" -o "$RESULTS" --config config/dam.yaml
+"$bin/sweep_report" "$SWEEP_DIR" -o "$RESULTS" --config config/dam.yaml --calibrate
