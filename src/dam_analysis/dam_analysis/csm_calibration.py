@@ -156,7 +156,7 @@ def friction_groups(cells: GraspCells) -> list[tuple[float, np.ndarray]]:
 
 
 def margin_cube(cells: GraspCells, margins: CellMargins, fit_friction_angle: bool = True,
-                alpha_half_width: float = math.radians(12.0),
+                alpha_half_width: float = math.radians(20.0),
                 alpha_step: float = math.radians(0.25),
                 log_kt_range: tuple[float, float] = DEFAULT_LOG_KT_RANGE,
                 log_kt_step: float = 0.25, verdict: str = 'path') -> MarginCube:

@@ -69,6 +69,7 @@ class Calibration:
     groups : per group, the agreements.
     folds : folds of the k-fold check (0: none).
     members : per group, the indices of its cells.
+    table : the analysis' ``PathTable`` the margins came from.
     """
 
     fit: CsmFit
@@ -79,6 +80,19 @@ class Calibration:
     groups: tuple[GroupAgreement, ...]
     folds: int
     members: tuple[np.ndarray, ...]
+    table: Any = None
+
+    def boundary(self, friction_angle: float, delta_theta_p: float, object_mass: float,
+                 gravity: float, k_range: tuple[float, float] = (1e-3, 1e3),
+                 nodes: int = 361) -> float:
+        """The fitted CSM's lift boundary: the lowest finger-1 ``k_theta`` [N*m/rad] of a
+        log-spaced grid whose verdict (this calibration's, with its tangential stiffness) is
+        a lift at ``friction_angle`` [rad] and ``delta_theta_p`` [rad]; NaN when none lifts."""
+        k = np.geomspace(k_range[0], k_range[1], nodes)
+        margins = CellMargins(self.table, k, np.full(nodes, delta_theta_p),
+                              np.full(nodes, object_mass), gravity)
+        lifts = margins.margins(friction_angle, self.tangential_stiffness, self.verdict) > 0.0
+        return float(k[int(np.argmax(lifts))]) if lifts.any() else math.nan
 
 
 def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
@@ -141,7 +155,7 @@ def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
             held_out=agree(held[members] == 1) if folds else -1, fitted_lift=fitted))
     return Calibration(fit=fit, verdict=verdict, configured_tangential_stiffness=k_conf,
                        tangential_stiffness=k_fit, friction_angles=angles,
-                       groups=tuple(groups), folds=folds, members=cube.members)
+                       groups=tuple(groups), folds=folds, members=cube.members, table=table)
 
 
 def grasps_for_width(cells: int, width: float, target: float) -> float:

@@ -29,10 +29,23 @@ class CalibrationSection:
     ----------
     calibration : the fit and its agreements (one calibration cell per trial).
     categories : section 4's categories for the fitted CSM's verdict (``Category``).
+    columns : per friction angle, the ``ColumnBoundary`` of every ``delta_theta_p`` column
+        against the fitted CSM's boundary (section 2's definitions).
     """
 
     calibration: Calibration
     categories: tuple[Any, ...]
+    columns: tuple[tuple[Any, ...], ...] = ()
+
+    def distances(self, index: int) -> tuple[int, int, float | None]:
+        """Of friction angle ``index``: compared columns, those within one k step, and the
+        median ``|d|`` [decades] (None: none compared)."""
+        import statistics  # noqa: PLC0415
+
+        compared = [c for c in self.columns[index] if c.status == 'compared']
+        median = (statistics.median(abs(c.distance_dec) for c in compared) if compared
+                  else None)
+        return len(compared), sum(c.within_step for c in compared), median
 
 
 def calibration_section(data: Any, config: Any, cells: Sequence[Any],
@@ -42,7 +55,11 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
     ``cells`` are the report's ``CellRow`` objects, ``make_category(key, title, boundary,
     sim_lifts, cells)`` builds a section 4 category.
     """
+    import dataclasses  # noqa: PLC0415
+    import math  # noqa: PLC0415
+
     from dam_experiments.calibrate_csm import cells_of_sweep  # noqa: PLC0415
+    from dam_experiments.sweep_report import column_boundary  # noqa: PLC0415
 
     grasps, config = cells_of_sweep(data, config)
     result = calibrate(grasps, config, folds=min(folds, grasps.size))
@@ -61,7 +78,21 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
     }
     categories = tuple(make_category(key, title, boundary, lifts, members[key])
                        for key, title, boundary, lifts in FITTED_CATEGORIES)
-    return CalibrationSection(calibration=result, categories=categories)
+    columns = []
+    for recorded, alpha in zip(result.fit.recorded_friction_angle, result.friction_angles,
+                               strict=True):
+        mine = [c for c in cells if math.isclose(math.radians(c.friction_angle_deg), recorded,
+                                                 abs_tol=1e-9)]
+        per_column = []
+        for dp in sorted({c.delta_theta_p_deg for c in mine}):
+            k_fit = result.boundary(alpha, math.radians(dp), config.object.mass_kg,
+                                    config.task.gravity_m_per_s2)
+            per_column.append(column_boundary(
+                [dataclasses.replace(c, k_csm=k_fit) for c in mine
+                 if c.delta_theta_p_deg == dp]))
+        columns.append(tuple(per_column))
+    return CalibrationSection(calibration=result, categories=categories,
+                              columns=tuple(columns))
 
 
 def _deg_interval(estimate: float, low: float, high: float) -> str:
@@ -102,7 +133,10 @@ def calibration_lines(section: CalibrationSection,
         '(the largest margin on the way to `delta_theta_p`: the object lifts as soon as the '
         'margin turns positive). Agreement counts trials whose verdict equals `lifted`; '
         '"held out" predicts each trial with a fit that did not see it '
-        f'({result.folds}-fold).', '',
+        f'({result.folds}-fold). The fitted boundary of a `delta_theta_p` column is the lowest '
+        '`k_theta` whose fitted verdict is a lift (361 log-spaced values from 1e-3 to 1e3 '
+        'N*m/rad); its distance to the simulated boundary and "within one k step" are section '
+        '2\'s.', '',
         f'* Tangential stiffness `k_t` [N/m]: configured '
         f'{result.configured_tangential_stiffness:.3g}; fitted '
         f'{_pow_interval(kt.estimate, kt.low, kt.high)} ({kt.status}); taken '
@@ -111,14 +145,19 @@ def calibration_lines(section: CalibrationSection,
     ]
     header = ('alpha recorded [deg]', 'alpha fitted [deg] (interval)', 'status', 'trials',
               'configured, end verdict', 'configured, path verdict', 'fitted',
-              'fitted, held out')
+              'fitted, held out', 'fitted boundary: median distance [decades] (compared)',
+              'columns within one k step')
     rows = []
-    for iv, g in zip(fit.friction_angle, result.groups, strict=True):
+    for index, (iv, g) in enumerate(zip(fit.friction_angle, result.groups, strict=True)):
+        compared, within, median = section.distances(index) if section.columns else (0, 0,
+                                                                                      None)
         rows.append((f'{g.recorded_deg:g}', _deg_interval(iv.estimate, iv.low, iv.high),
                      iv.status if fit.fitted_friction_angle else 'not fitted', str(g.cells),
                      share(g.configured_end, g.cells), share(g.configured_path, g.cells),
                      share(g.fitted, g.cells),
-                     share(g.held_out, g.cells) if g.held_out >= 0 else '-'))
+                     share(g.held_out, g.cells) if g.held_out >= 0 else '-',
+                     f'{median:.3f} ({compared})' if median is not None else f'- ({compared})',
+                     share(within, compared)))
     lines += ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(r) + ' |' for r in rows] + ['']
     lines += ['### Where the fitted CSM still disagrees', '',
