@@ -72,12 +72,7 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
         votes = [fitted_by_trial[t.index] for t in cell.trials]
         return sum(votes) * 2 > len(votes)
 
-    members = {
-        'fitted_csm_not_sim': [c for c in cells if fitted(c) and not c.lifts],
-        'sim_not_fitted_csm': [c for c in cells if c.lifts and not fitted(c)],
-    }
-    categories = tuple(make_category(key, title, boundary, lifts, members[key])
-                       for key, title, boundary, lifts in FITTED_CATEGORIES)
+    k_fit: dict[tuple[float, float], float] = {}
     columns = []
     for recorded, alpha in zip(result.fit.recorded_friction_angle, result.friction_angles,
                                strict=True):
@@ -85,12 +80,22 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
                                                  abs_tol=1e-9)]
         per_column = []
         for dp in sorted({c.delta_theta_p_deg for c in mine}):
-            k_fit = result.boundary(alpha, math.radians(dp), config.object.mass_kg,
-                                    config.task.gravity_m_per_s2)
+            key = (mine[0].friction_angle_deg, dp)
+            k_fit[key] = result.boundary(alpha, math.radians(dp), config.object.mass_kg,
+                                         config.task.gravity_m_per_s2)
             per_column.append(column_boundary(
-                [dataclasses.replace(c, k_csm=k_fit) for c in mine
+                [dataclasses.replace(c, k_csm=k_fit[key]) for c in mine
                  if c.delta_theta_p_deg == dp]))
         columns.append(tuple(per_column))
+    # the fitted CSM's boundary stands in for the configured one ("next to the boundary")
+    refitted = [dataclasses.replace(c, k_csm=k_fit[(c.friction_angle_deg, c.delta_theta_p_deg)])
+                for c in cells]
+    members = {
+        'fitted_csm_not_sim': [c for c in refitted if fitted(c) and not c.lifts],
+        'sim_not_fitted_csm': [c for c in refitted if c.lifts and not fitted(c)],
+    }
+    categories = tuple(make_category(key, title, boundary, lifts, members[key])
+                       for key, title, boundary, lifts in FITTED_CATEGORIES)
     return CalibrationSection(calibration=result, categories=categories,
                               columns=tuple(columns))
 
@@ -161,8 +166,8 @@ def calibration_lines(section: CalibrationSection,
     lines += ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(r) + ' |' for r in rows] + ['']
     lines += ['### Where the fitted CSM still disagrees', '',
-              'Classed by the checks of section 4 ("next to the boundary" uses the configured '
-              'CSM boundary).', '']
+              'Classed by the checks of section 4; "next to the boundary" and the column "k* '
+              'here" use the fitted CSM\'s boundary.', '']
     for category in section.categories:
         lines += category_lines(category)
     return lines

@@ -295,6 +295,9 @@ CHECKS_NOT_LIFTING = (
     ('servo limit', 'a position joint reached its servo torque limit'),
     ('heavier object', 'the object was heavier than the analysis assumes'),
     ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
+    ('left the table', 'the object rose at least a tenth of the lift height: it left the table, '
+                       'as a positive margin says, and the displacement ended below the lift '
+                       'height'),
 )
 CHECKS_LIFTING = (
     ('lifted after rolling-up', 'the object reached the lift height only after ROLLING_UP, '
@@ -327,7 +330,8 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
                  'servo limit': (trial.peak_position_nm
                                  >= LIMIT_FRACTION * limits.servo_torque_nm),
                  'heavier object': mass > limits.object_mass_kg * (1.0 + 1e-9),
-                 'next to the boundary': near}
+                 'next to the boundary': near,
+                 'left the table': trial.rise_max_mm >= 0.1 * limits.lift_height_mm}
         names = CHECKS_NOT_LIFTING
     return [name for name, _ in names if found[name]]
 
