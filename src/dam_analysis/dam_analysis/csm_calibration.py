@@ -19,8 +19,9 @@ group is its own experiment; with ``fit_friction_angle`` False the recorded valu
 the likelihood is flat in ``k_t`` over decades (the CSM's stick cap ``mu f_n / k_t`` is microns
 against millimetres of slip above ~1e3 N/m) and has plateaus, so a grid is robust where a
 gradient method is not. Intervals are profile-likelihood intervals: every value whose profile
-log-likelihood lies within ``chi2_1(level) / 2`` of the maximum (Wilks), the ends interpolated
-linearly between grid nodes. An interval that reaches an end of its grid is open on that side;
+log-likelihood lies within ``chi2_1(level) / 2`` of the maximum (Wilks), widened to the first
+grid node outside on each side (the grid's step is the resolution of an end). An interval
+that reaches an end of its grid is open on that side;
 one that covers the whole grid means the data do not determine the parameter, and the fit says
 so instead of reporting a value.
 """
@@ -50,7 +51,8 @@ class Interval:
 
     Attributes
     ----------
-    estimate : the maximum-likelihood grid value (NaN when not determined).
+    estimate : the maximum-likelihood grid value (NaN when not determined); it may lie at an
+        end of the grid (:attr:`at_grid_end`).
     low, high : the interval's ends (``-inf``/``inf`` where it reaches the end of the grid).
     grid_low, grid_high : the searched range.
     """
@@ -73,6 +75,12 @@ class Interval:
         if hi:
             return 'bounded above'
         return 'not determined'
+
+    @property
+    def at_grid_end(self) -> bool:
+        """The estimate lies at an end of the searched range (the maximum may lie beyond)."""
+        return self.estimate in (self.grid_low, self.grid_high) and \
+            self.grid_low != self.grid_high
 
     @property
     def determined(self) -> bool:
@@ -204,6 +212,9 @@ def _log_lik(margin: np.ndarray, lifted: np.ndarray, sigma: np.ndarray, lapse: f
 
 def _interval(grid: np.ndarray, profile: np.ndarray, best: float, threshold: float,
               estimate: float) -> Interval:
+    """The nodes whose profile lies within ``threshold`` of ``best``, widened to the first
+    node outside on each side (the crossing lies between them: no finer claim than the grid
+    is made); a side that reaches the end of the grid is open (``-inf``/``inf``)."""
     inside = profile >= best - threshold
     lo_grid, hi_grid = float(grid[0]), float(grid[-1])
     if grid.size == 1:
@@ -212,17 +223,8 @@ def _interval(grid: np.ndarray, profile: np.ndarray, best: float, threshold: flo
         return Interval(math.nan, -math.inf, math.inf, lo_grid, hi_grid)
     idx = np.flatnonzero(inside)
     first, last = int(idx[0]), int(idx[-1])
-    cut = best - threshold
-
-    def crossing(i_out: int, i_in: int) -> float:
-        p_out, p_in = profile[i_out], profile[i_in]
-        if not math.isfinite(p_out) or p_in == p_out:
-            return float(grid[i_out])
-        w = (p_in - cut) / (p_in - p_out)
-        return float(grid[i_in] + w * (grid[i_out] - grid[i_in]))
-
-    low = -math.inf if first == 0 else crossing(first - 1, first)
-    high = math.inf if last == grid.size - 1 else crossing(last + 1, last)
+    low = -math.inf if first == 0 else float(grid[first - 1])
+    high = math.inf if last == grid.size - 1 else float(grid[last + 1])
     return Interval(estimate, low, high, lo_grid, hi_grid)
 
 

@@ -53,6 +53,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if any(not 0.0 <= a < 90.0 for a in options.friction_angles_deg):
         parser.error(f'--friction-angles-deg: each must lie in [0, 90), got '
                      f'{options.friction_angles_deg}')
+    if options.out.suffix.lower() != '.png':
+        parser.error(f'{options.out}: the figure must be a .png file')
     if not options.out.parent.is_dir():
         parser.error(f'{options.out}: the directory {str(options.out.parent)!r} does not exist')
     try:
@@ -95,7 +97,20 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def entry_point() -> None:
-    sys.exit(main())
+    """The console script: SIGINT or SIGTERM at any moment ends it with one line, status 130."""
+    import signal  # noqa: PLC0415
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, interrupt)
+    try:
+        status = main()
+    except KeyboardInterrupt:
+        print(f'{PROG}: interrupted', file=sys.stderr)
+        status = 130
+    sys.exit(status)
 
 if __name__ == '__main__':
     entry_point()

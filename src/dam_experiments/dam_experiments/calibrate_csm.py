@@ -14,8 +14,8 @@ or directories holding them: a real hand's grasps calibrate the same way. The fi
 angle (unless ``--fixed-friction-angle``) and the effective tangential contact stiffness with
 their profile-likelihood intervals, says which the data do not determine, checks the fit on
 held-out folds and writes a configuration overlay (default ``SWEEP_DIR/csm_calibration.yaml``)
-that ``load_config``, ``check_lift_server -p config_overlay:=FILE`` and ``check_lift
---overlay FILE`` accept.
+with the values the data determine, which ``load_config(path, [FILE])`` and
+``check_lift_server --ros-args -p config_overlay:=FILE`` accept.
 
 Exit status: 0 written; 2 bad input (no grasp, a malformed table or bag, several objects
 without ``--object``, a bad configuration or option, an output that cannot be written), with
@@ -40,6 +40,7 @@ from dam_experiments.csm_calibration_run import (
     Calibration,
     calibrate,
     grasps_for_width,
+    interval_text,
     overlay,
 )
 from dam_experiments.errors import SweepPlotError
@@ -51,13 +52,22 @@ NOT_LIFTED_OUTCOMES = ('FAILURE',)
 
 
 def cells_from_sweep(directory: Path, config: Any, object_name: str | None
-                     ) -> tuple[Any, Any, str]:
-    """The grasp cells of a sweep directory, the configuration with its object, a label."""
+                     ) -> tuple[Any, Any, str, list[str]]:
+    """The grasp cells of a sweep directory, the configuration with its object, a label and
+    notes (an incomplete sweep, a configuration that is not the sweep's)."""
+    from dam_experiments.sweep import config_digest  # noqa: PLC0415
     from dam_experiments.sweep_results import one_object, read_sweep  # noqa: PLC0415
 
-    data = one_object(read_sweep(directory), object_name)
+    whole = read_sweep(directory)
+    notes = []
+    if whole.parameters.get('config_sha256') != config_digest(config):
+        notes.append(f'the configuration {str(config.source)!r} is not the sweep\'s (its '
+                     f'config_sha256 differs): the analysis is this configuration\'s')
+    if len(whole.trials) < whole.n_planned:
+        notes.append(f'the sweep holds {len(whole.trials)} of its {whole.n_planned} trials')
+    data = one_object(whole, object_name)
     cells, config = cells_of_sweep(data, config)
-    return cells, config, f'sweep {directory}'
+    return cells, config, f'sweep {directory}', notes
 
 
 def cells_of_sweep(data: Any, config: Any) -> tuple[Any, Any]:
@@ -147,22 +157,20 @@ def report_lines(result: Calibration) -> list[str]:
     """The printed summary of a calibration."""
     fit = result.fit
     lines = [f'{fit.cells} grasp(s), verdict {result.verdict!r}, {fit.level:.0%} '
-             f'profile-likelihood intervals']
-    for rec, iv, chosen in zip(fit.recorded_friction_angle, fit.friction_angle,
-                               result.friction_angles, strict=True):
+             f'profile-likelihood intervals (ends to the grid step: 0.25 deg, 0.25 decade)']
+    for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
         if not fit.fitted_friction_angle:
             lines.append(f'friction angle {math.degrees(rec):g} deg: as recorded (not fitted)')
             continue
         lines.append(f'friction angle recorded {math.degrees(rec):g} deg: fitted '
-                     f'{_deg(iv.estimate)} deg, interval [{_deg(iv.low)}, {_deg(iv.high)}] '
-                     f'deg ({iv.status}); taken: {math.degrees(chosen):.4g} deg')
+                     f'{interval_text(iv, scale=180.0 / math.pi)} deg ({iv.status})')
     kt = fit.log10_tangential_stiffness
-    lines.append(f'tangential stiffness k_t: fitted {_pow(kt.estimate)} N/m, interval '
-                 f'[{_pow(kt.low)}, {_pow(kt.high)}] N/m ({kt.status}); configured '
-                 f'{result.configured_tangential_stiffness:.4g}, taken '
-                 f'{result.tangential_stiffness:.4g} N/m')
+    lines.append(f'tangential stiffness k_t: fitted {interval_text(kt, log10=True)} N/m '
+                 f'({kt.status}); configured {result.configured_tangential_stiffness:.4g} N/m')
     sg = fit.sigma
-    lines.append(f'link spread sigma: {sg.estimate:.3g} N [{sg.low:.3g}, {sg.high:.3g}]')
+    lines.append(f'link spread sigma: {interval_text(sg)} N'
+                 + (' -- at the end of its range: the margin explains little of the outcomes'
+                    if sg.at_grid_end else ''))
     for g in result.groups:
         held = (f', held out ({result.folds}-fold) {g.held_out} of {g.cells}'
                 if g.held_out >= 0 else '')
@@ -172,12 +180,15 @@ def report_lines(result: Calibration) -> list[str]:
     for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
         if fit.fitted_friction_angle and iv.determined:
             width = math.degrees(iv.high - iv.low)
+            n = _group_size(result, rec)
             lines.append(f'friction angle {math.degrees(rec):g} deg: interval width '
-                         f'{width:.3g} deg from {_group_size(result, rec)} grasps; a width of '
-                         f'2 deg needs about '
-                         f'{grasps_for_width(_group_size(result, rec), width, 2.0):.0f}, of '
-                         f'1 deg about {grasps_for_width(_group_size(result, rec), width, 1.0):.0f}'
-                         f' (same design)')
+                         f'{width:.3g} deg from {n} grasps; of the same design, a width of 2 deg '
+                         f'needs about {grasps_for_width(n, width, 2.0):.0f} grasps, of 1 deg '
+                         f'about {grasps_for_width(n, width, 1.0):.0f}')
+    if result.verdict == 'path':
+        lines.append('note: /check_lift answers the end verdict; the overlay\'s values were '
+                     'fitted to the path verdict (--verdict end fits the one /check_lift '
+                     'answers)')
     return lines
 
 
@@ -186,18 +197,6 @@ def _group_size(result: Calibration, recorded: float) -> int:
         if math.isclose(g.recorded_deg, math.degrees(recorded), abs_tol=1e-6):
             return g.cells
     return 0
-
-
-def _deg(value: float) -> str:
-    return f'{math.degrees(value):.4g}' if math.isfinite(value) else (
-        '-inf' if value < 0 else 'inf')
-
-
-def _pow(log_value: float) -> str:
-    if math.isnan(log_value):
-        return 'nan'
-    return f'{10.0 ** log_value:.4g}' if math.isfinite(log_value) else (
-        '0' if log_value < 0 else 'inf')
 
 
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
@@ -244,33 +243,74 @@ def _is_sweep(path: Path) -> bool:
     return (path / 'trials.csv').is_file()
 
 
+def _check_inputs(inputs: Sequence[Path]) -> bool:
+    """Whether the inputs are one sweep directory; refuse what is neither."""
+    for path in inputs:
+        if not path.exists():
+            raise SweepPlotError(f'{path}: no such directory')
+        if not path.is_dir():
+            raise SweepPlotError(f'{path} is a file: give a sweep directory (trials.csv) or '
+                                 f'episode bag directories (metadata.yaml) or directories '
+                                 f'holding them')
+    if len(inputs) == 1 and _is_sweep(inputs[0]):
+        return True
+    for path in inputs:
+        if _is_sweep(path):
+            raise SweepPlotError(f'{path} is a sweep: give one sweep directory alone')
+    return False
+
+
+def _check_output(output: Path) -> None:
+    if output.suffix.lower() not in ('.yaml', '.yml'):
+        raise SweepPlotError(f'output {str(output)!r}: the overlay must be a .yaml file')
+    if output.is_dir():
+        raise SweepPlotError(f'output {str(output)!r} is a directory')
+    if not output.parent.is_dir():
+        raise SweepPlotError(f'output {str(output)!r}: directory {str(output.parent)!r} '
+                             f'does not exist')
+    existed = output.exists()
+    try:  # before a minute of fitting, not after
+        with open(output, 'a', encoding='utf-8'):
+            pass
+    except OSError as exc:
+        raise SweepPlotError(f'output {str(output)!r} cannot be written: {exc.strerror}'
+                             ) from exc
+    if not existed:
+        output.unlink()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """``calibrate_csm``; see the module docstring."""
     from dam_common.config import load_config  # noqa: PLC0415
     from dam_common.errors import DamCommonError  # noqa: PLC0415
 
     args = _parse(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    sweep = len(args.inputs) == 1 and _is_sweep(args.inputs[0])
-    if args.output is None and not sweep:
-        sys.stderr.write(f'{PROG}: -o FILE.yaml is required for bags\n')
-        return 2
-    output = args.output if args.output is not None else args.inputs[0] / DEFAULT_OUTPUT
     try:
-        if output.suffix.lower() not in ('.yaml', '.yml'):
-            raise SweepPlotError(f'output {str(output)!r}: the overlay must be a .yaml file')
-        if not output.parent.is_dir():
-            raise SweepPlotError(f'output {str(output)!r}: directory {str(output.parent)!r} '
-                                 f'does not exist')
+        sweep = _check_inputs(args.inputs)
+        if args.output is None and not sweep:
+            raise SweepPlotError(f'{args.inputs[0]} holds no trials.csv: for episode bags, '
+                                 f'-o FILE.yaml is required')
+        output = args.output if args.output is not None else args.inputs[0] / DEFAULT_OUTPUT
+        _check_output(output)
         config = load_config(args.config)
         skipped = 0
+        notes = []
         if sweep:
-            cells, config, source = cells_from_sweep(args.inputs[0], config, args.object)
+            cells, config, source, notes = cells_from_sweep(args.inputs[0], config,
+                                                            args.object)
         else:
             cells, config, source, skipped = cells_from_bags(args.inputs, config, args.object)
+        folds = min(args.folds, cells.size)
+        folds = 0 if folds < 2 else folds
+        for note in notes:
+            sys.stderr.write(f'{PROG}: note: {note}\n')
+        sys.stderr.write(f'{PROG}: fitting {cells.size} grasp(s) of {config.object.name} '
+                         f'(about a minute for a few hundred)\n')
+        sys.stderr.flush()
         result = calibrate(cells, config, verdict=args.verdict,
                            fit_friction_angle=not args.fixed_friction_angle, lapse=args.lapse,
-                           level=args.level, folds=min(args.folds, cells.size), seed=args.seed)
-        text = overlay(result, config, source)
+                           level=args.level, folds=folds, seed=args.seed)
+        text = overlay(result, config, source, config.object.name)
         try:
             output.write_text(text, encoding='utf-8')
         except OSError as exc:

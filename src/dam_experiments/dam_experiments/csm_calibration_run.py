@@ -110,7 +110,7 @@ def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
     from dam_analysis.model import build_hand_model  # noqa: PLC0415 - slow import
     from dam_analysis.regions import PathTable  # noqa: PLC0415
 
-    if folds == 1 or folds < 0 or folds > cells.size:
+    if folds < 0 or folds == 1 or folds > cells.size:
         raise SweepPlotError(f'folds {folds} must be 0 (none) or from 2 to the number of cells '
                              f'({cells.size})')
     try:
@@ -169,43 +169,69 @@ def grasps_for_width(cells: int, width: float, target: float) -> float:
     return cells * (width / target) ** 2
 
 
-def overlay(calibration: Calibration, config: Any, source: str) -> str:
-    """The configuration overlay (YAML text) with the fitted values.
+def overlay(calibration: Calibration, config: Any, source: str, object_name: str) -> str:
+    """The configuration overlay (YAML text) with the values the data determine.
 
+    Only a parameter whose interval is closed on both sides is written (one the data bound on
+    one side only, or not at all, keeps the configuration's value):
     ``contact.contact_stiffness_n_per_m[1]`` takes the fitted effective tangential stiffness
     and ``contact.series_stiffness_n_per_m`` becomes ``.inf`` (the fit is of the series
-    combination); ``contact.friction_angle_deg`` is written only when the cells hold one
-    friction-angle group whose angle was fitted (a sweep over several angles sets each).
+    combination); ``contact.friction_angle_deg`` is written only when the grasps hold one
+    recorded friction angle (a sweep over several angles sets each). The comments say what
+    was fitted, on which verdict and object, and what was left out.
     """
     fit = calibration.fit
-    stiffness = [float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)]
-    stiffness[1] = float(f'{calibration.tangential_stiffness:.6g}')
-    contact: dict[str, Any] = {'contact_stiffness_n_per_m': stiffness,
-                               'series_stiffness_n_per_m': math.inf}
-    one_group = len(fit.friction_angle) == 1 and fit.fitted_friction_angle
-    if one_group:
-        contact['friction_angle_deg'] = float(
-            f'{math.degrees(calibration.friction_angles[0]):.6g}')
     kt = fit.log10_tangential_stiffness
+    contact: dict[str, Any] = {}
+    if kt.determined:
+        stiffness = [float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)]
+        stiffness[1] = float(f'{10.0 ** kt.estimate:.6g}')
+        contact['contact_stiffness_n_per_m'] = stiffness
+        contact['series_stiffness_n_per_m'] = math.inf
+    alpha = fit.friction_angle[0]
+    one_group = len(fit.friction_angle) == 1 and fit.fitted_friction_angle
+    if one_group and alpha.determined:
+        contact['friction_angle_deg'] = float(f'{math.degrees(alpha.estimate):.6g}')
     lines = [
-        '# CSM calibration overlay: merge over the configuration (load_config(path, [this]),',
-        '# check_lift_server -p config_overlay:=THIS, calibrate_csm/sweep_report --overlay).',
-        f'# Fitted from {source}: {fit.cells} grasp(s), verdict {calibration.verdict!r}, '
-        f'{fit.level:.0%} profile-likelihood intervals.',
-        f'# log10 k_t [N/m]: {_interval_text(kt.estimate, kt.low, kt.high)} ({kt.status}).',
+        '# CSM calibration overlay (calibrate_csm): merge it over the configuration with',
+        '# load_config(path, [THIS]) or check_lift_server --ros-args -p config_overlay:=THIS.',
+        f'# Fitted from {source}, object {object_name!r}: {fit.cells} grasp(s), verdict '
+        f'{calibration.verdict!r}, {fit.level:.0%} profile-likelihood intervals.',
+        f'# k_t [N/m]: {interval_text(kt, log10=True)} ({kt.status}).',
     ]
     for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
-        lines.append(f'# friction angle recorded {math.degrees(rec):g} deg: fitted '
-                     f'{_interval_text(*(math.degrees(v) for v in (iv.estimate, iv.low, iv.high)))}'
-                     f' deg ({iv.status}).')
-    if not one_group and fit.fitted_friction_angle:
-        lines.append('# (several friction-angle groups: contact.friction_angle_deg is left as '
-                     'configured)')
-    return '\n'.join(lines) + '\n' + yaml.safe_dump({'contact': contact}, sort_keys=False)
+        text = interval_text(iv, scale=180.0 / math.pi) if fit.fitted_friction_angle \
+            else 'not fitted'
+        lines.append(f'# friction angle recorded {math.degrees(rec):g} deg: {text} deg'
+                     + (f' ({iv.status}).' if fit.fitted_friction_angle else '.'))
+    if not kt.determined:
+        lines.append('# k_t is not determined by these grasps: the configured value stays.')
+    if fit.fitted_friction_angle and not one_group:
+        lines.append('# several recorded friction angles: contact.friction_angle_deg stays.')
+    elif one_group and not alpha.determined:
+        lines.append('# the friction angle is not determined by these grasps: the configured '
+                     'value stays.')
+    if calibration.verdict == 'path':
+        lines.append('# /check_lift answers the end verdict; these values were fitted to the '
+                     'path verdict.')
+    body = yaml.safe_dump({'contact': contact}, sort_keys=False) if contact else '{}\n'
+    return '\n'.join(lines) + '\n' + body
 
 
-def _interval_text(estimate: float, low: float, high: float) -> str:
-    def fmt(v: float) -> str:
-        return f'{v:.4g}' if math.isfinite(v) else ('-inf' if v < 0 else 'inf')
+def interval_text(interval: Any, scale: float = 1.0, log10: bool = False) -> str:
+    """``estimate [low, high]`` of an :class:`~dam_analysis.csm_calibration.Interval`; an
+    open side shows the end of the searched range (``<`` or ``>`` it), an estimate at an end
+    of the range is marked, a parameter not determined says so. ``log10``: the values are
+    logarithms, shown as powers of ten; ``scale`` multiplies them (e.g. rad to deg)."""
+    def value(v: float) -> float:
+        return 10.0 ** v if log10 else v * scale
 
-    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'
+    if math.isnan(interval.estimate):
+        return (f'not determined in [{value(interval.grid_low):.4g}, '
+                f'{value(interval.grid_high):.4g}]')
+    low = (f'<{value(interval.grid_low):.4g}' if math.isinf(interval.low)
+           else f'{value(interval.low):.4g}')
+    high = (f'>{value(interval.grid_high):.4g}' if math.isinf(interval.high)
+            else f'{value(interval.high):.4g}')
+    edge = ' (at the end of the searched range)' if interval.at_grid_end else ''
+    return f'{value(interval.estimate):.4g}{edge} [{low}, {high}]'

@@ -8,11 +8,12 @@ as section 4 classes the configured CSM's disagreements.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from dam_experiments.csm_calibration_run import Calibration, calibrate
+from dam_experiments.csm_calibration_run import Calibration, calibrate, interval_text
 
 #: The disagreement categories of the fitted CSM (key, title, boundary, simulation lifts).
 FITTED_CATEGORIES = (
@@ -56,7 +57,6 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
     sim_lifts, cells)`` builds a section 4 category.
     """
     import dataclasses  # noqa: PLC0415
-    import math  # noqa: PLC0415
 
     from dam_experiments.calibrate_csm import cells_of_sweep  # noqa: PLC0415
     from dam_experiments.sweep_report import column_boundary  # noqa: PLC0415
@@ -100,26 +100,6 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
                               columns=tuple(columns))
 
 
-def _deg_interval(estimate: float, low: float, high: float) -> str:
-    import math  # noqa: PLC0415
-
-    def fmt(v: float) -> str:
-        return f'{math.degrees(v):.3g}' if math.isfinite(v) else ('-inf' if v < 0 else 'inf')
-
-    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'
-
-
-def _pow_interval(estimate: float, low: float, high: float) -> str:
-    import math  # noqa: PLC0415
-
-    def fmt(v: float) -> str:
-        if math.isnan(v):
-            return 'nan'
-        return f'{10.0 ** v:.3g}' if math.isfinite(v) else ('0' if v < 0 else 'inf')
-
-    return f'{fmt(estimate)} [{fmt(low)}, {fmt(high)}]'
-
-
 def calibration_lines(section: CalibrationSection,
                       category_lines: Callable[[Any], list[str]],
                       share: Callable[[int, int], str]) -> list[str]:
@@ -144,9 +124,14 @@ def calibration_lines(section: CalibrationSection,
         '2\'s.', '',
         f'* Tangential stiffness `k_t` [N/m]: configured '
         f'{result.configured_tangential_stiffness:.3g}; fitted '
-        f'{_pow_interval(kt.estimate, kt.low, kt.high)} ({kt.status}); taken '
+        f'{interval_text(kt, log10=True)} ({kt.status}); the fitted verdicts below take '
         f'{result.tangential_stiffness:.3g}.',
-        f'* Link spread sigma: {fit.sigma.estimate:.3g} N.', '',
+        f'* Link spread sigma (the vertical force the CSM does not capture) [N]: '
+        f'{interval_text(fit.sigma)}.',
+        '* An interval\'s ends are grid nodes (0.25 deg, 0.25 decade); `<`/`>` an end of the '
+        'searched range: the data bound that side no further. A friction angle the data do '
+        'not determine enters the fitted verdicts as the allowed value nearest the recorded '
+        'one.', '',
     ]
     header = ('alpha recorded [deg]', 'alpha fitted [deg] (interval)', 'status', 'trials',
               'configured, end verdict', 'configured, path verdict', 'fitted',
@@ -156,7 +141,7 @@ def calibration_lines(section: CalibrationSection,
     for index, (iv, g) in enumerate(zip(fit.friction_angle, result.groups, strict=True)):
         compared, within, median = section.distances(index) if section.columns else (0, 0,
                                                                                       None)
-        rows.append((f'{g.recorded_deg:g}', _deg_interval(iv.estimate, iv.low, iv.high),
+        rows.append((f'{g.recorded_deg:g}', interval_text(iv, scale=180.0 / math.pi),
                      iv.status if fit.fitted_friction_angle else 'not fitted', str(g.cells),
                      share(g.configured_end, g.cells), share(g.configured_path, g.cells),
                      share(g.fitted, g.cells),
@@ -167,7 +152,9 @@ def calibration_lines(section: CalibrationSection,
     lines += ['| ' + ' | '.join(r) + ' |' for r in rows] + ['']
     lines += ['### Where the fitted CSM still disagrees', '',
               'Classed by the checks of section 4; "next to the boundary" and the column "k* '
-              'here" use the fitted CSM\'s boundary.', '']
+              'here" use the fitted CSM\'s boundary, the columns `csm_margin_n` and '
+              '`worst_case_margin_n` are the configured analysis\' (`/check_lift`\'s).', '']
     for category in section.categories:
-        lines += category_lines(category)
+        lines += ['#' + line if line.startswith('### ') else line
+                  for line in category_lines(category)]
     return lines

@@ -1,0 +1,76 @@
+"""calibrate_csm's overlay: only what the grasps determine is written, and the loader takes it."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from dam_analysis.csm_outcomes import CellMargins, GraspCells
+from dam_analysis.model import build_hand_model
+from dam_analysis.regions import PathTable
+from dam_common.config import load_config
+from dam_experiments.csm_calibration_run import calibrate, overlay
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+CONFIG_PATH = REPO_ROOT / 'config' / 'dam.yaml'
+CONFIG = load_config(CONFIG_PATH)
+
+
+def _cells(alpha_deg: float, lifted_from: np.ndarray | None = None) -> GraspCells:
+    k, dp = np.meshgrid(np.geomspace(0.2, 20.0, 12), [5.0, 15.0, 30.0, 45.0], indexing='ij')
+    n = k.size
+    cells = GraspCells(np.full(n, math.radians(alpha_deg)), k.ravel(), np.radians(dp.ravel()),
+                       np.full(n, CONFIG.object.mass_kg), np.zeros(n))
+    if lifted_from is not None:
+        cells = GraspCells(cells.friction_angle, cells.k_theta, cells.delta_theta_p,
+                           cells.object_mass, lifted_from)
+    return cells
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / 'overlay.yaml'
+    path.write_text(text, encoding='utf-8')
+    return path
+
+
+def test_a_determined_friction_angle_is_written_and_an_undetermined_k_t_is_not(
+        tmp_path: Path) -> None:
+    """Outcomes exactly as the CSM says at 20 deg and the configured k_t (1e5 N/m, where the
+    contacts slide and k_t cancels): alpha comes out near 20 deg, k_t stays configured."""
+    base = _cells(20.0)
+    margins = CellMargins(PathTable(build_hand_model(CONFIG)), base.k_theta,
+                          base.delta_theta_p, base.object_mass, CONFIG.task.gravity_m_per_s2)
+    truth = margins.margins(math.radians(20.0), 1e5, 'path') > 0.0
+    assert 0 < truth.sum() < truth.size  # both outcomes present
+    result = calibrate(_cells(20.0, truth.astype(float)), CONFIG, folds=0)
+    text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
+    data = yaml.safe_load(text)
+    assert result.fit.log10_tangential_stiffness.status != 'determined'
+    assert 'contact_stiffness_n_per_m' not in data['contact']
+    alpha = result.fit.friction_angle[0]
+    assert alpha.status == 'determined'
+    assert alpha.contains(math.radians(20.0))
+    assert data['contact']['friction_angle_deg'] == pytest.approx(math.degrees(alpha.estimate),
+                                                                  rel=1e-5)
+    merged = load_config(CONFIG_PATH, [_write(tmp_path, text)])
+    assert merged.contact.friction_angle_rad == pytest.approx(alpha.estimate, rel=1e-5)
+    np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
+                                  CONFIG.contact.contact_stiffness_n_per_m)
+    assert '# k_t is not determined' in text
+
+
+def test_grasps_that_never_lift_write_nothing(tmp_path: Path) -> None:
+    cells = _cells(10.0)  # every outcome 0: only a bound on alpha, nothing determined
+    result = calibrate(cells, CONFIG, folds=0)
+    text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
+    assert result.fit.friction_angle[0].status != 'determined'
+    assert yaml.safe_load(text) == {}
+    merged = load_config(CONFIG_PATH, [_write(tmp_path, text)])
+    assert merged.contact.friction_angle_rad == CONFIG.contact.friction_angle_rad
+    np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
+                                  CONFIG.contact.contact_stiffness_n_per_m)
+    assert merged.contact.series_stiffness_n_per_m == CONFIG.contact.series_stiffness_n_per_m
