@@ -27,7 +27,7 @@ setup(
             'check_lift = dam_analysis.entry_points:check_lift',
             'lift_map = dam_analysis.lift_map:entry_point',
             'scale_map = dam_analysis.scale_map:entry_point',
-            'csm_dependence = dam_analysis.csm_dependence:entry_point',
+            'csm_dependence = dam_analysis.entry_points:csm_dependence',
             'plan_lift = dam_analysis.entry_points:plan_lift',
         ],
     },

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -179,3 +180,42 @@ def test_the_likelihood_is_the_probit_of_the_margin(
     p = 0.02 + 0.96 * ndtr(cube.margin[0][a, t] / fit.sigma.estimate)
     by_hand = float(np.sum(np.where(lifted > 0.5, np.log(p), np.log1p(-p))))
     assert by_hand == pytest.approx(fit.log_likelihood, rel=1e-9)
+
+
+def test_csm_dependence_draws_the_configured_boundary_and_stops_cleanly(tmp_path: Path
+                                                                         ) -> None:
+    """The boundary it prints at k_t = 1e5 N/m is the configured CSM's (LiftAnalyzer), one
+    at 10 N/m differs; SIGINT while it works: one line, status 130."""
+    import signal
+    import subprocess
+
+    from ros_testing import installed_executable, wait_for_signal_handlers
+
+    exe = str(installed_executable('dam_analysis', 'csm_dependence'))
+    out = tmp_path / 'dep.png'
+    done = subprocess.run([exe, '-o', str(out), '--config', str(CONFIG_PATH),
+                           '--friction-angles', '30deg', '--k-t', '10', '1e5'],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr
+    assert out.stat().st_size > 10_000
+    printed = {}
+    for line in done.stdout.splitlines():
+        k_t = float(line.split('k_t ')[1].split(' N/m')[0])
+        printed[k_t] = [float(v) for v in line.split('= ')[1].split(' N*m/rad')[0].split(', ')]
+    want = LiftAnalyzer(CONFIG).boundaries(math.radians(30.0), np.radians([10.0, 20.0])).csm
+    # printed at 3 significant digits, from a 60-point curve interpolated linearly
+    np.testing.assert_allclose(printed[1e5][:2], want, rtol=0.03)
+    assert printed[10.0][1] > 2.0 * printed[1e5][1]
+    proc = subprocess.Popen([exe, '-o', str(tmp_path / 'x.png')], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_signal_handlers(proc)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130
+    assert 'Traceback' not in stderr and 'interrupted' in stderr

@@ -22,7 +22,8 @@ from ros_testing import installed_executable  # noqa: E402
 #: parameters for a node).
 EXECUTABLES = {
     ('dam_analysis', 'check_lift_server'): ['/check_lift', '/plan_lift',
-                                           'default_friction_angle', 'config_file'],
+                                           'default_friction_angle', 'config_file',
+                                           'config_overlay'],
     ('dam_hand_driver', 'hand_driver'): ['/joint_states', '/hand/command', 'backend',
                                          '~/reset'],
     ('dam_spcm_controller', 'spcm_controller'): ['/dam_grasp', '/dam/status', '/joint_states',
@@ -33,6 +34,7 @@ EXECUTABLES = {
     ('dam_analysis', 'plan_lift'): ['--mass', '--position-tolerance'],
     ('dam_analysis', 'lift_map'): ['--friction-angles'],
     ('dam_analysis', 'scale_map'): ['--radius-range'],
+    ('dam_analysis', 'csm_dependence'): ['--k-t', '--friction-angles'],
     ('dam_spcm_controller', 'dam_grasp'): ['--k-theta', '--cancel-after'],
     ('dam_hand_driver', 'hand_urdf'): ['usage'],
     ('dam_recorder', 'bag'): ['info', 'plot', 'export'],
@@ -41,7 +43,8 @@ EXECUTABLES = {
     ('dam_experiments', 'dam_experiment'): ['--alpha'],
     ('dam_experiments', 'sweep'): ['--friction-angles', '--scheduler'],
     ('dam_experiments', 'sweep_plot'): ['usage'],
-    ('dam_experiments', 'sweep_report'): ['usage'],
+    ('dam_experiments', 'sweep_report'): ['--calibrate'],
+    ('dam_experiments', 'calibrate_csm'): ['--verdict', '--folds', '--fixed-friction-angle'],
 }
 
 

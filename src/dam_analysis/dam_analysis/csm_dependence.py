@@ -18,11 +18,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import numpy as np
-
 from dam_common.command_line import CommandLineParser
-from dam_common.config import load_config
-from dam_common.errors import ConfigError
+from dam_common.quantities import ANGLE, argument, in_degrees, number_argument
 from dam_common.ros_args import strip_ros_args
 
 PROG = 'csm_dependence'
@@ -37,10 +34,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration (default: DAM_CONFIG or the installed config/dam.yaml)')
     p.add_argument('--object', default='', metavar='NAME', help='object of the library')
-    p.add_argument('--friction-angles-deg', type=float, nargs='+', default=[5.0, 30.0],
-                   metavar='DEG', help='friction angles, one panel each (default 5 30)')
-    p.add_argument('--k-t', type=float, nargs='+', default=list(DEFAULT_K_T), metavar='N_PER_M',
-                   help='effective tangential stiffnesses [N/m] (default 10 ... 1e5)')
+    p.add_argument('--friction-angles', type=in_degrees(argument(ANGLE)), nargs='+',
+                   default=[5.0, 30.0], metavar='ANGLE',
+                   help='friction angles alpha, 0 <= alpha < 90 deg, one panel each (5deg, '
+                        '0.09rad; bare: rad; default 5deg 30deg)')
+    p.add_argument('--k-t', type=number_argument(above=0.0, unit='N/m'), nargs='+',
+                   default=list(DEFAULT_K_T), metavar='N_PER_M',
+                   help='effective tangential stiffnesses [N/m] (default 10 30 100 300 1000 '
+                        '1e5)')
     return p
 
 
@@ -48,15 +49,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the tool; ``argv`` without the program name (``sys.argv[1:]`` if None)."""
     parser = build_parser()
     options = parser.parse_args(strip_ros_args(sys.argv[1:] if argv is None else argv))
-    if any(not (math.isfinite(k) and k > 0.0) for k in options.k_t):
-        parser.error(f'--k-t: every stiffness must be a positive number, got {options.k_t}')
-    if any(not 0.0 <= a < 90.0 for a in options.friction_angles_deg):
-        parser.error(f'--friction-angles-deg: each must lie in [0, 90), got '
-                     f'{options.friction_angles_deg}')
+    if any(not 0.0 <= a < 90.0 for a in options.friction_angles):
+        parser.error(f'--friction-angles: each must lie in [0, 90) deg, got '
+                     f'{", ".join(f"{a:g}deg" for a in options.friction_angles)}')
     if options.out.suffix.lower() != '.png':
         parser.error(f'{options.out}: the figure must be a .png file')
     if not options.out.parent.is_dir():
         parser.error(f'{options.out}: the directory {str(options.out.parent)!r} does not exist')
+    import numpy as np  # noqa: PLC0415 - after the signal handlers (entry_points)
+
+    from dam_common.config import load_config  # noqa: PLC0415
+    from dam_common.errors import ConfigError  # noqa: PLC0415
+
     try:
         config = load_config(options.config).with_object(options.object)
     except ConfigError as exc:
@@ -72,9 +76,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     table = PathTable(build_hand_model(config))
     dp = np.radians(np.linspace(1.0, math.degrees(table.model.delta_theta_p_max), 60))
-    fig, axes = plt.subplots(1, len(options.friction_angles_deg), squeeze=False,
-                             figsize=(5.5 * len(options.friction_angles_deg), 4.2))
-    for ax, alpha_deg in zip(axes[0], options.friction_angles_deg, strict=True):
+    fig, axes = plt.subplots(1, len(options.friction_angles), squeeze=False,
+                             figsize=(5.5 * len(options.friction_angles), 4.2))
+    for ax, alpha_deg in zip(axes[0], options.friction_angles, strict=True):
         for k_t in options.k_t:
             b = region_boundaries(table, math.radians(alpha_deg), dp, tangential_stiffness=k_t)
             ax.semilogy(np.degrees(dp), b.csm, label=f'k_t = {k_t:g} N/m')
@@ -96,21 +100,5 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def entry_point() -> None:
-    """The console script: SIGINT or SIGTERM at any moment ends it with one line, status 130."""
-    import signal  # noqa: PLC0415
-
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, interrupt)
-    try:
-        status = main()
-    except KeyboardInterrupt:
-        print(f'{PROG}: interrupted', file=sys.stderr)
-        status = 130
-    sys.exit(status)
-
 if __name__ == '__main__':
-    entry_point()
+    sys.exit(main())

@@ -27,3 +27,23 @@ def check_lift() -> None:
 def plan_lift() -> None:
     """``ros2 run dam_analysis plan_lift``: one /plan_lift request from the command line."""
     run_client_entry('dam_analysis.plan_lift_client', CLIENT_INTERRUPTED)
+
+
+def csm_dependence() -> None:
+    """``ros2 run dam_analysis csm_dependence``: SIGINT or SIGTERM at any moment, start-up
+    included, ends it with one line and status 130."""
+    import importlib  # noqa: PLC0415
+    import signal  # noqa: PLC0415
+    import sys  # noqa: PLC0415
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, interrupt)
+    try:
+        status = importlib.import_module('dam_analysis.csm_dependence').main()
+    except KeyboardInterrupt:
+        sys.stderr.write('csm_dependence: interrupted\n')
+        status = 130
+    sys.exit(status)
