@@ -16,7 +16,7 @@ PYTHON_PACKAGES = ['dam_common', 'dam_analysis', 'dam_sim_bridge', 'dam_hand_dri
                    'dam_spcm_controller', 'dam_recorder', 'dam_experiments']
 #: The suite's packages each package may import (besides itself and the message definitions,
 #: dam_interfaces): the stand-in hand sits beside the driver, below the controller; the
-#: experiments on top.
+#: experiments on top (they read the recorder's episode bags: calibrate_csm).
 LAYERS = {
     'dam_common': set(),
     'dam_analysis': {'dam_common'},
@@ -25,7 +25,7 @@ LAYERS = {
     'dam_recorder': {'dam_common'},
     'dam_spcm_controller': {'dam_common', 'dam_analysis', 'dam_hand_driver'},
     'dam_experiments': {'dam_common', 'dam_analysis', 'dam_hand_driver', 'dam_spcm_controller',
-                        'dam_sim_bridge'},
+                        'dam_sim_bridge', 'dam_recorder'},
 }
 
 
