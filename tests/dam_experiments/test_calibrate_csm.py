@@ -39,21 +39,26 @@ def _write(tmp_path: Path, text: str) -> Path:
 
 def test_a_determined_friction_angle_is_written_and_an_undetermined_k_t_is_not(
         tmp_path: Path) -> None:
-    """Outcomes exactly as the CSM says at 20 deg and the configured k_t (1e5 N/m, where the
-    contacts slide and k_t cancels): alpha comes out near 20 deg, k_t stays configured."""
-    base = _cells(20.0)
+    """Grasps recorded at 15 deg whose outcomes are the CSM's end verdict at 20 deg and the
+    configured k_t (1e5 N/m, where the contacts slide and k_t cancels): alpha comes out near
+    20 deg and /check_lift agrees with more grasps with it, so it is written; k_t stays."""
+    base = _cells(15.0)
     margins = CellMargins(PathTable(build_hand_model(CONFIG)), base.k_theta,
                           base.delta_theta_p, base.object_mass, CONFIG.task.gravity_m_per_s2)
-    truth = margins.margins(math.radians(20.0), 1e5, 'path') > 0.0
+    truth = margins.margins(math.radians(20.0), 1e5, 'end') > 0.0
     assert 0 < truth.sum() < truth.size  # both outcomes present
-    result = calibrate(_cells(20.0, truth.astype(float)), CONFIG, folds=0)
+    result = calibrate(_cells(15.0, truth.astype(float)), CONFIG, verdict='end', folds=0)
     text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
     data = yaml.safe_load(text)
     assert result.fit.log10_tangential_stiffness.status != 'determined'
     assert 'contact_stiffness_n_per_m' not in data['contact']
     alpha = result.fit.friction_angle[0]
     assert alpha.status == 'determined'
-    assert alpha.contains(math.radians(20.0))
+    assert alpha.contains(math.radians(20.0)) and not alpha.contains(math.radians(15.0))
+    # the end verdict at the recorded 15 deg misses grasps the fitted angle gets right
+    assert result.end_agreement_overlay > result.end_agreement_configured
+    assert result.end_agreement_overlay == int(np.sum(
+        (margins.margins(alpha.estimate, 1e5, 'end') > 0.0) == truth))
     assert data['contact']['friction_angle_deg'] == pytest.approx(math.degrees(alpha.estimate),
                                                                   rel=1e-5)
     merged = load_config(CONFIG_PATH, [_write(tmp_path, text)])
@@ -61,6 +66,22 @@ def test_a_determined_friction_angle_is_written_and_an_undetermined_k_t_is_not(
     np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
                                   CONFIG.contact.contact_stiffness_n_per_m)
     assert '# k_t is not determined' in text
+
+
+def test_values_that_do_not_help_check_lift_are_not_written(tmp_path: Path) -> None:
+    """Outcomes exactly as the end verdict at the recorded angle says: no fitted value can
+    make /check_lift agree with more grasps, so the overlay holds none."""
+    base = _cells(20.0)
+    margins = CellMargins(PathTable(build_hand_model(CONFIG)), base.k_theta,
+                          base.delta_theta_p, base.object_mass, CONFIG.task.gravity_m_per_s2)
+    truth = margins.margins(math.radians(20.0), CONFIG.contact.tangential_stiffness_n_per_m,
+                            'end') > 0.0
+    result = calibrate(_cells(20.0, truth.astype(float)), CONFIG, verdict='end', folds=0)
+    assert result.end_agreement_configured == truth.size
+    assert not result.overlay_helps
+    text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
+    assert yaml.safe_load(text) == {}
+    assert 'no better, so none is written' in text
 
 
 def test_grasps_that_never_lift_write_nothing(tmp_path: Path) -> None:

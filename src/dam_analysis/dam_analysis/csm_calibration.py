@@ -201,13 +201,19 @@ def margin_cube(cells: GraspCells, margins: CellMargins, fit_friction_angle: boo
 
 def _log_lik(margin: np.ndarray, lifted: np.ndarray, sigma: np.ndarray, lapse: float
              ) -> np.ndarray:
-    """Sum over the last axis of log P(outcome); ``margin`` (..., N), returns (..., S)."""
-    z = margin[..., None, :] / sigma[:, None]  # (..., S, N)
+    """Sum over the last axis of log P(outcome); ``margin`` (..., N), returns (..., S).
+
+    One ``sigma`` at a time: the memory is that of ``margin``, not S times it.
+    """
     sign = np.where(lifted > 0.5, 1.0, -1.0)
-    log_phi = log_ndtr(sign * z)  # log P(lift) for lifted, log P(no lift) otherwise
-    # lapse + (1 - 2 lapse) Phi, in logs: log(lapse + (1-2 lapse) e^log_phi)
-    value = np.logaddexp(math.log(lapse), math.log1p(-2.0 * lapse) + log_phi)
-    return value.sum(axis=-1)
+    signed = margin * sign  # log P(lift) for lifted, log P(no lift) otherwise, through Phi
+    log_lapse, log_rest = math.log(lapse), math.log1p(-2.0 * lapse)
+    out = np.empty(margin.shape[:-1] + (sigma.size,))
+    for j, s in enumerate(sigma):
+        # lapse + (1 - 2 lapse) Phi, in logs
+        value = np.logaddexp(log_lapse, log_rest + log_ndtr(signed / s))
+        out[..., j] = value.sum(axis=-1)
+    return out
 
 
 def _interval(grid: np.ndarray, profile: np.ndarray, best: float, threshold: float,

@@ -168,9 +168,12 @@ def report_lines(result: Calibration) -> list[str]:
     lines.append(f'tangential stiffness k_t: fitted {interval_text(kt, log10=True)} N/m '
                  f'({kt.status}); configured {result.configured_tangential_stiffness:.4g} N/m')
     sg = fit.sigma
-    lines.append(f'link spread sigma: {interval_text(sg)} N'
-                 + (' -- at the end of its range: the margin explains little of the outcomes'
-                    if sg.at_grid_end else ''))
+    remark = ''
+    if sg.at_grid_end and sg.estimate == sg.grid_high:
+        remark = ' -- at the top of its range: the margin explains little of the outcomes'
+    elif sg.at_grid_end:
+        remark = ' -- at the bottom of its range: the margin separates the outcomes perfectly'
+    lines.append(f'link spread sigma: {interval_text(sg)} N{remark}')
     for g in result.groups:
         held = (f', held out ({result.folds}-fold) {g.held_out} of {g.cells}'
                 if g.held_out >= 0 else '')
@@ -185,10 +188,14 @@ def report_lines(result: Calibration) -> list[str]:
                          f'{width:.3g} deg from {n} grasps; of the same design, a width of 2 deg '
                          f'needs about {grasps_for_width(n, width, 2.0):.0f} grasps, of 1 deg '
                          f'about {grasps_for_width(n, width, 1.0):.0f}')
+    lines.append(f'/check_lift (end verdict) agrees with {result.end_agreement_configured} of '
+                 f'{result.cells} grasps as configured, {result.end_agreement_overlay} with the '
+                 f'fitted values: '
+                 + ('the overlay holds them' if result.overlay_helps
+                    else 'no better, the overlay holds none'))
     if result.verdict == 'path':
-        lines.append('note: /check_lift answers the end verdict; the overlay\'s values were '
-                     'fitted to the path verdict (--verdict end fits the one /check_lift '
-                     'answers)')
+        lines.append('note: the values were fitted to the path verdict; /check_lift answers the '
+                     'end verdict (--verdict end fits that one)')
     return lines
 
 
@@ -305,7 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for note in notes:
             sys.stderr.write(f'{PROG}: note: {note}\n')
         sys.stderr.write(f'{PROG}: fitting {cells.size} grasp(s) of {config.object.name} '
-                         f'(about a minute for a few hundred)\n')
+                         f'(a few minutes for a few hundred)\n')
         sys.stderr.flush()
         result = calibrate(cells, config, verdict=args.verdict,
                            fit_friction_angle=not args.fixed_friction_angle, lapse=args.lapse,

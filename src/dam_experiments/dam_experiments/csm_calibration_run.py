@@ -81,6 +81,17 @@ class Calibration:
     folds: int
     members: tuple[np.ndarray, ...]
     table: Any = None
+    overlay_tangential_stiffness: float | None = None
+    overlay_friction_angle: float | None = None
+    end_agreement_configured: int = 0
+    end_agreement_overlay: int = 0
+    cells: int = 0
+
+    @property
+    def overlay_helps(self) -> bool:
+        """Whether the overlay's values make ``/check_lift``'s end verdict agree with more of
+        the grasps than the configured ones do (else the overlay writes nothing)."""
+        return self.end_agreement_overlay > self.end_agreement_configured
 
     def boundary(self, friction_angle: float, delta_theta_p: float, object_mass: float,
                  gravity: float, k_range: tuple[float, float] = (1e-3, 1e3),
@@ -153,9 +164,26 @@ def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
             recorded_deg=math.degrees(rec), cells=int(members.size),
             configured_end=agree(end), configured_path=agree(path), fitted=agree(fitted),
             held_out=agree(held[members] == 1) if folds else -1, fitted_lift=fitted))
+    # the values an overlay would hold, and what /check_lift (end verdict) answers with them
+    kt = fit.log10_tangential_stiffness
+    k_overlay = 10.0 ** kt.estimate if kt.determined else None
+    alpha_iv = fit.friction_angle[0]
+    a_overlay = (alpha_iv.estimate if len(fit.friction_angle) == 1 and fit_friction_angle
+                 and alpha_iv.determined else None)
+    truth = cells.lifted > 0.5
+    end_conf = end_over = 0
+    for rec, members in zip(cube.recorded, cube.members, strict=True):
+        conf = margins.margins(rec, k_conf, 'end')[members] > 0.0
+        over = margins.margins(rec if a_overlay is None else a_overlay,
+                               k_conf if k_overlay is None else k_overlay, 'end')[members] > 0.0
+        end_conf += int(np.sum(conf == truth[members]))
+        end_over += int(np.sum(over == truth[members]))
     return Calibration(fit=fit, verdict=verdict, configured_tangential_stiffness=k_conf,
                        tangential_stiffness=k_fit, friction_angles=angles,
-                       groups=tuple(groups), folds=folds, members=cube.members, table=table)
+                       groups=tuple(groups), folds=folds, members=cube.members, table=table,
+                       overlay_tangential_stiffness=k_overlay,
+                       overlay_friction_angle=a_overlay, end_agreement_configured=end_conf,
+                       end_agreement_overlay=end_over, cells=cells.size)
 
 
 def grasps_for_width(cells: int, width: float, target: float) -> float:
@@ -173,7 +201,9 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     """The configuration overlay (YAML text) with the values the data determine.
 
     Only a parameter whose interval is closed on both sides is written (one the data bound on
-    one side only, or not at all, keeps the configuration's value):
+    one side only, or not at all, keeps the configuration's value), and only when the written
+    values make ``/check_lift``'s end verdict agree with more of the grasps than the
+    configured ones (:attr:`Calibration.overlay_helps`; otherwise the overlay is ``{}``):
     ``contact.contact_stiffness_n_per_m[1]`` takes the fitted effective tangential stiffness
     and ``contact.series_stiffness_n_per_m`` becomes ``.inf`` (the fit is of the series
     combination); ``contact.friction_angle_deg`` is written only when the grasps hold one
@@ -182,16 +212,18 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     """
     fit = calibration.fit
     kt = fit.log10_tangential_stiffness
+    helps = calibration.overlay_helps
     contact: dict[str, Any] = {}
-    if kt.determined:
+    if helps and calibration.overlay_tangential_stiffness is not None:
         stiffness = [float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)]
-        stiffness[1] = float(f'{10.0 ** kt.estimate:.6g}')
+        stiffness[1] = float(f'{calibration.overlay_tangential_stiffness:.6g}')
         contact['contact_stiffness_n_per_m'] = stiffness
         contact['series_stiffness_n_per_m'] = math.inf
     alpha = fit.friction_angle[0]
     one_group = len(fit.friction_angle) == 1 and fit.fitted_friction_angle
-    if one_group and alpha.determined:
-        contact['friction_angle_deg'] = float(f'{math.degrees(alpha.estimate):.6g}')
+    if helps and calibration.overlay_friction_angle is not None:
+        contact['friction_angle_deg'] = float(
+            f'{math.degrees(calibration.overlay_friction_angle):.6g}')
     lines = [
         '# CSM calibration overlay (calibrate_csm): merge it over the configuration with',
         '# load_config(path, [THIS]) or check_lift_server --ros-args -p config_overlay:=THIS.',
@@ -200,20 +232,27 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
         f'# k_t [N/m]: {interval_text(kt, log10=True)} ({kt.status}).',
     ]
     for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
-        text = interval_text(iv, scale=180.0 / math.pi) if fit.fitted_friction_angle \
-            else 'not fitted'
-        lines.append(f'# friction angle recorded {math.degrees(rec):g} deg: {text} deg'
-                     + (f' ({iv.status}).' if fit.fitted_friction_angle else '.'))
+        text = (f'{interval_text(iv, scale=180.0 / math.pi)} deg ({iv.status})'
+                if fit.fitted_friction_angle else 'not fitted')
+        lines.append(f'# friction angle recorded {math.degrees(rec):g} deg: {text}.')
     if not kt.determined:
         lines.append('# k_t is not determined by these grasps: the configured value stays.')
+        if not kt.contains(math.log10(calibration.configured_tangential_stiffness)):
+            lines.append(f'# (the configured k_t, '
+                         f'{calibration.configured_tangential_stiffness:.4g} N/m, lies outside '
+                         f'the interval: these grasps disagree with it)')
     if fit.fitted_friction_angle and not one_group:
         lines.append('# several recorded friction angles: contact.friction_angle_deg stays.')
     elif one_group and not alpha.determined:
         lines.append('# the friction angle is not determined by these grasps: the configured '
                      'value stays.')
+    lines.append(f'# /check_lift (end verdict) agrees with {calibration.end_agreement_configured}'
+                 f' of the {calibration.cells} grasps as configured, with '
+                 f'{calibration.end_agreement_overlay} with the fitted values'
+                 + ('.' if helps else ': no better, so none is written.'))
     if calibration.verdict == 'path':
-        lines.append('# /check_lift answers the end verdict; these values were fitted to the '
-                     'path verdict.')
+        lines.append('# The values were fitted to the path verdict (--verdict end fits the '
+                     'one /check_lift answers).')
     body = yaml.safe_dump({'contact': contact}, sort_keys=False) if contact else '{}\n'
     return '\n'.join(lines) + '\n' + body
 
