@@ -154,6 +154,19 @@ def wait_for_signal_handlers(proc: subprocess.Popen, timeout_s: float = 20.0) ->
         time.sleep(0.002)
 
 
+def stop_with_signal(proc: subprocess.Popen, signum: int, timeout_s: float = 60.0
+                     ) -> tuple[str, str]:
+    """Send ``signum`` to ``proc`` (by its PID) and return its output; killed if it does not
+    end within ``timeout_s`` (then ``communicate`` raises ``TimeoutExpired``)."""
+    try:
+        proc.send_signal(signum)
+        return proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def child_pids(pid: int) -> list[int]:
     """PIDs of the direct children of process ``pid`` (from /proc; empty once it is gone)."""
     out: list[int] = []

@@ -189,7 +189,7 @@ def test_csm_dependence_draws_the_configured_boundary_and_stops_cleanly(tmp_path
     import signal
     import subprocess
 
-    from ros_testing import installed_executable, wait_for_signal_handlers
+    from ros_testing import installed_executable, stop_with_signal, wait_for_signal_handlers
 
     exe = str(installed_executable('dam_analysis', 'csm_dependence'))
     out = tmp_path / 'dep.png'
@@ -208,14 +208,8 @@ def test_csm_dependence_draws_the_configured_boundary_and_stops_cleanly(tmp_path
     assert printed[10.0][1] > 2.0 * printed[1e5][1]
     proc = subprocess.Popen([exe, '-o', str(tmp_path / 'x.png')], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    try:
-        wait_for_signal_handlers(proc)
-        time.sleep(1.0)
-        proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+    wait_for_signal_handlers(proc)
+    time.sleep(1.0)
+    _, stderr = stop_with_signal(proc, signal.SIGINT)
     assert proc.returncode == 130
     assert 'Traceback' not in stderr and 'interrupted' in stderr

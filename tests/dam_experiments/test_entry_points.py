@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_testing import installed_executable, wait_for_signal_handlers
+from ros_testing import installed_executable, stop_with_signal, wait_for_signal_handlers
 
 #: Long enough that no command ends before its signal (a 0.6 s grasp costs about 0.2 s).
 GRID = ['--k-theta', *[str(k) for k in (0.5, 1, 2, 3, 5, 7, 10, 12, 15, 20)],
@@ -29,16 +29,6 @@ def _start(executable: str, *args: str) -> subprocess.Popen:
     return proc
 
 
-def _stop(proc: subprocess.Popen, signum: int) -> tuple[str, str]:
-    try:
-        proc.send_signal(signum)
-        return proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-
-
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['INT', 'TERM'])
 @pytest.mark.parametrize('delay_s', [0.0, 0.3, 1.5])
 @pytest.mark.parametrize('executable', ['sweep', 'dam_experiment'])
@@ -49,7 +39,7 @@ def test_a_signal_while_a_command_starts_or_works_is_a_clean_stop(
                                                           if executable == 'sweep' else []))
     time.sleep(delay_s)
     assert proc.poll() is None, proc.communicate()
-    stdout, stderr = _stop(proc, signum)
+    stdout, stderr = stop_with_signal(proc, signum)
     assert proc.returncode == 130, (stdout, stderr)
     assert 'Traceback' not in stderr, stderr
     assert 'interrupted' in stdout + stderr, (stdout, stderr)
@@ -62,7 +52,7 @@ def test_dam_experiment_keeps_the_grasps_done_when_interrupted(tmp_path: Path) -
     while not (out.is_file() and out.read_text().count('\n') >= 3):  # header and two rows
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.01)
-    stdout, stderr = _stop(proc, signal.SIGINT)
+    stdout, stderr = stop_with_signal(proc, signal.SIGINT)
     assert proc.returncode == 130, stderr
     with out.open(newline='', encoding='utf-8') as handle:
         rows = list(csv.DictReader(handle))

@@ -32,7 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import log_ndtr
+from scipy.special import log_ndtr, ndtr
 from scipy.stats import chi2
 
 from dam_analysis.csm_outcomes import CellMargins, GraspCells
@@ -296,7 +296,5 @@ def fit_outcomes(cube: MarginCube, lifted: np.ndarray, lapse: float = DEFAULT_LA
 def draw_outcomes(margin: np.ndarray, sigma: float, lapse: float,
                   rng: np.random.Generator) -> np.ndarray:
     """Outcomes drawn from the outcome model at known margins [N] (synthetic data)."""
-    from scipy.special import ndtr
-
     p = lapse + (1.0 - 2.0 * lapse) * ndtr(np.asarray(margin) / sigma)
     return (rng.random(p.shape) < p).astype(np.float64)

@@ -74,11 +74,6 @@ class GraspCells:
     def size(self) -> int:
         return int(self.k_theta.size)
 
-    def subset(self, index: np.ndarray) -> GraspCells:
-        """The cells at ``index`` (an integer or boolean array)."""
-        return GraspCells(*(getattr(self, f)[index] for f in (
-            'friction_angle', 'k_theta', 'delta_theta_p', 'object_mass', 'lifted')))
-
 
 class CellMargins:
     """CSM margins of a fixed set of cells for any friction angle and tangential stiffness.

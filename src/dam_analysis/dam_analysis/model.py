@@ -262,11 +262,7 @@ class HandModel:
     cone_faces: int
     contact_stiffness: np.ndarray
     delta_theta_p_max: float
-    tangential_stiffness: float = math.nan
-
-    def __post_init__(self) -> None:
-        if math.isnan(self.tangential_stiffness):  # built without one: the contact's own
-            object.__setattr__(self, 'tangential_stiffness', float(self.contact_stiffness[1]))
+    tangential_stiffness: float
 
     @property
     def n_fingers(self) -> int:

@@ -44,10 +44,10 @@ from dam_experiments.csm_calibration_run import (
     overlay,
 )
 from dam_experiments.errors import SweepPlotError
+from dam_experiments.sweep_report_rows import CLASSED_LIFTED as LIFTED_OUTCOMES
 
 PROG = 'calibrate_csm'
 DEFAULT_OUTPUT = 'csm_calibration.yaml'
-LIFTED_OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED')
 NOT_LIFTED_OUTCOMES = ('FAILURE',)
 
 
@@ -94,24 +94,15 @@ def cells_from_bags(paths: Sequence[Path], config: Any, object_name: str | None
     """The grasp cells of episode bags (or directories of them); also how many were left
     out (an outcome that says nothing of a lift)."""
     from dam_analysis.csm_outcomes import GraspCells  # noqa: PLC0415
-    from dam_recorder.bag_reading import (  # noqa: PLC0415
-        episode_bags,
-        is_bag_dir,
-        read_bag_metadata,
-    )
+    from dam_recorder.bag_reading import locate, read_bag_metadata  # noqa: PLC0415
     from dam_recorder.errors import DamRecorderError  # noqa: PLC0415
 
     bags: list[Path] = []
     for path in paths:
-        if is_bag_dir(path):
-            bags.append(path)
-        elif path.is_dir():
-            found = episode_bags(path)
-            if not found:
-                raise SweepPlotError(f'{path}: neither a bag nor a directory of bags')
-            bags.extend(found)
-        else:
-            raise SweepPlotError(f'{path}: no such bag or directory')
+        try:
+            bags.extend(locate(path)[1])
+        except DamRecorderError as exc:
+            raise SweepPlotError(str(exc)) from exc
     rows, skipped, objects = [], 0, set()
     for bag in bags:
         try:

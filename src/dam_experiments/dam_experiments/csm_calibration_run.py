@@ -43,6 +43,8 @@ class GroupAgreement:
     fitted : with the fitted parameters (in-sample, the calibration's verdict).
     held_out : the same on held-out folds (each cell predicted by a fit without it); -1 when
         no k-fold check ran.
+    overlay_end : cells whose end verdict (``/check_lift``'s) with the overlay's values
+        equals the outcome.
     fitted_lift : (N_g,) bool, the fitted verdict of each cell of the group (table order).
     """
 
@@ -53,6 +55,7 @@ class GroupAgreement:
     fitted: int
     held_out: int
     fitted_lift: np.ndarray
+    overlay_end: int
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,8 @@ class Calibration:
     folds : folds of the k-fold check (0: none).
     members : per group, the indices of its cells.
     table : the analysis' ``PathTable`` the margins came from.
+    overlay_tangential_stiffness, overlay_friction_angle : the values an overlay would hold
+        (the determined ones, [N/m], [rad]); None: the configured value stays.
     """
 
     fit: CsmFit
@@ -80,12 +85,23 @@ class Calibration:
     groups: tuple[GroupAgreement, ...]
     folds: int
     members: tuple[np.ndarray, ...]
-    table: Any = None
-    overlay_tangential_stiffness: float | None = None
-    overlay_friction_angle: float | None = None
-    end_agreement_configured: int = 0
-    end_agreement_overlay: int = 0
-    cells: int = 0
+    table: Any
+    overlay_tangential_stiffness: float | None
+    overlay_friction_angle: float | None
+
+    @property
+    def cells(self) -> int:
+        return sum(g.cells for g in self.groups)
+
+    @property
+    def end_agreement_configured(self) -> int:
+        """Grasps ``/check_lift``'s end verdict gets right with the configured values."""
+        return sum(g.configured_end for g in self.groups)
+
+    @property
+    def end_agreement_overlay(self) -> int:
+        """The same with the overlay's values."""
+        return sum(g.overlay_end for g in self.groups)
 
     @property
     def overlay_helps(self) -> bool:
@@ -150,40 +166,35 @@ def calibrate(cells: GraspCells, config: Any, verdict: str = 'path',
                 alpha = sub.friction_angle_of(rec)
                 m = margins.margins(alpha, k_sub, verdict)
                 held[test] = (m[test] > 0.0).astype(int)
-    groups = []
-    for rec, members, alpha in zip(cube.recorded, cube.members, angles, strict=True):
-        truth = cells.lifted[members] > 0.5
-
-        def agree(lift: np.ndarray, truth: np.ndarray = truth) -> int:
-            return int(np.sum(lift == truth))
-
-        end = margins.margins(rec, k_conf, 'end')[members] > 0.0
-        path = margins.margins(rec, k_conf, 'path')[members] > 0.0
-        fitted = margins.margins(alpha, k_fit, verdict)[members] > 0.0
-        groups.append(GroupAgreement(
-            recorded_deg=math.degrees(rec), cells=int(members.size),
-            configured_end=agree(end), configured_path=agree(path), fitted=agree(fitted),
-            held_out=agree(held[members] == 1) if folds else -1, fitted_lift=fitted))
     # the values an overlay would hold, and what /check_lift (end verdict) answers with them
     kt = fit.log10_tangential_stiffness
     k_overlay = 10.0 ** kt.estimate if kt.determined else None
     alpha_iv = fit.friction_angle[0]
     a_overlay = (alpha_iv.estimate if len(fit.friction_angle) == 1 and fit_friction_angle
                  and alpha_iv.determined else None)
-    truth = cells.lifted > 0.5
-    end_conf = end_over = 0
-    for rec, members in zip(cube.recorded, cube.members, strict=True):
-        conf = margins.margins(rec, k_conf, 'end')[members] > 0.0
-        over = margins.margins(rec if a_overlay is None else a_overlay,
-                               k_conf if k_overlay is None else k_overlay, 'end')[members] > 0.0
-        end_conf += int(np.sum(conf == truth[members]))
-        end_over += int(np.sum(over == truth[members]))
+    groups = []
+    for rec, members, alpha in zip(cube.recorded, cube.members, angles, strict=True):
+        truth = cells.lifted[members] > 0.5
+
+        def agree(a: float, k_t: float, which: str, truth: np.ndarray = truth,
+                  members: np.ndarray = members) -> tuple[int, np.ndarray]:
+            lift = margins.margins(a, k_t, which)[members] > 0.0
+            return int(np.sum(lift == truth)), lift
+
+        fitted, fitted_lift = agree(alpha, k_fit, verdict)
+        groups.append(GroupAgreement(
+            recorded_deg=math.degrees(rec), cells=int(members.size),
+            configured_end=agree(rec, k_conf, 'end')[0],
+            configured_path=agree(rec, k_conf, 'path')[0], fitted=fitted,
+            held_out=int(np.sum((held[members] == 1) == truth)) if folds else -1,
+            fitted_lift=fitted_lift,
+            overlay_end=agree(rec if a_overlay is None else a_overlay,
+                              k_conf if k_overlay is None else k_overlay, 'end')[0]))
     return Calibration(fit=fit, verdict=verdict, configured_tangential_stiffness=k_conf,
                        tangential_stiffness=k_fit, friction_angles=angles,
                        groups=tuple(groups), folds=folds, members=cube.members, table=table,
                        overlay_tangential_stiffness=k_overlay,
-                       overlay_friction_angle=a_overlay, end_agreement_configured=end_conf,
-                       end_agreement_overlay=end_over, cells=cells.size)
+                       overlay_friction_angle=a_overlay)
 
 
 def grasps_for_width(cells: int, width: float, target: float) -> float:

@@ -129,7 +129,11 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from dam_common.config import CONTACT_MODELS, SIM_MIN_CONTACT_DAMPING_N_S_PER_M
+from dam_common.config import (
+    CONTACT_MODELS,
+    SIM_MIN_CONTACT_DAMPING_N_S_PER_M,
+    series_stiffness,
+)
 from dam_common.cross_section import Circle
 from dam_common.device_protocol import JointFault, JointMode
 from dam_common.hand_urdf import hand_urdf
@@ -629,7 +633,7 @@ class HandWorld:
                 return None
             k0, d0 = a if a is not None else _BULLET_DEFAULT_CONTACT
             k1, d1 = b if b is not None else _BULLET_DEFAULT_CONTACT
-            return 1.0 / (1.0 / k0 + 1.0 / k1), d0 + d1
+            return series_stiffness(k0, k1), d0 + d1
 
         finger = values(self.hand_id, self._joints.indices[0])
         obj = values(self.object_id, -1)
