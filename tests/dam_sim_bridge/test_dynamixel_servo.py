@@ -13,6 +13,7 @@ from dam_sim_bridge.dynamixel_servo import (
     HW_OVERLOAD,
     SERVO_MODELS,
     DynamixelServo,
+    Status,
 )
 
 OK = int(ErrorCode.NONE)
@@ -48,10 +49,11 @@ def test_models_agree_with_the_configuration_module() -> None:
 def test_defaults_and_layout(xm: DynamixelServo) -> None:
     xc = DynamixelServo(7, 'XC330-M288')
     t = xm.table
-    assert len(t) == 256
     assert struct.unpack_from('<H', t, 0)[0] == 1020
     assert struct.unpack_from('<H', xc.table, 0)[0] == 1240
     assert t[7] == 3 and xc.table[7] == 7
+    assert t[8] == 1 and xc.table[8] == 1  # Baud Rate from the factory: 57600 bit/s
+    assert xm.baud_rate_bps == xc.baud_rate_bps == 57600
     assert t[9] == 250 and t[11] == 3 and t[63] == 52 and t[68] == 2
     assert struct.unpack_from('<H', t, 38)[0] == 1193
     assert struct.unpack_from('<H', xc.table, 38)[0] == 2352
@@ -77,8 +79,53 @@ def test_read_signed_present_values_and_tick(xm: DynamixelServo) -> None:
     assert struct.unpack_from('<h', status.params, 6)[0] == -300
     assert struct.unpack_from('<i', status.params, 8)[0] == -12
     assert struct.unpack_from('<i', status.params, 12)[0] == -5000
-    assert xm.read(250, 10, 0.0).error == ErrorCode.ACCESS
     assert xm.read(0, 0, 0.0).error == ErrorCode.DATA_LENGTH
+
+
+def test_the_table_ends_where_the_e_manual_table_ends(xm: DynamixelServo) -> None:
+    """XM430-W350: Indirect Data 56 at address 661 is the last item; XC330-M288: Indirect Data
+    20 at 227. Past the end: Access Error. Inside, items not emulated read as zeros."""
+    xc = DynamixelServo(7, 'XC330-M288')
+    for servo, last in ((xm, 661), (xc, 227)):
+        assert servo.read(last, 1, 0.0) == Status(OK, b'\x00')
+        assert servo.read(last + 1, 1, 0.0).error == ErrorCode.ACCESS
+        assert servo.read(last - 9, 11, 0.0).error == ErrorCode.ACCESS  # reaches past it
+        assert servo.read(last - 9, 10, 0.0) == Status(OK, bytes(10))
+        assert servo.read(168, 2, 0.0).error == OK  # Indirect Address 1 (not emulated)
+        assert servo.write(last + 1, b'\x00').error == ErrorCode.ACCESS
+        assert servo.write(last, b'\x00').error == ErrorCode.ACCESS  # not emulated
+    assert xc.read(228, 4, 0.0).error == ErrorCode.ACCESS  # an XM430 has Indirect Data there
+    assert xm.read(228, 4, 0.0).error == OK
+    assert xm.read(250, 10, 0.0).error == OK
+    assert xm.read(634, 28, 0.0).error == OK  # Indirect Data 29..56
+    assert xm.read(634, 29, 0.0).error == ErrorCode.ACCESS
+
+
+#: Baud Rate (address 8) values of the X series [bit/s] (e-manual, Baud Rate(8)).
+E_MANUAL_BAUD_RATES = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000,
+                       5: 3_000_000, 6: 4_000_000, 7: 4_500_000}
+
+
+def test_baud_rate_values_per_model(xm: DynamixelServo) -> None:
+    """0..7 on the XM430-W350 (4.5 Mbit/s its fastest); 0..6 on the XC330-M288 (4 Mbit/s)."""
+    xc = DynamixelServo(7, 'XC330-M288')
+    for value, bps in E_MANUAL_BAUD_RATES.items():
+        assert SERVO_MODELS['XM430-W350'].baud_rate_value(bps) == value
+        assert xm.write(8, bytes((value,))).error == OK
+        assert xm.baud_rate_bps == bps
+        if value <= 6:
+            assert SERVO_MODELS['XC330-M288'].baud_rate_value(bps) == value
+            assert xc.write(8, bytes((value,))).error == OK
+            assert xc.baud_rate_bps == bps
+    assert xc.write(8, b'\x07').error == ErrorCode.DATA_RANGE
+    assert xc.baud_rate_bps == 4_000_000  # nothing written
+    assert xm.write(8, b'\x08').error == ErrorCode.DATA_RANGE
+    with pytest.raises(ValueError, match='XC330-M288 has no baud rate of 4500000'):
+        SERVO_MODELS['XC330-M288'].baud_rate_value(4_500_000)
+    with pytest.raises(ValueError, match='19200'):
+        SERVO_MODELS['XM430-W350'].baud_rate_value(19200)
+    xm.write(64, b'\x01')
+    assert xm.write(8, b'\x03').error == ErrorCode.ACCESS  # EEPROM: torque off only
 
 
 def test_write_rules(xm: DynamixelServo) -> None:

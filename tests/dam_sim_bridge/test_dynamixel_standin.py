@@ -1,6 +1,7 @@
 """Tests of the Dynamixel stand-in: physics behind the bus, lockstep, watchdog, the executable.
 
-The dynamixel_sdk is the host; the world's own joint state is the independent truth.
+The dynamixel_sdk is the host, at the configured baud rate (the servos answer no other); the
+world's own joint state is the independent truth.
 """
 
 from __future__ import annotations
@@ -47,12 +48,18 @@ def _fast_gil_handoff() -> Iterator[None]:
     with fast_gil_handoff():
         yield
 
+def _open(path: str, bps: int) -> sdk.PortHandler:
+    """The SDK's port at ``bps`` [bit/s] (``openPort`` alone opens it at 1 Mbit/s)."""
+    port = sdk.PortHandler(path)
+    assert port.openPort() and port.setBaudRate(bps)
+    return port
+
+
 class _Rig:
     def __init__(self, standin: DynamixelStandIn) -> None:
         self.standin = standin
-        self.port = sdk.PortHandler(standin.port_path)
+        self.port = _open(standin.port_path, standin.config.dynamixel.baud_rate)
         self.ph = sdk.PacketHandler(2.0)
-        assert self.port.openPort()
         self.ids = [s.servo_id for s in standin.servo_configs]
         for i in self.ids:  # Return Delay Time 0, as a host at 250 Hz sets it
             self.write(i, 9, 1, 0)
@@ -214,8 +221,7 @@ def test_real_time_steps_on_its_own(cfg: DamConfig) -> None:
         time.sleep(0.3)
         cycles = standin.stats.cycles
         assert 0.3 / standin.period_s * 0.3 < cycles <= 0.3 / standin.period_s + 2
-        port = sdk.PortHandler(standin.port_path)
-        port.openPort()
+        port = _open(standin.port_path, cfg.dynamixel.baud_rate)
         tick, result, _ = sdk.PacketHandler(2.0).read2ByteTxRx(port, 1, 120)
         assert result == sdk.COMM_SUCCESS
         assert (int(standin.now() * 1000) - tick) % 32768 < 50  # [ms], the device clock
@@ -233,24 +239,88 @@ def test_needs_a_dynamixel_section(cfg: DamConfig) -> None:
         DynamixelStandIn(dataclasses.replace(cfg, dynamixel=None))
 
 
+def _with_baud_rate(cfg: DamConfig, bps: int) -> DamConfig:
+    return dataclasses.replace(cfg, dynamixel=dataclasses.replace(cfg.dynamixel, baud_rate=bps))
+
+
+@pytest.mark.parametrize(('bps', 'value'), [(4_000_000, 6), (1_000_000, 3), (57600, 1)])
+def test_baud_rate_register_encodes_the_configured_rate(cfg: DamConfig, bps: int,
+                                                        value: int) -> None:
+    """e-manual, Baud Rate(8): 6 is 4 Mbit/s, 3 is 1 Mbit/s, 1 is 57600 bit/s. Every servo
+    holds the configured rate's value and answers a host at that rate only."""
+    standin = DynamixelStandIn(_with_baud_rate(cfg, bps), sim_time=True)
+    thread = threading.Thread(target=standin.run, daemon=True)
+    thread.start()
+    ph = sdk.PacketHandler(2.0)
+    port = _open(standin.port_path, bps)
+    try:
+        for sc in standin.servo_configs:
+            assert ph.read1ByteTxRx(port, sc.servo_id, 8) == (value, sdk.COMM_SUCCESS, 0)
+        assert port.setBaudRate(2_000_000)  # a rate no servo is set to
+        assert ph.ping(port, 1)[1] == sdk.COMM_RX_TIMEOUT
+        assert port.setBaudRate(bps)
+        assert ph.ping(port, 1)[1] == sdk.COMM_SUCCESS
+    finally:
+        port.closePort()
+        standin.close()
+        thread.join(2.0)
+
+
+def test_watchdog_feed_reaches_the_bus(cfg: DamConfig) -> None:
+    from dam_sim_bridge.errors import WorldConfigError
+
+    with DynamixelStandIn(cfg, sim_time=True) as standin:
+        assert standin.watchdog_feed == standin.bus.watchdog_feed == 'addressed'
+    with DynamixelStandIn(cfg, sim_time=True, watchdog_feed='any') as standin:
+        assert standin.watchdog_feed == standin.bus.watchdog_feed == 'any'
+    with pytest.raises(WorldConfigError, match="watchdog_feed 'sometimes' is not one of"):
+        DynamixelStandIn(cfg, watchdog_feed='sometimes')
+
+
 # -------------------------------------------------------------------------------------------
 # The executable
 
 
 def _env() -> dict[str, str]:
+    """The source tree's packages first; C stdio buffered as by default (PYTHONUNBUFFERED
+    would make Python switch C stdio's buffers off too, and hide what they hold back)."""
     env = dict(os.environ)
+    env.pop('PYTHONUNBUFFERED', None)
     paths = [str(p) for p in sorted((REPO / 'src').iterdir()) if (p / 'setup.py').is_file()]
     env['PYTHONPATH'] = os.pathsep.join(paths + [env.get('PYTHONPATH', '')])
     return env
 
 
-def _start(*args: str) -> subprocess.Popen[str]:
-    """The program as its console script runs it."""
-    code = ('import sys; from dam_sim_bridge.entry_points import dynamixel_bus; '
-            'sys.argv[0] = "dynamixel_bus"; dynamixel_bus()')
+_CONSOLE_SCRIPT = ('import sys; from dam_sim_bridge.entry_points import dynamixel_bus; '
+                   'sys.argv[0] = "dynamixel_bus"; dynamixel_bus()')
+
+
+def _start(*args: str, code: str = _CONSOLE_SCRIPT) -> subprocess.Popen[str]:
+    """The program as its console script runs it (or as ``code`` does), stdout a pipe."""
     return subprocess.Popen([sys.executable, '-c', code, *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=_env())
+
+
+def _start_module(*args: str) -> subprocess.Popen[str]:
+    """``python -m dam_sim_bridge.dynamixel_bus_program`` from the source tree."""
+    return subprocess.Popen([sys.executable, '-m', 'dam_sim_bridge.dynamixel_bus_program',
+                             *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=_env())
+
+
+def _port_line_then_sigint(proc: subprocess.Popen[str]) -> tuple[str, str, str]:
+    """The first stdout line, then SIGINT: (that line, the rest of stdout, stderr)."""
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return line, out, err
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
@@ -263,8 +333,7 @@ def test_executable_prints_port_and_stops_cleanly(sig: signal.Signals, tmp_path:
         assert line.startswith('DYNAMIXEL_PORT /'), line
         path = line.split(maxsplit=1)[1].strip()
         assert os.path.realpath(link) == os.path.realpath(path)
-        port = sdk.PortHandler(path)
-        port.openPort()
+        port = _open(path, 4_000_000)  # the shipped configuration's dynamixel.baud_rate
         assert sdk.PacketHandler(2.0).ping(port, 1)[1] == sdk.COMM_SUCCESS
         port.closePort()
         proc.send_signal(sig)
@@ -276,6 +345,79 @@ def test_executable_prints_port_and_stops_cleanly(sig: signal.Signals, tmp_path:
     assert proc.returncode == 0, err
     assert 'Traceback' not in err and out == ''
     assert not link.is_symlink()
+
+
+def test_python_m_prints_the_port_line_first() -> None:
+    line, out, err = _port_line_then_sigint(_start_module())
+    assert line.startswith('DYNAMIXEL_PORT /dev/'), (line, err)
+    assert out == '' and 'Traceback' not in err
+    assert 'argv[0]=' in err  # PyBullet's print, sent to stderr
+
+
+#: The program, with a C library that prints into C stdio's buffer while the world is built and
+#: does not flush (stdout is a pipe: block-buffered), as PyBullet's ``argv[0]=`` may.
+_BUFFERED_C_PRINT = (
+    'import ctypes, sys\n'
+    'from dam_sim_bridge import world\n'
+    'libc = ctypes.CDLL(None)\n'
+    'build = world.HandWorld.__init__\n'
+    'def build_and_print(self, *args, **kwargs):\n'
+    '    build(self, *args, **kwargs)\n'
+    '    libc.printf(b"buffered by C stdio\\n")\n'
+    'world.HandWorld.__init__ = build_and_print\n'
+    'from dam_sim_bridge.entry_points import dynamixel_bus\n'
+    'sys.argv[0] = "dynamixel_bus"\n'
+    'dynamixel_bus()\n')
+
+
+def test_c_stdio_output_of_the_start_up_goes_to_stderr() -> None:
+    """Nothing but the port line on stdout, even what C code left in its stdio buffer."""
+    line, out, err = _port_line_then_sigint(_start(code=_BUFFERED_C_PRINT))
+    assert line.startswith('DYNAMIXEL_PORT /dev/'), (line, err)
+    assert out == '', out
+    assert 'buffered by C stdio' in err and 'Traceback' not in err
+
+
+@pytest.mark.parametrize(('feed', 'watchdog'), [('addressed', 255), ('any', 5)])
+def test_executable_watchdog_feed(feed: str, watchdog: int) -> None:
+    """--watchdog-feed: servo 1 armed with Bus Watchdog 5 (100 ms) hears only reads of servo 2
+    for 160 ms of simulated time (40 lockstep cycles of 4 ms): under addressed it stops."""
+    proc = _start('--sim-time', '--watchdog-feed', feed)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        assert line.startswith('DYNAMIXEL_PORT /'), line
+        port = _open(line.split(maxsplit=1)[1].strip(), 4_000_000)
+        ph = sdk.PacketHandler(2.0)
+        assert ph.write1ByteTxRx(port, 1, 98, 5) == (sdk.COMM_SUCCESS, 0)
+        assert ph.write1ByteTxRx(port, 1, 64, 1) == (sdk.COMM_SUCCESS, 0)
+        for _ in range(40):
+            assert ph.read4ByteTxRx(port, 2, 132)[1] == sdk.COMM_SUCCESS
+        assert ph.read1ByteTxRx(port, 1, 98) == (watchdog, sdk.COMM_SUCCESS, 0)
+        port.closePort()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+
+
+def test_the_stand_in_does_not_import_the_entry_points() -> None:
+    """No import cycle: the program's module is imported by the entry point when it runs, and
+    neither the stand-in nor the program imports the entry points."""
+    code = ('import sys\n'
+            'import dam_sim_bridge.entry_points\n'
+            'print(sorted(m for m in sys.modules if m.startswith("dam_sim_bridge.")))\n'
+            'del sys.modules["dam_sim_bridge.entry_points"]\n'
+            'import dam_sim_bridge.dynamixel_standin, dam_sim_bridge.dynamixel_bus_program\n'
+            'print("dam_sim_bridge.entry_points" in sys.modules)\n')
+    run = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         env=_env(), timeout=60, check=True)
+    first, second = run.stdout.splitlines()[-2:]
+    assert first == "['dam_sim_bridge.entry_points']"
+    assert second == 'False'
 
 
 def test_executable_signal_during_start_up() -> None:
@@ -298,3 +440,41 @@ def test_executable_bad_arguments() -> None:
     proc = _start('--frobnicate')
     _, err = proc.communicate(timeout=20)
     assert proc.returncode == 2 and '--frobnicate' in err
+    proc = _start('--watchdog-feed', 'sometimes')
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 2 and "invalid choice: 'sometimes'" in err
+
+
+# -------------------------------------------------------------------------------------------
+# The stand-in node's watchdog_feed parameter
+
+
+@pytest.fixture
+def ros_args() -> Iterator[object]:
+    """rclpy's default context, initialised by the test with its arguments."""
+    rclpy = pytest.importorskip('rclpy')
+    yield lambda *args: rclpy.init(args=['--ros-args', *args])
+    rclpy.try_shutdown()
+
+
+def test_node_refuses_another_watchdog_feed(ros_args) -> None:
+    from dam_sim_bridge.errors import SimBridgeError
+    from dam_sim_bridge.sim_bridge_node import SimBridgeNode
+
+    ros_args('-p', 'bus:=dynamixel', '-p', 'watchdog_feed:=sometimes')
+    with pytest.raises(SimBridgeError,
+                       match="watchdog_feed 'sometimes' is not one of addressed, any"):
+        SimBridgeNode()
+
+
+def test_node_passes_watchdog_feed_to_the_bus(ros_args) -> None:
+    from dam_sim_bridge.sim_bridge_node import SimBridgeNode
+
+    ros_args('-p', 'bus:=dynamixel', '-p', 'watchdog_feed:=any')
+    node = SimBridgeNode()
+    try:
+        assert node._device.watchdog_feed == 'any'
+        descriptor = node.describe_parameter('watchdog_feed')
+        assert descriptor.read_only and 'addressed or any' in descriptor.additional_constraints
+    finally:
+        node.destroy_node()

@@ -3,10 +3,18 @@
 :class:`DynamixelBus` opens a pty and plays every servo of a list of
 :class:`~dam_sim_bridge.dynamixel_servo.DynamixelServo` on it: any Protocol 2.0 host (the
 ``dynamixel_sdk`` ``PortHandler(path)`` + ``PacketHandler(2.0)``) opens :attr:`port_path` (or
-the symlink :attr:`link_path`) as it would open a USB serial adapter. The baud rate the host
-sets is accepted and ignored: bytes move at pty speed.
+the symlink :attr:`link_path`) as it would open a USB serial adapter.
 
-Dispatch, as real hardware on one half-duplex bus:
+**Baud rate.** Bytes move at pty speed, but the rate the host sets counts as on a real bus:
+a servo hears the line only when the host's rate is within 3 % (the e-manual's UART margin)
+of its Baud Rate (address 8); the others receive garbage, so they neither act, answer nor feed
+their watchdog. The host's rate is the pty's output speed (:meth:`DynamixelBus.line_baud_rate`:
+the two ends of a pty share their termios on Linux; ``tcgetattr`` on the bus's end, and on
+Linux ``TCGETS2`` for a rate without a ``B`` constant such as 4.5 Mbit/s), read when the bus
+takes the bytes; when it cannot be read, every servo hears. A pty opens at 38400 bit/s, a rate
+no X servo has: the host must set its rate, as the SDK's ``PortHandler`` does.
+
+Dispatch, as real hardware on one half-duplex bus (among the servos that hear the line):
 
 * a unicast instruction is answered by the servo of that ID (if its Status Return Level allows:
   0 only PING, 1 PING and READ, 2 everything); an ID no servo has gets no answer;
@@ -14,6 +22,16 @@ Dispatch, as real hardware on one half-duplex bus:
 * SYNC_WRITE, and WRITE or REBOOT to the broadcast ID: no answer;
 * broadcast PING: every servo answers, in ID order;
 * a packet with a bad CRC is answered with CRC Error by the servo it names (unicast only).
+
+**Bus Watchdog feeding** (``watchdog_feed``). The e-manual counts "all the Instruction Packet
+in the DYNAMIXEL Protocol" as communication, without saying whether packets for other IDs
+count. Both readings are offered; with either, a packet with a bad CRC or at another baud rate
+feeds no servo:
+
+* ``addressed`` (default, the stricter): a servo is fed by packets with its ID, by plain
+  broadcasts (PING, WRITE, REBOOT, ... to ID 254), and by sync and bulk packets (SYNC_READ,
+  SYNC_WRITE, FAST_SYNC_READ, BULK_READ, BULK_WRITE, FAST_BULK_READ) that list its ID;
+* ``any``: every instruction packet on the bus feeds every servo.
 
 Fault injection (thread-safe, all off by default): :attr:`DynamixelBus.crc_error_ids`,
 :attr:`DynamixelBus.silent_ids`, :attr:`DynamixelBus.status_delay_s` and
@@ -25,8 +43,13 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import os
+import re
 import select
+import struct
+import sys
+import termios
 import threading
 import time
 import tty
@@ -52,6 +75,28 @@ PARTIAL_TIMEOUT_S = 0.1
 #: A status packet that cannot be written within this long is dropped [s].
 WRITE_TIMEOUT_S = 0.2
 _READ_CHUNK = 4096
+#: ``watchdog_feed``: packets with a servo's ID, plain broadcasts, sync and bulk packets that
+#: list its ID feed its Bus Watchdog.
+WATCHDOG_FEED_ADDRESSED = 'addressed'
+#: ``watchdog_feed``: every instruction packet feeds every servo's Bus Watchdog.
+WATCHDOG_FEED_ANY = 'any'
+#: The values of ``watchdog_feed``.
+WATCHDOG_FEEDS = (WATCHDOG_FEED_ADDRESSED, WATCHDOG_FEED_ANY)
+#: A servo hears a host whose rate is off its Baud Rate by at most this fraction (e-manual:
+#: "less than 3% of the baud rate error margin will not affect UART communication").
+BAUD_RATE_TOLERANCE = 0.03
+
+# Instructions that list IDs but are not emulated (Protocol 2.0).
+_BULK_READ, _BULK_WRITE, _FAST_BULK_READ = 0x92, 0x93, 0x9A
+# termios speed constants (B9600, ...) to bit/s.
+_TERMIOS_RATES = {getattr(termios, name): int(name[1:]) for name in dir(termios)
+                  if re.fullmatch(r'B\d+', name)}
+_BOTHER = 0o010000  # Linux: the rate is in termios2's c_ispeed/c_ospeed
+# Linux TCGETS2 = _IOR('T', 0x2A, struct termios2), struct termios2 of 44 bytes, where the
+# ioctl numbers are asm-generic's.
+_TCGETS2 = 0x802C542A
+_TERMIOS2 = struct.Struct('=4I20x2I')  # flags, c_line + c_cc[19], c_ispeed, c_ospeed
+_TCGETS2_MACHINES = ('x86_64', 'i386', 'i686', 'aarch64', 'armv7l', 'armv6l', 'riscv64')
 
 _Answer = tuple[int, DynamixelServo, Status]  # (ID at the time of the instruction, servo, status)
 
@@ -87,11 +132,16 @@ class DynamixelBus:
         Guards the servos' tables; the bus holds it while it handles a packet (never while it
         writes or waits). A new RLock by default.
     before_dispatch
-        Called with every packet (good CRC) before it is handled, with ``lock`` held (the
-        stand-in steps its world here in lockstep).
+        Called with every packet (good CRC) that a servo hears, before it is handled, with
+        ``lock`` held (the stand-in steps its world here in lockstep).
+    watchdog_feed
+        Which packets feed a servo's Bus Watchdog: ``'addressed'`` or ``'any'`` (module
+        docstring).
 
     Raises
     ------
+    ValueError
+        ``watchdog_feed`` is not one of :data:`WATCHDOG_FEEDS`.
     OSError
         The pty cannot be opened or the link cannot be created.
     FileExistsError
@@ -101,7 +151,11 @@ class DynamixelBus:
     def __init__(self, servos: Sequence[DynamixelServo], *, link_path: str | None = None,
                  clock: Callable[[], float] = time.monotonic,
                  lock: threading.RLock | None = None,
-                 before_dispatch: Callable[[Packet], None] | None = None) -> None:
+                 before_dispatch: Callable[[Packet], None] | None = None,
+                 watchdog_feed: str = WATCHDOG_FEED_ADDRESSED) -> None:
+        if watchdog_feed not in WATCHDOG_FEEDS:
+            raise ValueError(f'watchdog_feed {watchdog_feed!r} is not one of {WATCHDOG_FEEDS}')
+        self._watchdog_feed = watchdog_feed
         self.servos: tuple[DynamixelServo, ...] = tuple(servos)
         self.lock = lock if lock is not None else threading.RLock()
         self.stats = BusStats()
@@ -136,6 +190,33 @@ class DynamixelBus:
             os.unlink(path)
         os.symlink(self.port_path, path)
         self.link_path = path
+
+    @property
+    def watchdog_feed(self) -> str:
+        """``'addressed'`` or ``'any'``: which packets feed a servo's Bus Watchdog."""
+        return self._watchdog_feed
+
+    def line_baud_rate(self) -> int | None:
+        """The rate the host set on the pty [bit/s] (0: hung up), ``None`` if unknown.
+
+        The termios output speed of the bus's end of the pty, which Linux shares with the
+        host's end.
+        """
+        try:
+            speed = termios.tcgetattr(self._slave)[5]
+        except (termios.error, OSError, ValueError):
+            return None
+        if speed == _BOTHER and sys.platform.startswith('linux'):
+            return _termios2_output_speed(self._slave)
+        return _TERMIOS_RATES.get(speed, speed)  # else a C library whose speeds are bit/s
+
+    def _hearing(self) -> tuple[DynamixelServo, ...]:
+        """The servos whose Baud Rate matches the host's (all if the host's is unknown)."""
+        rate = self.line_baud_rate()
+        if rate is None:
+            return self.servos
+        return tuple(s for s in self.servos
+                     if abs(rate - s.baud_rate_bps) <= BAUD_RATE_TOLERANCE * s.baud_rate_bps)
 
     # ---------------------------------------------------------------------------------------
     # Fault injection
@@ -174,11 +255,8 @@ class DynamixelBus:
             self._status_delay_s = delay
 
     def servo(self, servo_id: int) -> DynamixelServo | None:
-        """The servo that has ``servo_id`` now, or ``None``."""
-        for s in self.servos:
-            if s.servo_id == servo_id:
-                return s
-        return None
+        """The servo that has ``servo_id`` now, or ``None`` (whatever its baud rate)."""
+        return _with_id(self.servos, servo_id)
 
     def hardware_error(self, servo_id: int, bits: int) -> None:
         """Set Hardware Error Status ``bits`` on a servo, with their consequences (torque off
@@ -223,9 +301,10 @@ class DynamixelBus:
             arrived).
         """
         with self.lock:
+            hearing = self._hearing()
             if isinstance(packet, CorruptPacket):
                 self.stats.crc_errors += 1
-                s = self.servo(packet.packet_id)
+                s = _with_id(hearing, packet.packet_id)
                 if s is None or not _answers(s, packet.instruction):
                     return []
                 return [(s.servo_id, s, s.status(ErrorCode.CRC))]
@@ -233,23 +312,35 @@ class DynamixelBus:
                 self.stats.ignored += 1
                 return []
             self.stats.packets += 1
-            if self._before_dispatch is not None:
+            if self._before_dispatch is not None and hearing:
                 self._before_dispatch(packet)
             now = self._clock()
             for s in self.servos:
                 s.check_watchdog(now)
+            for s in self._fed(packet, hearing):
+                s.heard(now)
             if packet.is_broadcast:
-                for s in self.servos:
-                    s.heard(now)
-                return self._broadcast(packet, now)
-            s = self.servo(packet.packet_id)
+                return self._broadcast(packet, hearing, now)
+            s = _with_id(hearing, packet.packet_id)
             if s is None:
                 self.stats.ignored += 1
                 return []
-            s.heard(now)
             sid = s.servo_id
             status = self._unicast(s, packet, now)
             return [(sid, s, status)] if _answers(s, packet.instruction) else []
+
+    def _fed(self, packet: Packet, hearing: tuple[DynamixelServo, ...]
+             ) -> tuple[DynamixelServo, ...]:
+        """The servos whose Bus Watchdog ``packet`` feeds (of those that hear it)."""
+        if self._watchdog_feed == WATCHDOG_FEED_ANY:
+            return hearing
+        if not packet.is_broadcast:
+            s = _with_id(hearing, packet.packet_id)
+            return () if s is None else (s,)
+        listed = _listed_ids(packet)
+        if listed is None:  # a plain broadcast
+            return hearing
+        return tuple(s for s in hearing if s.servo_id in listed)
 
     def _unicast(self, s: DynamixelServo, packet: Packet, now: float) -> Status:
         p, inst = packet.params, packet.instruction
@@ -267,24 +358,25 @@ class DynamixelBus:
             return s.reboot()
         return s.status(ErrorCode.INSTRUCTION)
 
-    def _broadcast(self, packet: Packet, now: float) -> list[_Answer]:
+    def _broadcast(self, packet: Packet, hearing: tuple[DynamixelServo, ...], now: float
+                   ) -> list[_Answer]:
         p, inst = packet.params, packet.instruction
         if inst == Instruction.PING:
-            ordered = sorted(self.servos, key=lambda s: s.servo_id)
+            ordered = sorted(hearing, key=lambda s: s.servo_id)
             return [(s.servo_id, s, s.ping()) for s in ordered]
         if inst == Instruction.WRITE and len(p) >= 3:
-            for s in self.servos:
+            for s in hearing:
                 s.write(from_le(p[0:2]), p[2:])
             return []
         if inst == Instruction.REBOOT:
-            for s in self.servos:
+            for s in hearing:
                 s.reboot()
             return []
         if inst == Instruction.SYNC_READ and len(p) >= 4:
             address, length = from_le(p[0:2]), from_le(p[2:4])
             answers = []
             for sid in p[4:]:
-                s = self.servo(sid)
+                s = _with_id(hearing, sid)
                 if s is not None and s.status_return_level >= 1:
                     answers.append((sid, s, s.read(address, length, now)))
             return answers
@@ -295,7 +387,7 @@ class DynamixelBus:
                 self.stats.ignored += 1
                 return []
             for k in range(4, len(p), block):
-                s = self.servo(p[k])
+                s = _with_id(hearing, p[k])
                 if s is not None:
                     s.write(address, p[k + 1:k + block])
             return []
@@ -425,6 +517,48 @@ class DynamixelBus:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _with_id(servos: Iterable[DynamixelServo], servo_id: int) -> DynamixelServo | None:
+    """The servo of ``servos`` that has ``servo_id`` now, or ``None``."""
+    for s in servos:
+        if s.servo_id == servo_id:
+            return s
+    return None
+
+
+def _listed_ids(packet: Packet) -> frozenset[int] | None:
+    """The IDs a broadcast sync or bulk packet lists (empty if it is malformed); ``None`` for
+    a plain broadcast (another instruction)."""
+    p, inst = packet.params, packet.instruction
+    if inst in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
+        return frozenset(p[4:]) if len(p) >= 4 else frozenset()
+    if inst == Instruction.SYNC_WRITE:
+        length = from_le(p[2:4]) if len(p) >= 4 else 0
+        if length < 1 or (len(p) - 4) % (length + 1):
+            return frozenset()
+        return frozenset(p[4::length + 1])
+    if inst in (_BULK_READ, _FAST_BULK_READ):  # per servo: ID, address (2), length (2)
+        return frozenset(p[0::5]) if len(p) % 5 == 0 else frozenset()
+    if inst == _BULK_WRITE:  # per servo: ID, address (2), length (2), data
+        ids, k = set(), 0
+        while k + 5 <= len(p):
+            ids.add(p[k])
+            k += 5 + from_le(p[k + 3:k + 5])
+        return frozenset(ids) if k == len(p) else frozenset()
+    return None
+
+
+def _termios2_output_speed(fd: int) -> int | None:
+    """The output speed of ``fd`` from Linux's ``TCGETS2`` [bit/s], ``None`` where this
+    machine's ioctl numbers are not known here or the call fails."""
+    if os.uname().machine not in _TCGETS2_MACHINES:
+        return None
+    try:
+        raw = fcntl.ioctl(fd, _TCGETS2, bytes(_TERMIOS2.size))
+    except OSError:
+        return None
+    return int(_TERMIOS2.unpack(raw)[5])
 
 
 def _answers(servo: DynamixelServo, instruction: int) -> bool:

@@ -1,16 +1,26 @@
 """One emulated Dynamixel X-series servo: its control table and the rules of reading and writing.
 
-No I/O and no physics: :class:`DynamixelServo` keeps a 256-byte control table (little-endian
-fields at the addresses of the ROBOTIS e-manual, X series, Protocol 2.0) and answers PING,
-READ, WRITE and REBOOT with an error code and parameters; the bus
+No I/O and no physics: :class:`DynamixelServo` keeps a control table as long as its model's
+(little-endian fields at the addresses of the ROBOTIS e-manual, X series, Protocol 2.0) and
+answers PING, READ, WRITE and REBOOT with an error code and parameters; the bus
 (:mod:`dam_sim_bridge.dynamixel_bus`) frames them, the stand-in
 (:mod:`dam_sim_bridge.dynamixel_standin`) reads the goals and writes the present values.
 
 Emulated rules (X-series e-manual behaviour as far as it is known here):
 
+* The table ends where the model's e-manual table ends (:attr:`ServoModel.table_end`: after
+  Indirect Data 56 at address 661 on the XM430-W350, after Indirect Data 20 at 227 on the
+  XC330-M288): a read or write that reaches past it gives Access Error. Inside it, the items of
+  :data:`FIELDS` are emulated; every other address (e.g. Indirect Address and Data, the
+  XC330's Startup Configuration and PWM Slope, the XM430's gap 252..577) reads as zero and
+  gives Access Error when written.
 * EEPROM fields (address < 64) cannot be written while Torque Enable is 1 (Access Error,
-  nothing written); read-only fields, addresses of no field, and writes past the table give
-  Access Error; a write that covers only part of a field gives Data Length Error.
+  nothing written); read-only fields and addresses of no emulated field give Access Error; a
+  write that covers only part of a field gives Data Length Error.
+* Baud Rate (8) takes the model's values (:data:`BAUD_RATES_BPS`; 0..7 on the XM430-W350,
+  0..6 on the XC330-M288, whose fastest rate is 4 Mbit/s): others give Data Range Error. The
+  servo hears the line only at that rate (:attr:`DynamixelServo.baud_rate_bps`; the bus
+  compares it with the host's).
 * Values outside a field's range give Data Range Error; Goal Current beyond +-Current Limit,
   Goal PWM beyond PWM Limit, Goal Velocity beyond Velocity Limit and, in position mode (3),
   Goal Position outside Min..Max Position Limit give Data Limit Error (in modes 4 and 5 the
@@ -19,10 +29,11 @@ Emulated rules (X-series e-manual behaviour as far as it is known here):
   packet. If one of its bits is enabled in Shutdown (63) the torque goes off and a write of
   Torque Enable = 1 gives Result Fail (with the Alert bit) and leaves it off. REBOOT clears the
   error, turns torque off and restores the RAM defaults; the EEPROM is kept.
-* Bus Watchdog (98): with torque on and a non-zero value, a servo that hears no instruction
-  packet (its ID or broadcast) for ``value * 20 ms`` of the device clock stops (no torque
-  output) and shows 255 (-1); then writes of Goal PWM/Current/Velocity/Position give Data Range
-  Error, until 0 is written to Bus Watchdog.
+* Bus Watchdog (98): with torque on and a non-zero value, a servo that is not fed
+  (:meth:`DynamixelServo.heard`; which packets feed it is the bus's ``watchdog_feed``) for
+  ``value * 20 ms`` of the device clock stops (no torque output) and shows 255 (-1); then
+  writes of Goal PWM/Current/Velocity/Position give Data Range Error, until 0 is written to
+  Bus Watchdog.
 * Goal Position starts at the Present Position of the moment the RAM is (re)initialised.
 * Drive Mode, the gains, profiles and LED are stored but have no effect.
 """
@@ -33,8 +44,6 @@ from dataclasses import dataclass
 
 from dam_sim_bridge.dynamixel_packets import MAX_ID, ErrorCode, from_le, le_bytes
 
-#: Size of the emulated control table [bytes].
-TABLE_SIZE = 256
 #: First RAM address: fields below are EEPROM.
 RAM_START = 64
 #: Bus Watchdog unit [s].
@@ -45,6 +54,11 @@ WATCHDOG_TRIPPED = 255
 EXTENDED_POSITION_LIMIT = 1_048_575
 #: Return Delay Time unit [s].
 RETURN_DELAY_UNIT_S = 2e-6
+#: Baud Rate (address 8) values of the X series and their line rates [bit/s] (e-manual).
+BAUD_RATES_BPS: dict[int, int] = {0: 9600, 1: 57600, 2: 115200, 3: 1_000_000, 4: 2_000_000,
+                                  5: 3_000_000, 6: 4_000_000, 7: 4_500_000}
+#: Baud Rate value from the factory (57600 bit/s).
+FACTORY_BAUD_RATE = 1
 
 # Hardware Error Status bits (address 70).
 HW_INPUT_VOLTAGE = 0x01
@@ -74,12 +88,40 @@ class ServoModel:
     max_voltage_limit: int  #: [0.1 V]
     min_voltage_limit: int  #: [0.1 V]
     input_voltage: int  #: the emulated Present Input Voltage [0.1 V]
+    baud_rate_max: int  #: the largest Baud Rate value (a key of :data:`BAUD_RATES_BPS`)
+    table_end: int  #: one past the last address of the control table [bytes]
+
+    def baud_rate_value(self, bps: int) -> int:
+        """The Baud Rate (address 8) value of a line rate.
+
+        Parameters
+        ----------
+        bps
+            Line rate [bit/s].
+
+        Returns
+        -------
+        int
+            The value, 0..:attr:`baud_rate_max`.
+
+        Raises
+        ------
+        ValueError
+            The model has no such rate.
+        """
+        for value, rate in BAUD_RATES_BPS.items():
+            if rate == int(bps) and value <= self.baud_rate_max:
+                return value
+        rates = [BAUD_RATES_BPS[v] for v in range(self.baud_rate_max + 1)]
+        raise ValueError(f'{self.name} has no baud rate of {bps!r} bit/s (its rates: {rates})')
 
 
 #: The emulated models by name.
 SERVO_MODELS: dict[str, ServoModel] = {
-    'XM430-W350': ServoModel('XM430-W350', 1020, 2.69e-3, 1193, 885, 200, 80, 160, 95, 120),
-    'XC330-M288': ServoModel('XC330-M288', 1240, 1.0e-3, 2352, 885, 445, 70, 70, 35, 50),
+    'XM430-W350': ServoModel('XM430-W350', 1020, 2.69e-3, 1193, 885, 200, 80, 160, 95, 120,
+                             baud_rate_max=7, table_end=662),
+    'XC330-M288': ServoModel('XC330-M288', 1240, 1.0e-3, 2352, 885, 445, 70, 70, 35, 50,
+                             baud_rate_max=6, table_end=228),
 }
 #: Firmware Version the emulated servos report.
 FIRMWARE_VERSION = 48
@@ -146,7 +188,7 @@ _FIELDS = (
 )
 #: Control-table items by name.
 FIELDS: dict[str, Field] = {f.name: f for f in _FIELDS}
-_FIELD_AT: list[Field | None] = [None] * TABLE_SIZE
+_FIELD_AT: list[Field | None] = [None] * max(f.address + f.size for f in _FIELDS)
 for _f in _FIELDS:
     for _a in range(_f.address, _f.address + _f.size):
         _FIELD_AT[_a] = _f
@@ -184,7 +226,8 @@ class DynamixelServo:
         if not 0 <= int(servo_id) <= MAX_ID:
             raise ValueError(f'servo ID {servo_id!r} is outside 0..{MAX_ID}')
         self.model = SERVO_MODELS[model]
-        self.table = bytearray(TABLE_SIZE)
+        #: The control table, :attr:`ServoModel.table_end` bytes.
+        self.table = bytearray(self.model.table_end)
         self._last_heard_s: float | None = None
         self._eeprom_defaults(int(servo_id))
         self._ram_defaults()
@@ -212,7 +255,8 @@ class DynamixelServo:
         m = self.model
         for name, value in (('model_number', m.model_number), ('firmware_version',
                                                                FIRMWARE_VERSION),
-                            ('id', servo_id), ('baud_rate', 1), ('return_delay_time', 250),
+                            ('id', servo_id), ('baud_rate', FACTORY_BAUD_RATE),
+                            ('return_delay_time', 250),
                             ('operating_mode', MODE_POSITION), ('secondary_id', 255),
                             ('protocol_type', 2), ('moving_threshold', 10),
                             ('temperature_limit', m.temperature_limit),
@@ -226,7 +270,7 @@ class DynamixelServo:
 
     def _ram_defaults(self) -> None:
         measured = self.table[_MEASURED_START:_MEASURED_END]  # what the sensors tell
-        self.table[RAM_START:TABLE_SIZE] = bytes(TABLE_SIZE - RAM_START)
+        self.table[RAM_START:] = bytes(len(self.table) - RAM_START)
         self.table[_MEASURED_START:_MEASURED_END] = measured
         for name, value in (('status_return_level', 2), ('velocity_i_gain', 1920),
                             ('velocity_p_gain', 100), ('position_p_gain', 800),
@@ -248,6 +292,11 @@ class DynamixelServo:
     def status_return_level(self) -> int:
         """0: only PING answers, 1: PING and READ, 2: every instruction."""
         return self.table[68]
+
+    @property
+    def baud_rate_bps(self) -> int:
+        """The line rate of its Baud Rate (address 8) [bit/s]."""
+        return BAUD_RATES_BPS[self.table[8]]
 
     @property
     def return_delay_s(self) -> float:
@@ -304,11 +353,12 @@ class DynamixelServo:
         Returns
         -------
         Status
-            The bytes, or Data Length Error (length 0) or Access Error (past the table).
+            The bytes (zeros where no item is emulated), or Data Length Error (length 0) or
+            Access Error (reaching past the model's table).
         """
         if length <= 0:
             return self.status(ErrorCode.DATA_LENGTH)
-        if address < 0 or address + length > TABLE_SIZE:
+        if address < 0 or address + length > len(self.table):
             return self.status(ErrorCode.ACCESS)
         self.set('realtime_tick', int(now_s * 1000.0) % 32768)
         return self.status(params=bytes(self.table[address:address + length]))
@@ -332,12 +382,12 @@ class DynamixelServo:
         if not data:
             return self.status(ErrorCode.DATA_LENGTH)
         end = address + len(data)
-        if address < 0 or end > TABLE_SIZE:
+        if address < 0 or end > len(self.table):
             return self.status(ErrorCode.ACCESS)
         items: list[tuple[Field, int]] = []
         a = address
         while a < end:
-            f = _FIELD_AT[a]
+            f = _FIELD_AT[a] if a < len(_FIELD_AT) else None
             if f is None or not f.writable:
                 return self.status(ErrorCode.ACCESS)
             if f.address != a or f.address + f.size > end:
@@ -373,6 +423,8 @@ class DynamixelServo:
         if 'operating_mode' in new and new['operating_mode'] not in OPERATING_MODES:
             return ErrorCode.DATA_RANGE
         if 'current_limit' in new and new['current_limit'] > self.model.current_limit:
+            return ErrorCode.DATA_RANGE
+        if 'baud_rate' in new and new['baud_rate'] > self.model.baud_rate_max:
             return ErrorCode.DATA_RANGE
         if 'goal_current' in new and abs(new['goal_current']) > value('current_limit'):
             return ErrorCode.DATA_LIMIT
@@ -426,8 +478,8 @@ class DynamixelServo:
             self.table[64] = 0
 
     def heard(self, now_s: float) -> None:
-        """An instruction packet for this servo (its ID or broadcast) arrived at ``now_s`` [s]
-        of the device clock: feeds the Bus Watchdog."""
+        """An instruction packet that feeds the Bus Watchdog arrived at ``now_s`` [s] of the
+        device clock (which packets do is the bus's ``watchdog_feed``)."""
         self.check_watchdog(now_s)
         self._last_heard_s = now_s
 

@@ -35,27 +35,29 @@ Two ways of running (:meth:`DynamixelStandIn.run`):
   that read is answered; the host's bus cycle is the clock, and the device clock is the
   simulated time.
 
-Realtime Tick (120) and the Bus Watchdog run on the device clock.
+Realtime Tick (120) and the Bus Watchdog run on the device clock. Every servo's Baud Rate
+(address 8) encodes ``dynamixel.baud_rate``, and the bus answers a host only at that rate
+(:mod:`dam_sim_bridge.dynamixel_bus`); Return Delay Time (9) is ``return_delay_time_raw``.
 
-``python -m dam_sim_bridge.dynamixel_standin`` (or the ``dynamixel_bus`` executable) serves the
-bus until SIGINT or SIGTERM, after printing ``DYNAMIXEL_PORT <path>``.
+The ``dynamixel_bus`` program (:mod:`dam_sim_bridge.dynamixel_bus_program`) serves a stand-in
+alone, without ROS.
 """
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import math
-import os
-import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
-from dam_common.command_line import CommandLineParser
 from dam_common.device_protocol import JointMode
-from dam_sim_bridge.dynamixel_bus import BusStats, DynamixelBus
+from dam_sim_bridge.dynamixel_bus import (
+    WATCHDOG_FEED_ADDRESSED,
+    WATCHDOG_FEEDS,
+    BusStats,
+    DynamixelBus,
+)
 from dam_sim_bridge.dynamixel_packets import Instruction, Packet, from_le
 from dam_sim_bridge.dynamixel_servo import (
     MODE_CURRENT,
@@ -115,12 +117,16 @@ class DynamixelStandIn:
     return_delay_time_raw
         Return Delay Time of every servo [2 us units]: 0, as a hand set up for speed; 250 as
         a servo from the factory.
+    watchdog_feed
+        Which packets feed a servo's Bus Watchdog: ``'addressed'`` (packets with its ID, plain
+        broadcasts, sync and bulk packets that list it) or ``'any'`` (every packet).
 
     Raises
     ------
     WorldConfigError
         No ``dynamixel`` section, a servo per joint missing or out of order, an unknown model,
-        or a bus period shorter than the physics step.
+        a baud rate a servo's model does not have, a bus period shorter than the physics step,
+        or a ``watchdog_feed`` that is neither.
     OSError
         The pty or the link cannot be created.
     """
@@ -128,7 +134,8 @@ class DynamixelStandIn:
     def __init__(self, config: DamConfig, world: HandWorld | None = None, *,
                  sim_time: bool = False, link_path: str | None = None,
                  clock: Callable[[], float] = time.monotonic,
-                 return_delay_time_raw: int = 0) -> None:
+                 return_delay_time_raw: int = 0,
+                 watchdog_feed: str = WATCHDOG_FEED_ADDRESSED) -> None:
         dxl = getattr(config, 'dynamixel', None)
         if dxl is None:
             raise WorldConfigError('the configuration has no dynamixel: section')
@@ -144,6 +151,14 @@ class DynamixelStandIn:
         if unknown:
             raise WorldConfigError(f'dynamixel.servos: model {unknown} is not emulated '
                                    f'(emulated: {sorted(SERVO_MODELS)})')
+        try:
+            baud_values = tuple(SERVO_MODELS[s.model].baud_rate_value(dxl.baud_rate)
+                                for s in dxl.servos)
+        except ValueError as exc:
+            raise WorldConfigError(f'dynamixel.baud_rate: {exc}') from None
+        if watchdog_feed not in WATCHDOG_FEEDS:
+            raise WorldConfigError(f'watchdog_feed {watchdog_feed!r} is not one of '
+                                   f'{WATCHDOG_FEEDS}')
         self.config = config
         self.period_s = 1.0 / rate
         own_world = world is None
@@ -166,7 +181,8 @@ class DynamixelStandIn:
             self._stop = threading.Event()
             self._running = threading.Lock()
             self.bus = DynamixelBus(self.servos, link_path=link_path, clock=self.now,
-                                    lock=self.lock, before_dispatch=self._before_dispatch)
+                                    lock=self.lock, before_dispatch=self._before_dispatch,
+                                    watchdog_feed=watchdog_feed)
         except BaseException:
             if own_world:
                 self.world.close()
@@ -176,10 +192,11 @@ class DynamixelStandIn:
         self.stats: BusStats = self.bus.stats
         with self.lock:
             self._refresh_present()
-            for s in self.servos:  # at power-up the goal is where the servo stands
-                s.set('goal_position', s.get('present_position'))
-                # A hand set up as docs/dynamixel.md says: no Return Delay Time (a servo
-                # fresh from the factory waits 500 us before each answer).
+            for s, baud in zip(self.servos, baud_values, strict=True):
+                s.set('goal_position', s.get('present_position'))  # where it stands
+                # A hand set up as docs/dynamixel.md says: the configured baud rate (a servo
+                # from the factory has 57600 bit/s) and no Return Delay Time (500 us).
+                s.set('baud_rate', baud)
                 s.set('return_delay_time', return_delay_time_raw)
 
     # ---------------------------------------------------------------------------------------
@@ -318,7 +335,12 @@ class DynamixelStandIn:
                 self._running.release()
 
     # ---------------------------------------------------------------------------------------
-    # Fault injection (the bus's)
+    # The bus's options and fault injection
+
+    @property
+    def watchdog_feed(self) -> str:
+        """``'addressed'`` or ``'any'``: which packets feed a servo's Bus Watchdog."""
+        return self.bus.watchdog_feed
 
     @property
     def crc_error_ids(self) -> frozenset[int]:
@@ -365,94 +387,3 @@ class DynamixelStandIn:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-# -------------------------------------------------------------------------------------------
-# The dynamixel_bus program
-
-PROG = 'dynamixel_bus'
-
-
-def _parser() -> argparse.ArgumentParser:
-    parser = CommandLineParser(
-        prog=PROG, description='Serve the simulated hand as nine Dynamixel servos on a '
-        'pseudo-terminal; print "DYNAMIXEL_PORT <path>" and run until SIGINT or SIGTERM.')
-    parser.add_argument('--config', metavar='FILE', help='configuration file (default: the '
-                        'installed or source-tree config/dam.yaml)')
-    parser.add_argument('--object', metavar='NAME', default='',
-                        help='an object of the configuration\'s library')
-    parser.add_argument('--link', metavar='PATH', help='also make PATH a symlink to the pty')
-    parser.add_argument('--sim-time', action='store_true',
-                        help='lockstep: the world steps one period per read of Present '
-                        'Position')
-    return parser
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """File descriptor 1 goes to stderr meanwhile (C libraries' prints included)."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    try:
-        os.dup2(2, 1)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``dynamixel_bus``: build the world and the bus, print the port line, serve.
-
-    Stops cleanly on SIGINT and SIGTERM when started by
-    :func:`dam_sim_bridge.entry_points.dynamixel_bus` (which catches them).
-
-    Returns
-    -------
-    int
-        0 after a stop request; 2 for a bad argument or configuration (usage error).
-    """
-    from dam_common.config import load_config  # noqa: PLC0415
-    from dam_common.errors import ConfigError  # noqa: PLC0415
-    from dam_common.shutdown import SHUTDOWN  # noqa: PLC0415
-
-    parser = _parser()
-    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        config = load_config(args.config)
-    except ConfigError as exc:
-        parser.error(f'--config {args.config or "(default)"}: {exc}')
-    try:
-        config = config.with_object(args.object)
-    except ConfigError as exc:
-        parser.error(f'--object {args.object}: {exc}')
-    if getattr(config, 'dynamixel', None) is None:
-        parser.error(f'--config {args.config or "(default)"}: no dynamixel: section')
-    standin = None
-    try:
-        try:
-            with _stdout_to_stderr():  # PyBullet prints to fd 1: keep stdout one line
-                standin = DynamixelStandIn(config, sim_time=args.sim_time,
-                                           link_path=args.link)
-        except (FileExistsError, FileNotFoundError, PermissionError,
-                NotADirectoryError) as exc:
-            parser.error(f'--link {args.link}: {exc}')
-        with SHUTDOWN.uninterrupted():
-            sys.stdout.write(f'DYNAMIXEL_PORT {standin.port_path}\n')
-            sys.stdout.flush()
-        SHUTDOWN.started()
-        worker = threading.Thread(target=standin.run, name='dynamixel-bus', daemon=True)
-        worker.start()
-        while worker.is_alive() and not SHUTDOWN.wait(0.1):
-            pass
-    finally:
-        if standin is not None:
-            standin.close()
-    return 0
-
-
-if __name__ == '__main__':
-    from dam_sim_bridge.entry_points import dynamixel_bus  # noqa: PLC0415
-
-    dynamixel_bus()

@@ -19,11 +19,11 @@ def sim_bridge() -> None:
 
 def dynamixel_bus() -> None:
     """``dynamixel_bus``: the emulated Dynamixel bus (not a node; see
-    :func:`dam_sim_bridge.dynamixel_standin.main`). A signal at any moment ends it with status
-    0; a bad argument with status 2."""
+    :func:`dam_sim_bridge.dynamixel_bus_program.main`). A signal at any moment ends it with
+    status 0; a bad argument with status 2."""
     shutdown = catch_signals(interrupt_startup=True)
     try:
-        from dam_sim_bridge.dynamixel_standin import main  # noqa: PLC0415
+        from dam_sim_bridge.dynamixel_bus_program import main  # noqa: PLC0415
 
         status = main()
     except StartupInterrupted:

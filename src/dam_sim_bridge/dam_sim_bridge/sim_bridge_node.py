@@ -56,6 +56,11 @@ port_file : string, read-only
     ``bus:=dynamixel``: write the pseudo-terminal's path into this file once it serves.
 port_link : string, read-only
     ``bus:=dynamixel``: a symbolic link to the pseudo-terminal (a fixed name for tools).
+watchdog_feed : string, read-only, ``addressed`` (default) or ``any``
+    ``bus:=dynamixel``: which instruction packets feed a servo's Bus Watchdog (the e-manual
+    leaves it open): ``addressed``, packets with its ID, plain broadcasts, and sync and bulk
+    packets that list its ID; ``any``, every instruction packet on the bus. Another value is
+    refused at start-up.
 fault_crc_error_ids, fault_silent_ids : int[], ``bus:=dynamixel``, may be set at run time
     Servos (by ID) whose status packets get a wrong CRC, or that stop answering.
 fault_status_delay_s : double [s] in [0, 1], ``bus:=dynamixel``, may be set at run time
@@ -102,6 +107,7 @@ from dam_common.ros_args import strip_ros_args
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.srv import SetFrictionAngle
+from dam_sim_bridge.dynamixel_bus import WATCHDOG_FEED_ADDRESSED, WATCHDOG_FEEDS
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.sim_device import SimDevice
@@ -172,6 +178,16 @@ class SimBridgeNode(Node):
             'port_link', '', ParameterDescriptor(
                 description='bus dynamixel: a symbolic link to the pseudo-terminal',
                 read_only=True)).value)
+        watchdog_feed = str(self.declare_parameter(
+            'watchdog_feed', WATCHDOG_FEED_ADDRESSED, ParameterDescriptor(
+                description='bus dynamixel: which instruction packets feed a servo\'s Bus '
+                            'Watchdog: addressed (its ID, plain broadcasts, sync and bulk '
+                            'packets that list it) or any (every packet on the bus)',
+                additional_constraints=' or '.join(WATCHDOG_FEEDS),
+                read_only=True)).value)
+        if watchdog_feed not in WATCHDOG_FEEDS:
+            raise SimBridgeError(f'watchdog_feed {watchdog_feed!r} is not one of '
+                                 f'{", ".join(WATCHDOG_FEEDS)}')
         self._declare_fault_parameters()
         self._config = declare_object(self, load_config(config_file or None))
         with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
@@ -180,7 +196,8 @@ class SimBridgeNode(Node):
                 if self._bus == 'dynamixel':
                     self._device = DynamixelStandIn(self._config, world,
                                                     sim_time=self._sim_time,
-                                                    link_path=port_link or None)
+                                                    link_path=port_link or None,
+                                                    watchdog_feed=watchdog_feed)
                 else:
                     self._device = SimDevice(self._config, world, sim_time=self._sim_time)
             except BaseException:
@@ -231,8 +248,9 @@ class SimBridgeNode(Node):
                  if self._sim_time else 'real time')
         self.get_logger().info(
             f'simulated DAM hand as an emulated Dynamixel bus on {device.port_path}{link}: '
-            f'servos {ids}; {dxl.rate_hz:g} Hz bus cycle ({device.steps_per_cycle} physics '
-            f'steps), {clock}; object {self._config.object.name}, config '
+            f'servos {ids} at {dxl.baud_rate} bit/s; {dxl.rate_hz:g} Hz bus cycle '
+            f'({device.steps_per_cycle} physics steps), {clock}; watchdog_feed '
+            f'{device.watchdog_feed}; object {self._config.object.name}, config '
             f'{self._config.source}')
 
     def _declare_fault_parameters(self) -> None:
