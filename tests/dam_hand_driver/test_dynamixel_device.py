@@ -175,7 +175,9 @@ def test_the_device_reads_the_world_arms_and_disarms(cfg: DamConfig, standin) ->
         assert sample.position == pytest.approx(world_q, abs=POSITION_RAD_PER_COUNT)
         device.arm(sample)
         assert all(_field(standin, j, 'torque_enable') == 1 for j in range(9))
-        assert all(_field(standin, j, 'bus_watchdog') == 5 for j in range(9))  # 0.1 s
+        # 0.1 s, in one Sync Write after the others (no answer: the bus takes it a moment on)
+        assert _eventually(lambda: all(_field(standin, j, 'bus_watchdog') == 5
+                                       for j in range(9)))
         items = [(1, T, 0.1, 0.0, 0.0)]  # a torque on a locked joint
         why = device.command_error([_Item(*i) for i in items])
         assert why is not None and 'finger1_locked_joint' in why and 'MODE_TORQUE' in why
@@ -271,3 +273,301 @@ def test_failed_reads_leave_the_compliant_joints_limp_not_pushing(cfg: DamConfig
     # Closing switched torque off and cleared the watchdog: no servo is left tripped.
     assert all(_field(standin, j, 'torque_enable') == 0 for j in range(9))
     assert all(_field(standin, j, 'bus_watchdog') == 0 for j in range(9))
+
+
+# -------------------------------------------------------------------------------------------
+# Arming, the Bus Watchdog, the Alert bit, a failing port (issue: a real hand a lab can trust)
+
+
+@pytest.fixture
+def realtime_standin(cfg: DamConfig, tmp_path: Path) -> Iterator[object]:
+    """The emulated bus in real time (its Bus Watchdog runs on the wall clock), behind a
+    symlink (a fixed name, as /dev/serial/by-id/... for an adapter)."""
+    from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
+
+    with fast_gil_handoff():
+        bus = DynamixelStandIn(cfg, link_path=str(tmp_path / 'ttyDXL'))
+        thread = threading.Thread(target=bus.run, daemon=True)
+        thread.start()
+        yield bus
+        bus.close()
+        thread.join(2.0)
+
+
+def _hold_cycles(device, duration_s: float) -> list:
+    """Run the driver's bus cycle (read, then HOLD every joint) for ``duration_s`` [s]; the
+    samples read."""
+    import time
+
+    n = device.n
+    samples = []
+    deadline = time.monotonic() + duration_s
+    while time.monotonic() < deadline:
+        sample = device.receive(0.2)
+        if sample is None:
+            continue
+        samples.append(sample)
+        device.send(sample, np.full(n, H), np.zeros(n), np.zeros(n), np.zeros(n))
+    return samples
+
+
+def _tripped(bus) -> list[int]:
+    with bus.lock:
+        return [s.servo_id for s in bus.servos if s.watchdog_tripped]
+
+
+def test_arming_with_slow_answers_leaves_no_servo_tripped(cfg: DamConfig,
+                                                          realtime_standin) -> None:
+    """Every status packet 20 ms late: arming nine servos takes most of a second, five times
+    the 100 ms Bus Watchdog. A watchdog set servo by servo runs out while the others are
+    armed (packets to other IDs need not feed it); set in one Sync Write at the end, none
+    does, and the cycles that follow keep every servo fed."""
+    import time
+
+    from dam_hand_driver.dynamixel_device import DynamixelDevice
+
+    device = DynamixelDevice(cfg, realtime_standin.link_path)
+    try:
+        sample = device.receive(1.0)
+        assert sample is not None
+        realtime_standin.status_delay_s = 0.02
+        started = time.monotonic()
+        device.arm(sample)
+        arming_s = time.monotonic() - started
+        assert arming_s > 2.0 * cfg.dynamixel.bus_watchdog_s, arming_s
+        samples = _hold_cycles(device, 0.6)
+        assert len(samples) > 5
+        assert _tripped(realtime_standin) == []
+        assert all(s.fault == '' for s in samples), samples[-1].fault
+        with realtime_standin.lock:
+            assert all(s.torque_enabled and s.get('bus_watchdog') == 5
+                       for s in realtime_standin.servos)
+    finally:
+        device.close()
+
+
+def test_a_host_stall_longer_than_the_watchdog_is_a_fault_naming_the_servos(
+        cfg: DamConfig, realtime_standin) -> None:
+    """The host stops for 0.3 s (three watchdog periods): every servo trips and refuses its
+    goals. The next checks say so (the driver goes to ERROR), and recovery arms the hand
+    again with no servo tripped."""
+    import time
+
+    from dam_hand_driver.dynamixel_device import CHECK_EVERY, DynamixelDevice
+
+    device = DynamixelDevice(cfg, realtime_standin.link_path)
+    try:
+        sample = device.receive(1.0)
+        device.arm(sample)
+        assert all(s.fault == '' for s in _hold_cycles(device, 0.3))
+        time.sleep(0.3)  # the host stalls
+        assert len(_tripped(realtime_standin)) == 9
+        faults = []
+        for _ in range(CHECK_EVERY + 3):
+            sample = device.receive(0.5)
+            if sample is not None and sample.fault:
+                faults.append(sample.fault)
+                break
+        assert faults, 'a tripped watchdog went unnoticed'
+        assert 'ID 1 (finger1_compliant_joint): Bus Watchdog tripped' in faults[0]
+        assert device.diagnostics()['bus_watchdog_trips'] == '9'
+        device.disarm()
+        assert device.recover() == ''
+        sample = device.receive(1.0)
+        device.arm(sample)
+        assert all(s.fault == '' for s in _hold_cycles(device, 0.3))
+        assert _tripped(realtime_standin) == []
+    finally:
+        device.close()
+
+
+def test_the_alert_bit_starts_a_check_at_once(cfg: DamConfig, standin) -> None:
+    """A hardware error sets the Alert bit of every status packet: the fault is seen within
+    two cycles, not at the next periodic check."""
+    from dam_hand_driver.dynamixel_device import CHECK_EVERY, DynamixelDevice
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        sample = device.receive(1.0)
+        device.arm(sample)
+        while device._cycles % CHECK_EVERY != 3:  # just after a periodic check
+            device.receive(1.0)
+        standin.hardware_error(6, 1 << 5)
+        cycles = 0
+        while True:
+            cycles += 1
+            sample = device.receive(1.0)
+            if sample is not None and sample.fault:
+                break
+            assert cycles < CHECK_EVERY - 3, 'the Alert bit was ignored'
+        assert cycles <= 2, cycles
+        assert 'ID 6 (finger2_position_joint): hardware error overload error' in sample.fault
+        assert device.alerts > 0
+    finally:
+        device.close()
+
+
+def test_a_servo_that_refuses_its_goals_is_a_fault(cfg: DamConfig, standin) -> None:
+    """Someone lowered a servo's Current Limit: the Goal Current the driver writes is beyond
+    it, the servo refuses the whole goal block (Data Limit Error, which a Sync Write does not
+    report), and the check finds goals other than the ones written."""
+    from dam_hand_driver.dynamixel_device import CHECK_EVERY, DynamixelDevice
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        sample = device.receive(1.0)
+        device.arm(sample)
+        with standin.lock:
+            standin.servos[2].set('current_limit', 10)  # ID 3, current-based position
+        n = device.n
+        fault = ''
+        for k in range(2 * CHECK_EVERY + 2):
+            sample = device.receive(1.0)
+            if sample.fault:
+                fault = sample.fault
+                break
+            setpoints = np.where(np.arange(n) == 2, 0.01 * k, 0.0)
+            device.send(sample, np.where(np.arange(n) == 2, P, H), setpoints, np.zeros(n),
+                        np.zeros(n))
+        assert 'ID 3 (finger1_position_joint): does not follow its goals' in fault, fault
+    finally:
+        device.close()
+
+
+def test_recovery_tries_every_transaction_before_a_servo_counts_as_silent(
+        cfg: DamConfig, standin) -> None:
+    """A servo that misses one answer (load, a glitch) is not reported missing."""
+    from dam_hand_driver.dynamixel_device import DynamixelDevice
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        standin.silent_ids = [4]
+        timer = threading.Timer(0.05, lambda: setattr(standin, 'silent_ids', []))
+        timer.start()
+        assert device.recover() == ''
+        timer.join()
+        standin.silent_ids = [4]
+        with pytest.raises(HandDriverError, match=re.escape(
+                'servo ID 4 (finger2_compliant_joint) does not answer')):
+            device.recover()
+    finally:
+        standin.silent_ids = []
+        device.close()
+
+
+def test_a_port_that_fails_is_named_and_recovery_reopens_it(cfg: DamConfig,
+                                                            tmp_path: Path) -> None:
+    """The adapter goes away while the hand is armed (the pty closes): no exception, the
+    device names the port; recovery fails while it is gone and opens it again once it is
+    back (a new bus behind the same name), after which the hand arms and reads."""
+    from dam_hand_driver.dynamixel_device import DynamixelDevice
+    from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
+
+    link = str(tmp_path / 'ttyDXL')
+
+    def start() -> tuple[object, threading.Thread]:
+        bus = DynamixelStandIn(cfg, sim_time=True, link_path=link)
+        thread = threading.Thread(target=bus.run, daemon=True)
+        thread.start()
+        return bus, thread
+
+    with fast_gil_handoff():
+        bus, thread = start()
+        device = DynamixelDevice(cfg, link)
+        try:
+            device.arm(device.receive(1.0))
+            assert device.receive(1.0) is not None
+            bus.close()
+            thread.join(2.0)
+            for _ in range(3):
+                assert device.receive(0.05) is None
+            assert device.link_lost.startswith(f'the Dynamixel port {link!r} failed')
+            assert device.diagnostics()['port_lost'] == device.link_lost
+            device.disarm()  # the driver's ERROR: no exception on a dead port
+            with pytest.raises(HandDriverError, match=re.escape(f"port {link!r}")):
+                device.recover()
+            bus, thread = start()
+            assert 'opened ' + link + ' again' in device.recover()
+            assert device.link_lost == ''
+            sample = device.receive(1.0)
+            assert sample is not None and sample.fault == ''
+            device.arm(sample)
+            assert _eventually(lambda: all(_field(bus, j, 'torque_enable') == 1
+                                           for j in range(9)))
+        finally:
+            device.close()
+            bus.close()
+            thread.join(2.0)
+
+
+def test_a_second_program_on_the_port_is_refused_naming_the_holder(cfg: DamConfig,
+                                                                   standin) -> None:
+    """The port is locked while a device holds it (flock, as pyserial's exclusive=True): a
+    second opener is refused with one line naming the port and the holder's PID, before it
+    touches the line."""
+    import os
+    import subprocess
+    import sys
+
+    from dam_hand_driver.dynamixel_device import DynamixelDevice
+    from dam_hand_driver.dynamixel_port import PortBusyError
+
+    holder = subprocess.Popen(
+        [sys.executable, '-c', 'import fcntl, os, sys, time\n'
+         f'fd = os.open({standin.port_path!r}, os.O_RDWR | os.O_NOCTTY)\n'
+         'fcntl.flock(fd, fcntl.LOCK_EX)\nprint("locked", flush=True)\ntime.sleep(60)'],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == 'locked'
+        with pytest.raises(PortBusyError) as refused:
+            DynamixelDevice(cfg, standin.port_path)
+        message = str(refused.value)
+        assert f"the Dynamixel port {standin.port_path!r} is in use" in message
+        assert f'PID {holder.pid}' in message and '\n' not in message
+    finally:
+        holder.kill()
+        holder.wait()
+    device = DynamixelDevice(cfg, standin.port_path)  # free again
+    try:
+        with pytest.raises(PortBusyError, match=f'PID {os.getpid()}'):
+            DynamixelDevice(cfg, standin.port_path)
+        assert device.receive(1.0) is not None  # the holder reads on
+    finally:
+        device.close()
+
+
+def test_a_late_answer_of_the_longer_check_read_is_never_taken_for_the_state(
+        cfg: DamConfig, standin) -> None:
+    """The SDK matches a status packet by ID and cuts its data to the length it asked for: a
+    late answer of the servo check (56 bytes from address 64) would read as Present Position
+    (the velocity gains at 76-79 as 6.5 million counts). Only packets of the block's own
+    length are taken."""
+    import os
+
+    from dam_hand_driver.dynamixel_device import CHECK_LENGTH, DynamixelDevice
+    from dam_sim_bridge.dynamixel_packets import build_status
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        assert device.receive(1.0) is not None
+        with standin.lock:
+            check_block = bytes(standin.servos[0].table[64:64 + CHECK_LENGTH])
+        late = [build_status(1, 0, check_block)]
+        dispatch = standin.bus._before_dispatch
+
+        def before_dispatch(packet) -> None:  # the late answer goes out before the real ones
+            dispatch(packet)
+            if late:
+                os.write(standin.bus._master, late.pop())
+
+        standin.bus._before_dispatch = before_dispatch
+        assert device.receive(1.0) is None
+        assert not late
+        assert 'a status packet of another length from ID 1' in device.last_failure
+        sample = device.receive(1.0)
+        with standin.lock:
+            world_q = standin.world.joint_states().positions
+        assert sample is not None
+        assert sample.position == pytest.approx(world_q, abs=POSITION_RAD_PER_COUNT)
+    finally:
+        device.close()

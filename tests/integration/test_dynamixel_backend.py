@@ -18,12 +18,13 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from dynamixel_testing import DriverClient
 from grasp_testing import config_with_free_ports, grasp_stack, lockstep_reference
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from std_srvs.srv import Trigger
 
-from ros_testing import RosClient, cpu_burners, installed_executable, node_process
+from ros_testing import cpu_burners, installed_executable, node_process
 
 pytestmark = [pytest.mark.integration]
 
@@ -59,58 +60,12 @@ def test_grasps_through_the_sdk_end_as_the_udp_standin_says(config_file: Path) -
 # Faults
 
 
-class _Bus:
-    """A client of the driver (diagnostics, joint states, ~/reset) and of the stand-in's fault
-    parameters."""
-
-    def __init__(self) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from sensor_msgs.msg import JointState
-
-        self.client = RosClient()
-        self.diag: dict[str, str] = {}
-        self.joint_states = 0
-        node = self.client.node
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 10)
-        node.create_subscription(JointState, '/joint_states', self._on_js, 50)
-
-    def _on_diag(self, msg) -> None:
-        for status in msg.status:
-            if status.name.startswith('dam_hand_driver'):
-                self.diag = {kv.key: kv.value for kv in status.values}
-                self.diag['message'] = status.message
-
-    def _on_js(self, msg) -> None:
-        self.joint_states += 1
-
-    def state(self) -> str:
-        return self.diag.get('state', '')
-
-    def wait_state(self, state: str, timeout: float) -> bool:
-        self.diag = {}
-        return self.client.spin_until(lambda: self.state() == state, timeout)
-
-    def set_fault(self, name: str, values: list[int] | float) -> SetParameters.Response:
-        if isinstance(values, list) and not values:  # as `ros2 param set NODE NAME "[]"`
-            value = ParameterValue(type=ParameterType.PARAMETER_BOOL_ARRAY, bool_array_value=[])
-        elif isinstance(values, float):
-            value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=values)
-        else:
-            value = ParameterValue(type=ParameterType.PARAMETER_INTEGER_ARRAY,
-                                   integer_array_value=values)
-        request = SetParameters.Request(parameters=[Parameter(name=name, value=value)])
-        return self.client.call(SetParameters, '/hand_driver_sim/set_parameters', request)
-
-    def reset(self) -> Trigger.Response:
-        return self.client.call(Trigger, '/hand_driver/reset', Trigger.Request(), timeout=30.0)
-
-
 @pytest.fixture(scope='module')
-def bus(config_file: Path) -> Iterator[tuple[_Bus, object]]:
+def bus(config_file: Path) -> Iterator[tuple[DriverClient, object]]:
     env = {'DAM_CONFIG': str(config_file)}
     with node_process([installed_executable('dam_hand_driver', 'hand_driver'),
                        '--ros-args', '-p', 'backend:=dynamixel'], env=env) as driver:
-        client = _Bus()
+        client = DriverClient()
         try:
             assert client.wait_state('ACTIVE', 30.0), driver.output()
             yield client, driver
@@ -118,7 +73,7 @@ def bus(config_file: Path) -> Iterator[tuple[_Bus, object]]:
             client.client.close()
 
 
-def _no_joint_states_while_in_error(client: _Bus) -> None:
+def _no_joint_states_while_in_error(client: DriverClient) -> None:
     before = client.joint_states
     client.client.spin_until(lambda: False, 0.5)
     assert client.joint_states == before, 'joint states published in ERROR'

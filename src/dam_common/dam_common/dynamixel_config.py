@@ -43,12 +43,17 @@ class ModelSpec:
     model_number: int  #: Model Number (address 0)
     current_unit_a: float  #: one unit of Goal/Present Current and Current Limit [A]
     current_limit_max: int  #: the largest Current Limit (address 38) [units]
+    #: Present Current (126) is the motor's current (a torque estimate through the torque
+    #: constant); ``False``: it is the servo's supply (input) current, no torque estimate.
+    motor_current: bool = True
 
 
-#: The supported models. Their control tables share the addresses the suite uses.
+#: The supported models. Their control tables share the addresses the suite uses. The
+#: XC330-M288's e-manual gives its Present Current as the input current.
 MODELS: dict[str, ModelSpec] = {
     'XM430-W350': ModelSpec(model_number=1020, current_unit_a=2.69e-3, current_limit_max=1193),
-    'XC330-M288': ModelSpec(model_number=1240, current_unit_a=1.0e-3, current_limit_max=2352),
+    'XC330-M288': ModelSpec(model_number=1240, current_unit_a=1.0e-3, current_limit_max=2352,
+                            motor_current=False),
 }
 
 

@@ -113,7 +113,14 @@ class HandDevice(abc.ABC):
 
     def recover(self) -> str:
         """Prepare to leave ERROR (``~/reset``): clear what the device can clear. Returns what
-        was done, for the reply (empty: nothing needed)."""
+        was done, for the reply (empty: nothing needed).
+
+        Raises
+        ------
+        HandDriverError
+            The device cannot leave ERROR now (the message says why): the driver stays in
+            ERROR with that reason.
+        """
         return ''
 
     def resend(self) -> bool:
@@ -122,6 +129,17 @@ class HandDevice(abc.ABC):
 
     def restart_sequence(self) -> None:  # noqa: B027 - optional for a backend
         """Forget the device's sequence numbers (it may have restarted)."""
+
+    @property
+    def link_lost(self) -> str:
+        """Why the device cannot be reached at all (a port that failed, named): an ERROR at
+        once, until :meth:`recover` reaches it again (empty: it can be reached)."""
+        return ''
+
+    @property
+    def failing_reads(self) -> int:
+        """Reads that failed in a row since the last good one (a WARN while above 0)."""
+        return 0
 
     @property
     def last_failure(self) -> str:

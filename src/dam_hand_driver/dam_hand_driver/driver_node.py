@@ -36,17 +36,27 @@ Topics
 Services
 --------
 ~/reset : std_srvs/Trigger
-    Leave ERROR: succeeds when state frames arrive again; every joint then HOLDs its measured
-    position, and the slew of later torque commands starts afresh from the measured torques.
+    Leave ERROR: the device recovers what it can (the Dynamixel backend opens a failed port
+    again, reboots servos in an overload or overheating error, clears tripped watchdogs);
+    succeeds when state frames arrive again, and every joint then HOLDs its measured position,
+    the slew of later torque commands starting afresh from the measured torques. A failure
+    says why, and the driver is then in ERROR with that reason: the answer is the state.
 
 Parameters
 ----------
 config_file : string, read-only
     DAM configuration file; empty: ``DAM_CONFIG`` or the installed ``config/dam.yaml``.
-backend : string, read-only, one of auto, hardware, sim
+config_overlay : string, read-only
+    A YAML file holding part of a configuration, merged over ``config_file`` (e.g. the
+    ``dynamixel:`` zero offsets ``dynamixel_setup zero`` wrote); empty: none.
+backend : string, read-only, one of auto, hardware, sim, dynamixel
     ``auto`` probes the device for ``device.probe_timeout_s`` and starts the simulated
     stand-in (``dam_sim_bridge sim_bridge``, a child process) when nothing answers;
-    ``hardware`` never falls back; ``sim`` always starts the stand-in.
+    ``hardware`` never falls back; ``sim`` always starts the stand-in; ``dynamixel`` drives
+    Dynamixel servos on a serial bus (``docs/dynamixel.md``).
+port : string, read-only
+    ``backend:=dynamixel``: the serial port (empty: ``dynamixel.port``; both empty: the
+    emulated bus, started here). The port is opened exclusively: a second driver is refused.
 object : string, read-only
     The column object of the configuration's ``object.library`` a stand-in this driver starts
     puts on the table (empty: ``object.default``); a real hand ignores it.
@@ -71,7 +81,8 @@ WAITING (no state frame yet) -> ACTIVE (on the first state frame: clean start, e
 HOLDs, the command slew starts afresh) -> ERROR (no state frame for ``device.state_timeout_s``,
 with ``use_sim_time`` ``sim.stall_timeout_s`` of wall time or the stand-in child exited:
 no more /joint_states, no more command frames, so the device's watchdog takes it to its safe
-state) -> ACTIVE only through ``~/reset``.
+state; at once for a fault the device names: a hardware error, a tripped servo watchdog, a
+port that failed, an exception in the device-link thread) -> ACTIVE only through ``~/reset``.
 """
 
 from __future__ import annotations
@@ -86,6 +97,7 @@ import subprocess
 import tempfile
 import threading
 import time
+import traceback
 from collections import deque
 from pathlib import Path
 from typing import NamedTuple
@@ -109,6 +121,7 @@ from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
+    declare_config_overlay,
     declare_object,
     declare_thread_priority,
     run_node,
@@ -139,6 +152,9 @@ _STANDIN_START_TIMEOUT_S = 20.0
 #: How long the stand-in may take to stop cleanly before it is killed [s].
 _STANDIN_STOP_TIMEOUT_S = 1.5
 _LOG_THROTTLE_S = 1.0
+#: On simulated time, the newest command is sent again after this much wall time without a
+#: state frame (twice the stand-in's own resend period) [s].
+_RESEND_AFTER_S = 2.0 * 0.1
 
 
 class DriverState(enum.Enum):
@@ -256,6 +272,7 @@ class HandDriverNode(Node):
     def __init__(self) -> None:
         super().__init__('hand_driver')
         config_file = declare_config_file(self)
+        self._overlays = declare_config_overlay(self)
         self.backend = str(self.declare_parameter(
             'backend', 'auto', ParameterDescriptor(
                 description='auto: probe the UDP device link, else start the simulator; '
@@ -283,7 +300,7 @@ class HandDriverNode(Node):
                                   'backend:=hardware drives a real hand in real time')
         #: The device is the simulated stand-in (started here, or it said so when probed).
         self._simulated_device = self.backend == 'sim'
-        self.config = declare_object(self, load_config(config_file or None))
+        self.config = declare_object(self, load_config(config_file or None, self._overlays))
         dev = self.config.device
         hand = self.config.hand
         self.joint_names = list(hand.joint_names)
@@ -342,6 +359,10 @@ class HandDriverNode(Node):
         self._command_ref_ns: int | None = None
         self._command_arrived = threading.Condition()
         self._command_waits_timed_out = 0
+        #: Exceptions the device-link thread caught (each an ERROR).
+        self._link_exceptions = 0
+        #: The link thread is arming the device (a ~/reset waits for it).
+        self._arming = False
         #: Stamps [ns] of the last three joint states published, oldest first (simulated time).
         self._stamps_ns = (0, 0, 0)
         self._child: subprocess.Popen[bytes] | None = None
@@ -548,19 +569,27 @@ class HandDriverNode(Node):
         """Clean start: every joint HOLDs its measured position; the slew of torque commands
         starts afresh (from the measured torques); the device's actuators come on."""
         assert self.device is not None
+        self._arming = True
         try:
             self.device.arm(sample)
         except Exception as exc:  # noqa: BLE001 - a port that went away raises anything
+            self._arming = False
             self._enter_error(f'the device could not be switched on: {exc}')
             return
         with self._lock:
-            self._modes[:] = int(JointMode.HOLD)
-            self._setpoints[:] = 0.0
-            self._stiffness[:] = 0.0
-            self._damping[:] = 0.0
-            self.slew.reset()
-            self.state = DriverState.ACTIVE
-            self._error_reason = ''
+            self._arming = False
+            gave_up = self.state is not DriverState.WAITING  # a ~/reset gave up meanwhile
+            if not gave_up:
+                self._modes[:] = int(JointMode.HOLD)
+                self._setpoints[:] = 0.0
+                self._stiffness[:] = 0.0
+                self._damping[:] = 0.0
+                self.slew.reset()
+                self.state = DriverState.ACTIVE
+                self._error_reason = ''
+        if gave_up:
+            self.device.disarm()
+            return
         q = sample.position
         self.get_logger().info(f'device link active: holding the measured posture '
                                f'{np.round(q, 3).tolist()} rad; torque commands ramp from '
@@ -611,52 +640,74 @@ class HandDriverNode(Node):
 
     def _loop(self) -> None:
         self._schedule_link_thread()
-        resend_after_s = 2.0 * 0.1  # twice the stand-in's own resend period
         device = self.device
         assert device is not None
         while self._running:
-            sample, self._startup_sample = self._startup_sample, None
-            resets = self._resets
-            if sample is None:
-                sample = device.receive(min(0.01, self.state_timeout_s / 4.0))
-            now = time.monotonic()
-            if sample is not None and self._resets != resets:
-                continue  # read before the recovery of a ~/reset: its fault is gone
-            if sample is None:
-                if self.state is not DriverState.ACTIVE:
-                    continue
-                why = self._silence(now)
-                if why is not None:
-                    # This thread may itself have been held up (interpreter lock, CPU):
-                    # samples that arrived meanwhile are waiting in the socket.
-                    sample = device.receive(0.0)
-                    if sample is None:
-                        self._enter_error(why)
-                elif self._sim_time and now - (device.last_sample_time or now) \
-                        > resend_after_s:
-                    # The stand-in waits for this answer: it may have been lost.
-                    device.resend()
-                if sample is None:
-                    continue
-                now = time.monotonic()
-            self._last_sample = sample
-            if sample.fault and self.state is not DriverState.ERROR:
-                self._enter_error(sample.fault)
-            if self.state is DriverState.WAITING:
-                self._activate(sample)
-            if self.state is not DriverState.ACTIVE:
-                continue
-            if self._sim_time:
-                # Simulated time: the joint state first, so that the commander computes its
-                # answer while the stand-in steps; then the answer to the previous one.
-                if not self._publish_or_stop(sample):
+            try:
+                if not self._cycle(device):
                     return
-                self._await_command()
-                self._answer(sample, now)
-                continue
-            self._answer(sample, now)
+            except Exception as exc:  # noqa: BLE001 - the link thread never dies
+                if not self._running:
+                    return
+                self._link_fault(exc)
+
+    def _link_fault(self, exc: Exception) -> None:
+        """An exception in the device-link thread: an ERROR naming it (the traceback logged
+        once, for a bug report); the thread goes on, so that ``~/reset`` can recover."""
+        self._link_exceptions += 1
+        if self._link_exceptions == 1:
+            self.get_logger().error('device link: ' + ''.join(
+                traceback.format_exception(type(exc), exc, exc.__traceback__)).rstrip())
+        self._enter_error(f'device link: {type(exc).__name__}: {exc}')
+        time.sleep(0.05)  # a fault that repeats does not spin
+
+    def _cycle(self, device: HandDevice) -> bool:
+        """One turn of the device-link loop; ``False`` when the node is shutting down."""
+        sample, self._startup_sample = self._startup_sample, None
+        resets = self._resets
+        if sample is None:
+            sample = device.receive(min(0.01, self.state_timeout_s / 4.0))
+        now = time.monotonic()
+        if sample is not None and self._resets != resets:
+            return True  # read before the recovery of a ~/reset: its fault is gone
+        if sample is None:
+            lost = device.link_lost
+            if lost:  # the port failed: no use waiting for the state timeout
+                self._enter_error(lost)
+                return True
+            if self.state is not DriverState.ACTIVE:
+                return True
+            why = self._silence(now)
+            if why is not None:
+                # This thread may itself have been held up (interpreter lock, CPU):
+                # samples that arrived meanwhile are waiting in the socket.
+                sample = device.receive(0.0)
+                if sample is None:
+                    self._enter_error(device.link_lost or why)
+            elif self._sim_time and now - (device.last_sample_time or now) \
+                    > _RESEND_AFTER_S:
+                # The stand-in waits for this answer: it may have been lost.
+                device.resend()
+            if sample is None:
+                return True
+            now = time.monotonic()
+        self._last_sample = sample
+        if sample.fault and self.state is not DriverState.ERROR:
+            self._enter_error(sample.fault)
+        if self.state is DriverState.WAITING:
+            self._activate(sample)
+        if self.state is not DriverState.ACTIVE:
+            return True
+        if self._sim_time:
+            # Simulated time: the joint state first, so that the commander computes its
+            # answer while the stand-in steps; then the answer to the previous one.
             if not self._publish_or_stop(sample):
-                return
+                return False
+            self._await_command()
+            self._answer(sample, now)
+            return True
+        self._answer(sample, now)
+        return self._publish_or_stop(sample)
 
     def _answer(self, sample: JointSample, received: float) -> None:
         try:
@@ -771,31 +822,40 @@ class HandDriverNode(Node):
         try:
             done = self.device.recover()
         except Exception as exc:  # noqa: BLE001 - the node stays up whatever the device does
-            done = f'recovery failed: {exc}'
+            why = str(exc) if isinstance(exc, HandDriverError) else f'{type(exc).__name__}: {exc}'
+            with self._lock:
+                self.state = DriverState.ERROR
+                self._error_reason = f'reset failed: {why}'
+            self.get_logger().warning(f'~/reset: still in ERROR: {why}')
+            response.success = False
+            response.message = f'still in ERROR: reset failed: {why}'
+            return response
         if done:
-            if 'does not answer' in done or 'keeps' in done or 'failed' in done:
-                self.get_logger().warning(f'~/reset: {done}')
-            else:
-                self.get_logger().info(f'~/reset: {done}')
+            self.get_logger().info(f'~/reset: {done}')
         with self._lock:
             self.state = DriverState.WAITING
-        wait_s = max(0.5, 5.0 * self.state_timeout_s)
+        # A good read within a few state timeouts (on simulated time, the stall timeout: a
+        # failing read of the emulated bus takes its long packet timeout), and as long as
+        # the link thread is arming the hand (its transactions have their own timeouts).
+        wait_s = max(0.5, 5.0 * self.state_timeout_s, self._silence_timeout_s)
         deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and self.state is DriverState.WAITING:
+        while self.state is DriverState.WAITING and (time.monotonic() < deadline
+                                                     or self._arming):
             time.sleep(0.01)
+        with self._lock:  # one decision with the link thread's: the answer is the state
+            if self.state is DriverState.WAITING:
+                self.state = DriverState.ERROR
+                self._error_reason = (f'reset failed: no state from the device within '
+                                      f'{wait_s:.2f} s')
+            state, reason = self.state, self._error_reason
         prefix = f'{done}; ' if done else ''
-        if self.state is DriverState.ACTIVE:
+        if state is DriverState.ACTIVE:
             response.success = True
             response.message = (f'{prefix}device link ACTIVE again: holding the measured '
                                 f'posture')
             return response
-        with self._lock:
-            if self.state is DriverState.WAITING:
-                self.state = DriverState.ERROR
-                self._error_reason = 'reset failed: no state from the device'
-            reason = self._error_reason
         response.success = False
-        response.message = (f'{prefix}still in ERROR: {reason} (waited {wait_s:.2f} s)')
+        response.message = f'{prefix}still in ERROR: {reason}'
         return response
 
     def _publish_diagnostics(self) -> None:
@@ -815,6 +875,7 @@ class HandDriverNode(Node):
         self._diag_prev = (now, received, published, device_ns)
         failures = device.read_failures if device is not None else 0
         failures0, self._failures_prev = self._failures_prev, failures
+        failing = device.failing_reads if device is not None else 0
         tripped = bool(sample is not None and sample.watchdog_tripped)
         simulated = bool(sample is not None and sample.simulated)
         lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
@@ -830,13 +891,15 @@ class HandDriverNode(Node):
             status.level = DiagnosticStatus.ERROR
             status.message = 'waiting for the device'
         elif (state_rate < 0.8 / self.period_s and not self._sim_time) or tripped \
-                or failures > failures0:
+                or failures > failures0 or failing:
             status.level = DiagnosticStatus.WARN
+            last_failure = device.last_failure if device is not None else ''
             status.message = (
                 'device watchdog tripped' if tripped else
-                f'{failures - failures0} failed reads in {dt:.1f} s (last: '
-                f'{device.last_failure if device is not None else ""})'
-                if failures > failures0 else f'state rate {state_rate:.0f} Hz below target')
+                f'{failures - failures0} failed reads in {dt:.1f} s (last: {last_failure})'
+                if failures > failures0 else
+                f'reads failing: {failing} in a row (last: {last_failure})' if failing else
+                f'state rate {state_rate:.0f} Hz below target')
         else:
             status.level = DiagnosticStatus.OK
             status.message = 'ACTIVE' + (' (simulator)' if simulated else '')
@@ -863,6 +926,7 @@ class HandDriverNode(Node):
             'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
             'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',
             'device_watchdog_tripped': str(tripped),
+            'link_thread_exceptions': str(self._link_exceptions),
             'hand_commands_rejected': str(self._rejected_commands),
             # Publishers of /hand/command whose QoS or type cannot match (logged once).
             'hand_command_incompatible_qos': str(self._intake.incompatible_qos),

@@ -2,25 +2,32 @@
 
 Through the official ``dynamixel-sdk``: one Group Sync Read of Realtime Tick .. Present
 Position (addresses 120-135) of all servos per bus cycle, one Group Sync Write of Goal Current
-.. Goal Position (102-119); Hardware Error Status (70) read by a second sync read every
-:data:`HARDWARE_ERROR_EVERY` cycles. The host is the bus master: :meth:`receive` paces the
-cycles at ``dynamixel.rate_hz``. See ``docs/dynamixel.md`` for wiring and configuration and
-:mod:`dam_hand_driver.dynamixel_goals` for the control law.
+.. Goal Position (102-119). A second sync read, of Torque Enable .. Goal Position (64-119:
+Hardware Error Status, Bus Watchdog and the goals the servos hold), checks the servos every
+:data:`CHECK_EVERY` cycles, and at once when a status packet carries the Alert bit. The host
+is the bus master: :meth:`receive` paces the cycles at ``dynamixel.rate_hz``. See
+``docs/dynamixel.md`` for wiring and configuration and :mod:`dam_hand_driver.dynamixel_goals`
+for the control law.
 
-Start-up: every configured servo must answer a ping with its configured model number, else
-the device is refused naming the servo by ID and joint. Torque off, then Operating Mode and
-Current Limit written (EEPROM: only while torque is off), Bus Watchdog cleared. Torque comes on
-only in :meth:`arm` (the driver is ACTIVE), with the Bus Watchdog set, so that servos whose
-host stops sending stop by themselves; :meth:`disarm` (driver ERROR) switches torque off.
+Start-up: the port is opened exclusively (:mod:`dam_hand_driver.dynamixel_port`); every
+configured servo must answer a ping with its configured model number, else the device is
+refused naming the servo by ID and joint. Torque off, then Operating Mode and Current Limit
+written (EEPROM: only while torque is off), Bus Watchdog cleared. Torque comes on only in
+:meth:`arm` (the driver is ACTIVE): every servo holds its posture with torque on, and only then
+one Sync Write sets the Bus Watchdog of all of them, so that no watchdog runs while the others
+are armed, and servos whose host stops sending stop by themselves. A tripped watchdog (address
+98 reads 255: the servo refuses its goals), a servo whose goals are not the ones written, a
+hardware error and a port that fails (an adapter unplugged) are faults: the driver goes to
+ERROR naming them, and :meth:`disarm` switches torque off.
 """
 
 from __future__ import annotations
 
 import os
+import termios
 import threading
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import numpy as np
 
@@ -34,6 +41,12 @@ from dam_hand_driver.dynamixel_goals import (
     signed,
     state_si,
     update_hold,
+)
+from dam_hand_driver.dynamixel_port import (
+    close_port,
+    latency_timer_fix,
+    open_port,
+    usb_latency_timer_ms,
 )
 from dam_hand_driver.errors import HandDriverError
 
@@ -54,6 +67,7 @@ ADDR_HARDWARE_ERROR = 70
 ADDR_BUS_WATCHDOG = 98
 ADDR_GOAL_CURRENT = 102
 ADDR_GOAL_POSITION = 116
+ADDR_PRESENT_POSITION_END = 136
 ADDR_REALTIME_TICK = 120
 ADDR_PRESENT_CURRENT = 126
 ADDR_PRESENT_VELOCITY = 128
@@ -62,9 +76,15 @@ ADDR_PRESENT_POSITION = 132
 STATE_START, STATE_LENGTH = ADDR_REALTIME_TICK, 16
 #: The block one sync write gives per cycle: Goal Current .. Goal Position.
 GOAL_START, GOAL_LENGTH = ADDR_GOAL_CURRENT, 18
-#: Torque Enable .. Hardware Error Status (64-70) is read once every this many cycles.
-HARDWARE_ERROR_EVERY = 25
-CHECK_START, CHECK_LENGTH = ADDR_TORQUE_ENABLE, ADDR_HARDWARE_ERROR - ADDR_TORQUE_ENABLE + 1
+#: Torque Enable .. Goal Position (64-119) is read every this many cycles (twice in a row, as
+#: a fault counts when two reads show it), and at once after a status packet with the Alert
+#: bit.
+CHECK_EVERY = 25
+CHECK_START, CHECK_LENGTH = ADDR_TORQUE_ENABLE, ADDR_GOAL_POSITION + 4 - ADDR_TORQUE_ENABLE
+#: Bus Watchdog (98) of a servo whose watchdog tripped (-1): its goals are read-only.
+WATCHDOG_TRIPPED = 255
+#: The Alert bit of a status packet's error byte: the servo has a hardware error.
+ALERT_BIT = 0x80
 #: Hardware Error Status bits (ROBOTIS e-manual, X series).
 HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
                        3: 'motor encoder error', 4: 'electrical shock error',
@@ -110,28 +130,54 @@ def hardware_error_names(bits: int) -> str:
     return ', '.join(names) if names else 'none'
 
 
-def _port_handler(sdk_module: object, port: str, margin_ms: float) -> object:
-    """The SDK's port handler, its packet timeouts longer by ``margin_ms`` [ms]."""
-    base = sdk_module.PortHandler  # type: ignore[attr-defined]
-    if margin_ms <= 0.0:
-        return base(port)
+def _checked_sync_read(sdk_module: object) -> type:
+    """The SDK's ``GroupSyncRead`` that keeps each status packet's error byte (``errors``, by
+    ID: the SDK's own drops it, and with it the Alert bit) and takes only status packets of
+    exactly the block's length. The SDK matches an answer by ID alone and cuts its data to the
+    length asked for: an answer of an earlier, longer read that came later than the host
+    waited (the servo check's 56 bytes) would pass for this read's 16 (``stale`` names it)."""
+    base = sdk_module.GroupSyncRead  # type: ignore[attr-defined]
+    success = sdk_module.COMM_SUCCESS  # type: ignore[attr-defined]
+    corrupt = sdk_module.COMM_RX_CORRUPT  # type: ignore[attr-defined]
+    # Status packet: header (3), reserved, ID, length (2), instruction, error, data, CRC (2).
+    id_at, length_at, error_at, data_at = 4, 5, 8, 9
 
-    class _Patient(base):  # type: ignore[misc, valid-type]
-        def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 - the SDK's
-            super().setPacketTimeout(packet_length)
-            self.packet_timeout += margin_ms
+    class _CheckedSyncRead(base):  # type: ignore[misc, valid-type]
+        errors: dict[int, int]
+        stale: int | None
 
-    return _Patient(port)
+        def rxPacket(self) -> int:  # noqa: N802 - the SDK's name
+            self.last_result = False
+            self.errors = {}
+            self.stale = None
+            result = sdk_module.COMM_NOT_AVAILABLE  # type: ignore[attr-defined]
+            for dxl_id in self.data_dict:
+                self.data_dict[dxl_id] = []
+                while True:  # answers of other IDs are dropped, as the SDK does
+                    packet, result = self.ph.rxPacket(self.port, False)
+                    if result != success or packet[id_at] == dxl_id:
+                        break
+                if result != success:
+                    return result
+                if packet[length_at] | packet[length_at + 1] << 8 != self.data_length + 4:
+                    self.stale = dxl_id
+                    return corrupt
+                self.errors[dxl_id] = int(packet[error_at])
+                self.data_dict[dxl_id] = bytearray(
+                    packet[data_at:data_at + self.data_length])
+            self.last_result = result == success
+            return result
+
+    return _CheckedSyncRead
 
 
-def usb_latency_timer_ms(port: str) -> int | None:
-    """The USB serial adapter's latency timer [ms] (``None``: not a USB serial adapter, or it
-    cannot be read)."""
-    name = Path(os.path.realpath(port)).name
-    try:
-        return int(Path(f'/sys/bus/usb-serial/devices/{name}/latency_timer').read_text())
-    except (OSError, ValueError):
-        return None
+#: What the SDK's port raises when the device fails: pyserial's SerialException is an OSError,
+#: its ioctls raise termios.error.
+PORT_ERRORS = (OSError, termios.error)
+
+
+class PortLost(HandDriverError):
+    """The serial port failed (an adapter unplugged, a pseudo-terminal closed)."""
 
 
 class DynamixelDevice(HandDevice):
@@ -154,6 +200,8 @@ class DynamixelDevice(HandDevice):
 
     Raises
     ------
+    PortBusyError
+        Another program holds the port (:mod:`dam_hand_driver.dynamixel_port`).
     HandDriverError
         No ``dynamixel:`` section or no port; the SDK is missing; the port cannot be opened;
         a servo does not answer its ping or is of another model; a setting cannot be written.
@@ -188,30 +236,18 @@ class DynamixelDevice(HandDevice):
         self.simulated = bool(simulated)
         self._clock_hint_ns = clock_hint_ns
         self._lock = threading.Lock()  # one transaction on the bus at a time
-        margin_ms = _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0
-        self._port = _port_handler(sdk, port, margin_ms)
-        self._quiet_s = (_QUIET_MS + margin_ms) / 1000.0
-        try:
-            opened = self._port.openPort() and self._port.setBaudRate(dxl.baud_rate)
-        except Exception as exc:  # noqa: BLE001 - pyserial raises SerialException, OSError
-            raise HandDriverError(f'cannot open the Dynamixel port {port!r}: {exc}') from exc
-        if not opened:
-            raise HandDriverError(f'cannot open the Dynamixel port {port!r} at '
-                                  f'{dxl.baud_rate} bit/s')
+        self._margin_ms = _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0
+        self._quiet_s = (_QUIET_MS + self._margin_ms) / 1000.0
         self._ph = sdk.PacketHandler(2.0)
+        #: Status packets with the Alert bit, and whether they ask for a check of the servos.
+        self.alerts = 0
+        self._alert_pending = False
+        self._port = self._open()
         try:
-            self._check_servos()
-            self._configure()
             self.rate_report = self._rate_report()
         except BaseException:
-            self._port.closePort()
+            close_port(self._port)
             raise
-        self._reader = sdk.GroupSyncRead(self._port, self._ph, STATE_START, STATE_LENGTH)
-        self._error_reader = sdk.GroupSyncRead(self._port, self._ph, CHECK_START, CHECK_LENGTH)
-        self._writer = sdk.GroupSyncWrite(self._port, self._ph, GOAL_START, GOAL_LENGTH)
-        for servo_id in self.table.ids:
-            self._reader.addParam(servo_id)
-            self._error_reader.addParam(servo_id)
         self.samples_received = 0
         self.last_sample_time: float | None = None
         self.read_failures = 0  #: sync reads that failed or came back incomplete
@@ -223,6 +259,21 @@ class DynamixelDevice(HandDevice):
         #: Servos found with torque off while armed (restarted).
         self.torque_lost = np.zeros(self.n, dtype=bool)
         self._torque_off_candidates = np.zeros(self.n, dtype=bool)
+        #: Servos whose Bus Watchdog tripped while armed (two reads in a row).
+        self.watchdog_tripped = np.zeros(self.n, dtype=bool)
+        self._tripped_candidates = np.zeros(self.n, dtype=bool)
+        #: Trips seen since start, per servo (``/diagnostics``).
+        self.watchdog_trips = np.zeros(self.n, dtype=np.int64)
+        #: Servos whose goal registers hold other values than the driver wrote (they refuse
+        #: their goals), two reads in a row; the values read, for the message.
+        self.goals_refused = np.zeros(self.n, dtype=bool)
+        self._refused_candidates = np.zeros(self.n, dtype=bool)
+        self._refused_detail = [''] * self.n
+        #: Why the port failed (empty: it works): a fault until ``recover`` opens it again.
+        self.port_lost = ''
+        #: Sync writes of goals since :meth:`arm` (the check compares the goals read back
+        #: only once one has reached the servos).
+        self._writes_since_arm = 0
         self.armed = False
         self._seq = 0
         self._cycles = 0
@@ -239,6 +290,40 @@ class DynamixelDevice(HandDevice):
     # ---------------------------------------------------------------------------------------
     # Start-up
 
+    def _open(self) -> object:
+        """Open the port exclusively, check the servos and write their settings; the groups
+        of the bus cycle use it.
+
+        Raises
+        ------
+        HandDriverError
+            As the constructor.
+        """
+        port = open_port(self._sdk, self.port, self.config.baud_rate, margin_ms=self._margin_ms)
+        self._port = port
+        try:
+            self._check_servos()
+            self._configure()
+        except BaseException:
+            close_port(port)
+            raise
+        sdk = self._sdk
+        self._reader = _checked_sync_read(sdk)(port, self._ph, STATE_START, STATE_LENGTH)
+        self._check_reader = _checked_sync_read(sdk)(port, self._ph, CHECK_START,
+                                                      CHECK_LENGTH)
+        self._writer = sdk.GroupSyncWrite(port, self._ph, GOAL_START, GOAL_LENGTH)
+        self._watchdog_writer = sdk.GroupSyncWrite(port, self._ph, ADDR_BUS_WATCHDOG, 1)
+        for servo_id in self.table.ids:
+            self._reader.addParam(servo_id)
+            self._check_reader.addParam(servo_id)
+        return port
+
+    def _note_alert(self, error: int) -> None:
+        """A status packet's error byte: the Alert bit starts a check of the servos at once."""
+        if error & ALERT_BIT:
+            self.alerts += 1
+            self._alert_pending = True
+
     def _result(self, what: str, j: int, result: int, error: int) -> None:
         if result != self._sdk.COMM_SUCCESS:
             raise HandDriverError(f'{what} of servo {self.table.label(j)} on {self.port}: '
@@ -251,11 +336,8 @@ class DynamixelDevice(HandDevice):
         """Ping every servo; refuse the bus naming each one missing or of another model."""
         problems = []
         for j, servo in enumerate(self.config.servos):
-            for _ in range(_TRANSACTION_TRIES):
-                model, result, _error = self._ph.ping(self._port, servo.servo_id)
-                if result == self._sdk.COMM_SUCCESS:
-                    break
-                self._clear_input()
+            model, result, _error = self._transact(
+                lambda sid=servo.servo_id: self._ph.ping(self._port, sid))
             if result != self._sdk.COMM_SUCCESS:
                 problems.append(f'servo {self.table.label(j)} does not answer the ping '
                                 f'({self._ph.getTxRxResult(result)})')
@@ -272,21 +354,16 @@ class DynamixelDevice(HandDevice):
         write = {1: self._ph.write1ByteTxRx, 2: self._ph.write2ByteTxRx,
                  4: self._ph.write4ByteTxRx}[size]
         raw = int(value) % (1 << 8 * size)
-        for _ in range(_TRANSACTION_TRIES):  # a late answer is not yet a missing servo
-            result, error = write(self._port, self.table.ids[j], address, raw)
-            if result == self._sdk.COMM_SUCCESS:
-                break
-            self._clear_input()
+        servo_id = self.table.ids[j]
+        # A late answer is not yet a missing servo.
+        result, error = self._transact(lambda: write(self._port, servo_id, address, raw))
         self._result(f'writing {what}', j, result, error)
 
     def _read(self, j: int, address: int, size: int, what: str) -> int:
         read = {1: self._ph.read1ByteTxRx, 2: self._ph.read2ByteTxRx,
                 4: self._ph.read4ByteTxRx}[size]
-        for _ in range(_TRANSACTION_TRIES):
-            value, result, error = read(self._port, self.table.ids[j], address)
-            if result == self._sdk.COMM_SUCCESS:
-                break
-            self._clear_input()
+        servo_id = self.table.ids[j]
+        value, result, error = self._transact(lambda: read(self._port, servo_id, address))
         self._result(f'reading {what}', j, result, error)
         return int(value)
 
@@ -318,44 +395,71 @@ class DynamixelDevice(HandDevice):
             report.append(
                 f'the USB serial adapter\'s latency timer is {latency} ms: each bus '
                 f'transaction may wait that long, capping the rate near {500.0 / latency:.0f} '
-                f'Hz; fix: echo 1 | sudo tee /sys/bus/usb-serial/devices/'
-                f'{Path(os.path.realpath(self.port)).name}/latency_timer (or a udev rule '
-                f'setting ATTR{{latency_timer}}="1")')
+                f'Hz; fix: {latency_timer_fix(self.port)}')
         bytes_per_cycle = (14 + self.n) + self.n * (11 + STATE_LENGTH) \
             + (14 + self.n * (1 + GOAL_LENGTH))
-        wire_s = bytes_per_cycle * 10.0 / self.config.baud_rate + delay_s
-        if wire_s > self.period_s:
+        wire_s = bytes_per_cycle * 10.0 / self.config.baud_rate
+        if wire_s + delay_s > self.period_s:
+            # Name what takes the time: the wire (the baud rate) or the servos' waits.
+            fix = ('raise the baud rate (all servos and dynamixel.baud_rate) or lower the rate'
+                   if wire_s > self.period_s else
+                   'write 0 to Return Delay Time (address 9, torque off) as above')
             report.append(
-                f'{bytes_per_cycle} bytes per cycle take {wire_s * 1e3:.2f} ms at '
-                f'{self.config.baud_rate} bit/s, longer than the {self.period_s * 1e3:.2f} ms '
-                f'of dynamixel.rate_hz {self.config.rate_hz:g}: raise the baud rate (all '
-                f'servos and dynamixel.baud_rate) or lower the rate')
+                f'one cycle takes {(wire_s + delay_s) * 1e3:.2f} ms ({bytes_per_cycle} bytes '
+                f'in {wire_s * 1e3:.2f} ms at {self.config.baud_rate} bit/s, plus '
+                f'{delay_s * 1e3:.2f} ms of Return Delay Time), longer than the '
+                f'{self.period_s * 1e3:.2f} ms of dynamixel.rate_hz {self.config.rate_hz:g}: '
+                f'{fix}')
         return report
 
     # ---------------------------------------------------------------------------------------
     # The bus cycle
 
     def receive(self, timeout_s: float) -> JointSample | None:
+        if self.port_lost:  # nothing to read until recover() opens the port again
+            time.sleep(max(timeout_s, 0.0))
+            return None
         now = time.monotonic()
-        if self._next_deadline is None:
-            self._next_deadline = now
-        wait = self._next_deadline - now
+        # One read of the deadline: recover() (another thread) may reset it meanwhile.
+        deadline = self._next_deadline
+        if deadline is None:
+            deadline = now
+        wait = deadline - now
         if wait > timeout_s:
             time.sleep(max(timeout_s, 0.0))
             return None
         if wait > 0.0:
             time.sleep(wait)
         # The next cycle one period on; a late cycle is not caught up.
-        self._next_deadline = max(self._next_deadline + self.period_s,
-                                  time.monotonic() - self.period_s)
+        self._next_deadline = max(deadline + self.period_s, time.monotonic() - self.period_s)
         with self._lock:
-            if self._closed:
+            if self._closed or self.port_lost:
                 return None
             try:
                 sample = self._read_state()
+            except PORT_ERRORS as exc:  # the port failed
+                sample = self._lose_port(exc)
             except Exception as exc:  # noqa: BLE001 - whatever the bus sends, no sample
                 sample = self._read_failed(f'sync read: {exc!r}')
         return sample
+
+    def _lose_port(self, exc: BaseException) -> None:
+        """The port failed: a fault named by the port until :meth:`recover` reopens it."""
+        self._port.is_using = False  # the SDK's flag stays set when a transaction raises
+        gone = '' if os.path.exists(self.port) else ' (the device is gone: adapter unplugged?)'
+        self.port_lost = (f'the Dynamixel port {self.port!r} failed{gone}: '
+                          f'{type(exc).__name__}: {exc}')
+        self.read_failures += 1
+        self.last_read_failure = self.port_lost
+        self._failed_in_a_row += 1
+
+    @property
+    def link_lost(self) -> str:
+        return self.port_lost
+
+    @property
+    def failing_reads(self) -> int:
+        return self._failed_in_a_row
 
     def _read_failed(self, why: str) -> None:
         """Count a failed or incomplete read; let answers still under way arrive and drop
@@ -395,6 +499,10 @@ class DynamixelDevice(HandDevice):
     def _complete(self, reader: object, length: int) -> str | None:
         """Which servo's data is missing or of the wrong length (``None``: all there)."""
         data = getattr(reader, 'data_dict', {})
+        stale = getattr(reader, 'stale', None)
+        if stale is not None:
+            return (f'a status packet of another length from ID {stale} (an answer of an '
+                    f'earlier transaction)')
         for j, servo_id in enumerate(self.table.ids):
             if len(data.get(servo_id) or ()) != length:
                 return f'no complete data from {self.table.label(j)}'
@@ -409,6 +517,9 @@ class DynamixelDevice(HandDevice):
                                      f'({self._ph.getTxRxResult(result)})')
         if missing is not None:
             return self._read_failed(f'sync read: {missing}')
+        refused = self._status_errors(self._reader)
+        if refused:
+            return self._read_failed(f'sync read: {refused}')
         raw = np.zeros((self.n, 4), dtype=np.int64)
         for j, servo_id in enumerate(self.table.ids):
             raw[j] = (self._reader.getData(servo_id, ADDR_REALTIME_TICK, 2),
@@ -418,8 +529,8 @@ class DynamixelDevice(HandDevice):
         q, dq, tau = state_si(self.table, signed(raw[:, 1], 16), signed(raw[:, 2], 32),
                               signed(raw[:, 3], 32))
         self._cycles += 1
-        if self._cycles % HARDWARE_ERROR_EVERY in (1, 2):
-            self._read_hardware_errors()
+        if self._cycles % CHECK_EVERY in (1, 2) or self._alert_pending:
+            self._check()
         self._seq = (self._seq + 1) % 2**32
         self._failed_in_a_row = 0
         self.samples_received += 1
@@ -442,31 +553,76 @@ class DynamixelDevice(HandDevice):
         self._tick_ms = tick_ms
         return self._time_ms * 1_000_000
 
-    def _read_hardware_errors(self) -> None:
-        result = self._error_reader.txRxPacket()
-        if result != self._sdk.COMM_SUCCESS or self._complete(self._error_reader, CHECK_LENGTH):
+    def _status_errors(self, reader: object) -> str:
+        """The servos whose status packets in ``reader`` carry an error (the Alert bit
+        noted), named; empty: none."""
+        errors = getattr(reader, 'errors', {})
+        bad = []
+        for j, servo_id in enumerate(self.table.ids):
+            error = errors.get(servo_id, 0)
+            self._note_alert(error)
+            if error & 0x7F:
+                bad.append(f'{self.table.label(j)} answered {self._ph.getRxPacketError(error)}')
+        return '; '.join(bad)
+
+    def _check(self) -> None:
+        """Read Torque Enable .. Goal Position of every servo: hardware errors, a torque that
+        went off, a tripped Bus Watchdog and goals other than the ones written, each a fault
+        when two reads in a row show it."""
+        self._alert_pending = False
+        reader = self._check_reader
+        result = reader.txRxPacket()
+        if result != self._sdk.COMM_SUCCESS or self._complete(reader, CHECK_LENGTH):
             self._clear_input()  # the state reads count the bus's failures
+            self._alert_pending = True  # check again next cycle
             return
-        bits = np.array([self._error_reader.getData(servo_id, ADDR_HARDWARE_ERROR, 1)
-                         for servo_id in self.table.ids], dtype=np.int64)
-        torque = np.array([self._error_reader.getData(servo_id, ADDR_TORQUE_ENABLE, 1)
-                           for servo_id in self.table.ids], dtype=np.int64)
+        self._status_errors(reader)
+        self._alert_pending = False  # the Alert bit of this very read asks for nothing more
+
+        def column(address: int, size: int) -> np.ndarray:
+            return np.array([reader.getData(servo_id, address, size)
+                             for servo_id in self.table.ids], dtype=np.int64)
+
+        bits = column(ADDR_HARDWARE_ERROR, 1)
+        torque = column(ADDR_TORQUE_ENABLE, 1)
         if np.any(_stale_error_bits(bits)) or np.any(torque > 1):
             # Not a Hardware Error Status: an answer of an earlier transaction (the SDK
             # matches by ID only). Dropped, like the rest of the input.
             self.read_failures += 1
-            self.last_read_failure = 'hardware error read: a stale answer'
+            self.last_read_failure = 'servo check: a stale answer'
             self._clear_input()
             return
+        watchdog = column(ADDR_BUS_WATCHDOG, 1)
+        goal_current = signed(column(ADDR_GOAL_CURRENT, 2), 16)
+        goal_position = signed(column(ADDR_GOAL_POSITION, 4), 32)
         # A bit counts when two reads in a row show it.
         self.hardware_errors = bits & self._error_candidates
         self._error_candidates = bits
+        armed = self.armed
         # Torque off while armed, without a hardware error: the servo restarted (a power dip,
-        # a reboot by someone else). Also two reads in a row.
+        # a reboot by someone else).
         off = (torque == 0) & (bits == 0)
-        self.torque_lost = (off & self._torque_off_candidates) if self.armed \
-            else np.zeros_like(off)
+        self.torque_lost = (off & self._torque_off_candidates) if armed else np.zeros_like(off)
         self._torque_off_candidates = off
+        tripped = watchdog == WATCHDOG_TRIPPED
+        new_trips = tripped & self._tripped_candidates & ~self.watchdog_tripped
+        self.watchdog_tripped = (tripped & self._tripped_candidates) if armed \
+            else np.zeros_like(tripped)
+        self.watchdog_trips += new_trips & armed
+        self._tripped_candidates = tripped
+        # The goals the servos hold against the ones written last (a servo that refuses its
+        # goals: a tripped watchdog, a write that never arrives).
+        refused = np.zeros(self.n, dtype=bool)
+        if armed and self._writes_since_arm > 0:
+            refused = (goal_current != self._goal_current) \
+                | (goal_position != self._goal_position)
+            for j in np.flatnonzero(refused):
+                self._refused_detail[j] = (
+                    f'Goal Current {int(goal_current[j])}, Goal Position '
+                    f'{int(goal_position[j])}; written {int(self._goal_current[j])}, '
+                    f'{int(self._goal_position[j])}')
+        self.goals_refused = refused & self._refused_candidates
+        self._refused_candidates = refused
 
     def _fault(self) -> str:
         bad = np.flatnonzero(self.hardware_errors)
@@ -474,6 +630,13 @@ class DynamixelDevice(HandDevice):
                   f'{hardware_error_names(int(self.hardware_errors[j]))}' for j in bad]
         faults += [f'servo {self.table.label(j)}: torque went off (the servo restarted: power '
                    f'dip or reboot)' for j in np.flatnonzero(self.torque_lost)]
+        faults += [f'servo {self.table.label(j)}: Bus Watchdog tripped (trip '
+                   f'{int(self.watchdog_trips[j])}: no packet from the host for '
+                   f'{self.config.bus_watchdog_s:g} s; its goals are read-only until ~/reset)'
+                   for j in np.flatnonzero(self.watchdog_tripped)]
+        faults += [f'servo {self.table.label(j)}: does not follow its goals (it holds '
+                   f'{self._refused_detail[j]})'
+                   for j in np.flatnonzero(self.goals_refused & ~self.watchdog_tripped)]
         return '; '.join(faults)
 
     def needs_rearm(self) -> str:
@@ -483,11 +646,17 @@ class DynamixelDevice(HandDevice):
             return ''
         off = []
         with self._lock:
-            for j, servo_id in enumerate(self.table.ids):
-                value, result, _ = self._ph.read1ByteTxRx(self._port, servo_id,
-                                                          ADDR_TORQUE_ENABLE)
-                if result == self._sdk.COMM_SUCCESS and value == 0:
-                    off.append(self.table.label(j))
+            if self.port_lost:
+                return self.port_lost
+            try:
+                for j, servo_id in enumerate(self.table.ids):
+                    value, result, _ = self._ph.read1ByteTxRx(self._port, servo_id,
+                                                              ADDR_TORQUE_ENABLE)
+                    if result == self._sdk.COMM_SUCCESS and value == 0:
+                        off.append(self.table.label(j))
+            except PORT_ERRORS as exc:
+                self._lose_port(exc)
+                return self.port_lost
         return f'torque off on servo {", ".join(off)}' if off else ''
 
     def send(self, sample: JointSample, modes: np.ndarray, setpoints: np.ndarray,
@@ -499,7 +668,7 @@ class DynamixelDevice(HandDevice):
             self.table, sample.position, sample.velocity, m, setpoints, stiffness, damping,
             self._hold, self.torque_limit_nm, self.hold_stiffness, self.hold_damping)
         with self._lock:
-            if self._closed:
+            if self._closed or self.port_lost:
                 return
             self._write_goals(current, position)
 
@@ -510,8 +679,14 @@ class DynamixelDevice(HandDevice):
             block = (int(current[j]) % (1 << 16)).to_bytes(2, 'little') + bytes(12) \
                 + (int(position[j]) % (1 << 32)).to_bytes(4, 'little')
             self._writer.addParam(servo_id, list(block))
-        if self._writer.txPacket() == self._sdk.COMM_SUCCESS:
+        try:
+            result = self._writer.txPacket()
+        except PORT_ERRORS as exc:
+            self._lose_port(exc)
+            return
+        if result == self._sdk.COMM_SUCCESS:
             self.commands_sent += 1
+            self._writes_since_arm += 1
         else:
             self.write_failures += 1
 
@@ -526,12 +701,19 @@ class DynamixelDevice(HandDevice):
     # Torque on and off, recovery
 
     def arm(self, sample: JointSample) -> None:
-        """Hold the present posture, then torque on and the Bus Watchdog set.
+        """Hold the present posture with torque on, then the Bus Watchdog of every servo in
+        one Sync Write.
+
+        Each servo gets its watchdog cleared (a trip too), its goals (the posture) and
+        Torque Enable, all with no watchdog running; only then does one Sync Write set the
+        watchdog of all of them at once. The next bus cycle (a read and a write to every
+        servo) follows at once, so no watchdog runs out while others are armed, whichever
+        packets feed it: its own only, or any on the bus.
 
         Raises
         ------
         HandDriverError
-            A servo refused a write (named).
+            A servo refused a write (named), or the port failed.
         """
         self._modes[:] = int(JointMode.HOLD)
         self._hold = np.asarray(sample.position, dtype=np.float64).copy()
@@ -541,36 +723,67 @@ class DynamixelDevice(HandDevice):
             self.torque_limit_nm, self.hold_stiffness, self.hold_damping)
         current = np.where(self.table.current_mode, 0, current)  # no step at switch-on
         with self._lock:
-            for j in range(self.n):
-                self._write(j, ADDR_BUS_WATCHDOG, 1, 0, 'Bus Watchdog')  # clear a trip
-                self._write(j, ADDR_GOAL_CURRENT, 2, int(current[j]), 'Goal Current')
-                self._write(j, ADDR_GOAL_POSITION, 4, int(position[j]), 'Goal Position')
-                self._write(j, ADDR_TORQUE_ENABLE, 1, 1, 'Torque Enable')
-                self._write(j, ADDR_BUS_WATCHDOG, 1, self.config.bus_watchdog_raw,
-                            'Bus Watchdog')
-            self._goal_current, self._goal_position = current, position
+            self._raise_if_port_lost()
+            try:
+                for j in range(self.n):
+                    self._write(j, ADDR_BUS_WATCHDOG, 1, 0, 'Bus Watchdog')  # clear a trip
+                    self._write(j, ADDR_GOAL_CURRENT, 2, int(current[j]), 'Goal Current')
+                    self._write(j, ADDR_GOAL_POSITION, 4, int(position[j]), 'Goal Position')
+                    self._write(j, ADDR_TORQUE_ENABLE, 1, 1, 'Torque Enable')
+                self._goal_current, self._goal_position = current, position
+                self._watchdog_writer.clearParam()
+                for servo_id in self.table.ids:
+                    self._watchdog_writer.addParam(servo_id, [self.config.bus_watchdog_raw])
+                if self._watchdog_writer.txPacket() != self._sdk.COMM_SUCCESS:
+                    raise HandDriverError(f'the Sync Write of Bus Watchdog on {self.port} '
+                                          f'failed')
+            except PORT_ERRORS as exc:
+                self._lose_port(exc)
+                raise PortLost(self.port_lost) from exc
             self.armed = True
-            self.torque_lost[:] = False
-            self._torque_off_candidates[:] = False
+            self._writes_since_arm = 0
+            for flags in (self.torque_lost, self._torque_off_candidates,
+                          self.watchdog_tripped, self._tripped_candidates,
+                          self.goals_refused, self._refused_candidates):
+                flags[:] = False
+
+    def _raise_if_port_lost(self) -> None:
+        if self.port_lost:
+            raise PortLost(self.port_lost)
 
     def disarm(self) -> None:
         """Torque off and Bus Watchdog cleared on every servo that answers (best effort: the
         Bus Watchdog stops the others once the host stops writing)."""
         with self._lock:
-            if self._closed:
-                return
-            for servo_id in self.table.ids:
-                self._ph.write1ByteTxRx(self._port, servo_id, ADDR_TORQUE_ENABLE, 0)
-                # A host that stops now would trip the watchdog of a servo already off.
-                self._ph.write1ByteTxRx(self._port, servo_id, ADDR_BUS_WATCHDOG, 0)
             self.armed = False
+            if self._closed or self.port_lost:
+                return
+            try:
+                for servo_id in self.table.ids:
+                    self._ph.write1ByteTxRx(self._port, servo_id, ADDR_TORQUE_ENABLE, 0)
+                    # A host that stops now would trip the watchdog of a servo already off.
+                    self._ph.write1ByteTxRx(self._port, servo_id, ADDR_BUS_WATCHDOG, 0)
+            except PORT_ERRORS as exc:
+                self._lose_port(exc)
+
+    def _transact(self, call: Callable[[], tuple], tries: int = _TRANSACTION_TRIES) -> tuple:
+        """``call()`` (an SDK transaction returning ``(..., result, error)``) until it
+        succeeds, at most ``tries`` times with the input drained in between."""
+        for _ in range(tries):
+            answer = call()
+            self._note_alert(int(answer[-1]))
+            if answer[-2] == self._sdk.COMM_SUCCESS:
+                return answer
+            self._clear_input()
+        return answer
 
     def _read_error_status(self, servo_id: int) -> int | None:
         """The Hardware Error Status of one servo; ``None`` when it does not answer, or only
         with answers of earlier transactions (bits no error has: the SDK matches an answer
         by ID only), :data:`_STATUS_READ_TRIES` times with the input drained in between."""
         for _ in range(_STATUS_READ_TRIES):
-            bits, result, _ = self._ph.read1ByteTxRx(self._port, servo_id, ADDR_HARDWARE_ERROR)
+            bits, result, _ = self._transact(
+                lambda: self._ph.read1ByteTxRx(self._port, servo_id, ADDR_HARDWARE_ERROR))
             if result != self._sdk.COMM_SUCCESS:
                 return None
             if not _stale_error_bits(bits):
@@ -581,43 +794,84 @@ class DynamixelDevice(HandDevice):
         return None
 
     def recover(self) -> str:
-        """Reboot the servos in an overload or overheating error, wait for them, write their
-        settings again (torque stays off until :meth:`arm`). Returns what was done."""
-        done = []
+        """Prepare ``~/reset``: open the port again if it failed, reboot the servos in an
+        overload or overheating error, wait for them, write their settings again (torque
+        stays off until :meth:`arm`). Every transaction is tried
+        :data:`_TRANSACTION_TRIES` times.
+
+        Returns
+        -------
+        str
+            What was done (empty: nothing was needed).
+
+        Raises
+        ------
+        HandDriverError
+            The hand cannot be armed: the port is still missing or busy, a servo does not
+            answer, keeps a hardware error a reboot does not clear, or refuses its settings
+            (each named). The driver stays in ERROR with this reason.
+        """
+        done: list[str] = []
+        problems: list[str] = []
         with self._lock:
-            for j, servo_id in enumerate(self.table.ids):
-                bits = self._read_error_status(servo_id)
-                if bits is None:
-                    done.append(f'servo {self.table.label(j)} does not answer')
-                    continue
-                self.hardware_errors[j] = bits
-                if bits & REBOOT_BITS:
-                    self._ph.reboot(self._port, servo_id)
-                    deadline = time.monotonic() + _REBOOT_WAIT_S
-                    while time.monotonic() < deadline:
-                        _, result, _ = self._ph.ping(self._port, servo_id)
-                        if result == self._sdk.COMM_SUCCESS:
-                            break
-                        time.sleep(0.05)
-                    done.append(f'rebooted servo {self.table.label(j)} '
-                                f'({hardware_error_names(int(bits))})')
-                    self.hardware_errors[j] = 0
-                elif bits:
-                    done.append(f'servo {self.table.label(j)} keeps '
-                                f'{hardware_error_names(int(bits))} (a reboot does not clear '
-                                f'it: check the supply and the wiring)')
-            try:
-                self._configure()
-            except HandDriverError as exc:
-                done.append(str(exc))
             self.armed = False
+            self._next_deadline = None
+            if self.port_lost:
+                close_port(self._port)
+                try:
+                    self._open()
+                except HandDriverError as exc:
+                    raise HandDriverError(f'{self.port_lost}; reopening it: {exc}') from exc
+                done.append(f'opened {self.port} again ({self.port_lost})')
+                self.port_lost = ''
+                self._failed_in_a_row = 0
+            try:
+                for j, servo_id in enumerate(self.table.ids):
+                    bits = self._read_error_status(servo_id)
+                    if bits is None:
+                        problems.append(f'servo {self.table.label(j)} does not answer')
+                        continue
+                    self.hardware_errors[j] = bits
+                    if bits & REBOOT_BITS:
+                        self._reboot(j)
+                        done.append(f'rebooted servo {self.table.label(j)} '
+                                    f'({hardware_error_names(int(bits))})')
+                        bits = self._read_error_status(servo_id)
+                        self.hardware_errors[j] = bits or 0
+                    if bits:
+                        problems.append(f'servo {self.table.label(j)} keeps '
+                                        f'{hardware_error_names(int(bits))} (a reboot does not '
+                                        f'clear it: check the supply and the wiring)')
+                if not problems:
+                    self._configure()
+            except PORT_ERRORS as exc:
+                self._lose_port(exc)
+                problems.append(self.port_lost)
+            except HandDriverError as exc:
+                problems.append(str(exc))
+            self._error_candidates[:] = 0
             # Torque is off until arm() on purpose: a loss seen before this recovery (a read
             # of the state thread between two of its transactions) is no fault of the hand
             # that is about to be armed.
-            self.torque_lost[:] = False
-            self._torque_off_candidates[:] = False
-            self._next_deadline = None
+            for flags in (self.torque_lost, self._torque_off_candidates,
+                          self.watchdog_tripped, self._tripped_candidates,
+                          self.goals_refused, self._refused_candidates):
+                flags[:] = False
+        if problems:
+            raise HandDriverError('; '.join(done + problems))
         return '; '.join(done)
+
+    def _reboot(self, j: int) -> None:
+        """Reboot servo ``j`` and wait until it answers a ping again (at most
+        :data:`_REBOOT_WAIT_S`)."""
+        servo_id = self.table.ids[j]
+        self._transact(lambda: self._ph.reboot(self._port, servo_id))
+        deadline = time.monotonic() + _REBOOT_WAIT_S
+        while time.monotonic() < deadline:
+            _, result, _ = self._ph.ping(self._port, servo_id)
+            if result == self._sdk.COMM_SUCCESS:
+                return
+            time.sleep(0.05)
 
     # ---------------------------------------------------------------------------------------
 
@@ -631,6 +885,14 @@ class DynamixelDevice(HandDevice):
             'commands_sent': str(self.commands_sent),
             'torque_enabled': str(self.armed),
             'rate_caps': ' | '.join(self.rate_report) if self.rate_report else 'none',
+            'port_lost': self.port_lost or 'no',
+            'bus_watchdog_s': f'{self.config.bus_watchdog_s:g}',
+            'bus_watchdog_trips': str(int(self.watchdog_trips.sum())),
+            'status_alerts': str(self.alerts),
+            # Present Current of these models is the supply (input) current, not the motor's:
+            # their efforts are no torque estimate (docs/dynamixel.md).
+            'effort_not_a_torque': ', '.join(
+                s.joint for s in self.config.servos if not s.spec.motor_current) or 'none',
         }
         for j in range(self.n):
             bits = int(self.hardware_errors[j])
@@ -649,10 +911,7 @@ class DynamixelDevice(HandDevice):
                 pass
         with self._lock:
             self._closed = True
-            try:
-                self._port.closePort()
-            except Exception:  # noqa: BLE001 - the device may have disappeared
-                pass
+            close_port(self._port)
 
     @property
     def closed(self) -> bool:
