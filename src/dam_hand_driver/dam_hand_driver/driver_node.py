@@ -470,8 +470,11 @@ class HandDriverNode(Node):
         cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim', '-p',
                f'gui:={str(self._gui).lower()}', '-p',
                f'use_sim_time:={str(self._sim_time).lower()}']
-        if os.path.isfile(self.config.source):
-            cmd += ['-p', f'config_file:={self.config.source}']
+        base = self.config.source.split(' + ')[0]  # 'FILE + OVERLAY' with an overlay
+        if os.path.isfile(base):
+            cmd += ['-p', f'config_file:={base}']
+        for overlay in self._overlays:  # the stand-in's servos get the same offsets
+            cmd += ['-p', f'config_overlay:={overlay}']
         cmd += ['-p', f'object:={self.config.object.name}']
         port_file = ''
         if bus == 'dynamixel':

@@ -35,6 +35,9 @@ Parameters
 ----------
 config_file : string, read-only
     DAM configuration file; empty: ``DAM_CONFIG`` or the installed ``config/dam.yaml``.
+config_overlay : string, read-only
+    A YAML file holding part of a configuration, merged over ``config_file`` (the driver
+    passes its own, so that emulated servos and driver agree on e.g. the zero offsets).
 object : string, read-only
     The column object on the table, a name of the configuration's ``object.library`` (empty:
     ``object.default``); its convex mesh is a prism of the cross-section.
@@ -98,6 +101,7 @@ from dam_common.echo import brief_repr
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
     declare_config_file,
+    declare_config_overlay,
     declare_object,
     declare_thread_priority,
     run_node,
@@ -144,6 +148,7 @@ class SimBridgeNode(Node):
     def __init__(self, gui_flag: bool = False) -> None:
         super().__init__('sim_bridge')
         config_file = declare_config_file(self)
+        overlays = declare_config_overlay(self)
         gui = bool(self.declare_parameter(
             'gui', False, ParameterDescriptor(
                 description='open the PyBullet window (needs a display)',
@@ -189,7 +194,7 @@ class SimBridgeNode(Node):
             raise SimBridgeError(f'watchdog_feed {watchdog_feed!r} is not one of '
                                  f'{", ".join(WATCHDOG_FEEDS)}')
         self._declare_fault_parameters()
-        self._config = declare_object(self, load_config(config_file or None))
+        self._config = declare_object(self, load_config(config_file or None, overlays))
         with SHUTDOWN.uninterrupted():  # a half-built physics client cannot be destroyed
             world = HandWorld(self._config, WorldOptions.from_config(self._config, gui=gui))
             try:
