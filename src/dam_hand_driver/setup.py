@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'hand_driver = dam_hand_driver.entry_points:hand_driver',
             'hand_urdf = dam_hand_driver.urdf:main',
+            'dynamixel_setup = dam_hand_driver.dynamixel_setup:main',
         ],
     },
 )

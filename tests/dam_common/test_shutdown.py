@@ -69,6 +69,75 @@ def test_an_uninterrupted_step_finishes_then_raises(restore_handlers) -> None:
     assert quiet.interrupting and not quiet.requested
 
 
+def test_an_interruptible_command_is_interrupted_then_the_handlers_come_back(
+        restore_handlers) -> None:
+    def before(signum: int, frame: object) -> None:
+        raise AssertionError('the handler from before ran inside the command')
+
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, before)
+    request = ShutdownRequest()
+    steps = []
+    with pytest.raises(StartupInterrupted, match='SIGINT'):
+        with request.interruptible() as inside:
+            assert inside is request and request.interrupting
+            steps.append('a step')
+            signal.raise_signal(signal.SIGINT)
+            steps.append('never reached')
+    assert steps == ['a step']
+    assert request.requested and not request.interrupting
+    assert all(signal.getsignal(sig) is before for sig in STOP_SIGNALS)
+    with pytest.raises(StartupInterrupted):
+        request.raise_if_requested()
+    # A second signal inside is only recorded; the first one is the one reported.
+    second = ShutdownRequest()
+    with pytest.raises(StartupInterrupted):
+        with second.interruptible():
+            try:
+                signal.raise_signal(signal.SIGTERM)
+            finally:
+                signal.raise_signal(signal.SIGINT)  # the clean-up is not cut in two
+    assert second.signal_name == 'SIGTERM'
+    # Without a signal the command runs to its end and nothing is left installed.
+    quiet = ShutdownRequest()
+    with quiet.interruptible():
+        pass
+    assert not quiet.requested and not quiet.interrupting
+    assert all(signal.getsignal(sig) is before for sig in STOP_SIGNALS)
+
+
+def test_an_interruptible_command_keeps_a_request_s_own_installation(restore_handlers) -> None:
+    """Inside a process whose request is installed already (a node's), the command is
+    interrupted, and the request's handlers and its running state stay after."""
+    request = ShutdownRequest()
+    request.install()
+    handlers = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    with request.interruptible():
+        assert request.interrupting
+    assert not request.interrupting
+    assert {sig: signal.getsignal(sig) for sig in STOP_SIGNALS} == handlers
+    signal.raise_signal(signal.SIGINT)  # recorded, not raised: the node runs
+    assert request.requested
+
+
+def test_an_interruptible_command_off_the_main_thread_installs_nothing() -> None:
+    import threading
+
+    handlers = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    seen = []
+
+    def command() -> None:
+        request = ShutdownRequest()
+        with request.interruptible() as inside:
+            seen.append((inside is request, request.interrupting))
+
+    thread = threading.Thread(target=command)
+    thread.start()
+    thread.join()
+    assert seen == [(True, False)]
+    assert {sig: signal.getsignal(sig) for sig in STOP_SIGNALS} == handlers
+
+
 def test_handlers_are_only_installed_from_the_main_thread() -> None:
     import threading
 

@@ -16,6 +16,9 @@ A command-line client (``check_lift``, ``plan_lift``) follows the same rules thr
 :func:`run_client_entry`: interrupted at once while it imports and parses its arguments, then
 (once it calls :meth:`ShutdownRequest.started`, before it creates its ROS context) it looks at
 the request in each of its waits, cleans up, and exits with its documented status for a stop.
+A command that a signal stops at any moment of its work (``dynamixel_setup``: short bus
+transactions, the port closed in ``finally``) runs within :meth:`ShutdownRequest.interruptible`,
+which gives the signals their previous handling back at its end.
 """
 
 from __future__ import annotations
@@ -95,6 +98,35 @@ class ShutdownRequest:
     def started(self) -> None:
         """From now on a signal only records the request (the node runs)."""
         self._interrupt = False
+
+    @contextmanager
+    def interruptible(self) -> Iterator[ShutdownRequest]:
+        """A command that a signal may stop at any moment of its work, not only while it
+        starts (its steps are short and what it opened is closed in ``finally``).
+
+        Within ``with``, SIGINT and SIGTERM are handled as after
+        ``install(interrupt_startup=True)``: the first signal raises
+        :class:`StartupInterrupted` where the interpreter is (or, where that exception
+        would be lost, only records the request: :meth:`raise_if_requested` between two
+        steps raises it), later ones are only recorded. On exit the handlers and the
+        interrupting from before come back, so that a process can run the command more than
+        once (its tests) and keep its own handling of the signals. From a thread other than
+        the main one nothing is installed.
+        """
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        previous = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+        installed, interrupting = self._installed, self._interrupt
+        try:
+            self.install(interrupt_startup=True)
+            yield self
+        finally:
+            self._interrupt = interrupting and not self._event.is_set()
+            if not installed:
+                for sig, handler in previous.items():
+                    signal.signal(sig, handler)
+                self._installed = False
 
     def install(self, interrupt_startup: bool = False) -> bool:
         """Handle SIGINT and SIGTERM by recording the request (idempotent); with
