@@ -232,6 +232,13 @@ def test_rate_caps_are_reported_with_the_fix(cfg: DamConfig) -> None:
     report = ' '.join(device.rate_report)
     assert 'Return Delay Time is not 0' in report and 'write 0 to address 9' in report
     assert 'ID 1 (finger1_compliant_joint): 500 us' in report
+    # Nine servos wait 4.5 ms of the 5.6 ms cycle: the fix is the delay, not the baud rate
+    # (451 bytes take 1.13 ms at 4 Mbit/s, within the 4 ms of 250 Hz).
+    cycle = [line for line in device.rate_report if line.startswith('one cycle takes')]
+    assert len(cycle) == 1, device.rate_report
+    assert 'plus 4.50 ms of Return Delay Time' in cycle[0], cycle[0]
+    assert 'write 0 to Return Delay Time' in cycle[0] and 'baud rate' not in cycle[0].split(
+        ': ')[-1], cycle[0]
 
 
 def test_a_port_that_does_not_exist_is_named(cfg: DamConfig) -> None:
@@ -569,5 +576,27 @@ def test_a_late_answer_of_the_longer_check_read_is_never_taken_for_the_state(
             world_q = standin.world.joint_states().positions
         assert sample is not None
         assert sample.position == pytest.approx(world_q, abs=POSITION_RAD_PER_COUNT)
+    finally:
+        device.close()
+
+
+def test_an_error_a_reboot_does_not_clear_fails_the_recovery_naming_it(cfg: DamConfig,
+                                                                       standin) -> None:
+    """An input voltage error stays after a reboot: the recovery says so and fails (the driver
+    stays in ERROR with that reason), instead of waiting for reads that then end in ERROR."""
+    from dam_hand_driver.dynamixel_device import DynamixelDevice
+
+    device = DynamixelDevice(cfg, standin.port_path)
+    try:
+        standin.hardware_error(5, 0x01)
+        with pytest.raises(HandDriverError, match=re.escape(
+                'servo ID 5 (finger2_locked_joint) keeps input voltage error')):
+            device.recover()
+        standin.hardware_error(8, 0x04)  # overheating: rebooted, then cleared
+        with pytest.raises(HandDriverError) as failed:
+            device.recover()
+        assert 'rebooted servo ID 8 (finger3_locked_joint) (overheating error)' in str(
+            failed.value)
+        assert 'ID 8' not in str(failed.value).split('keeps')[-1]
     finally:
         device.close()

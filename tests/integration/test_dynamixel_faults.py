@@ -26,6 +26,7 @@ import pytest
 from dynamixel_testing import DriverClient
 from grasp_testing import config_with_free_ports
 
+from dam_common.realtime import die_with_parent
 from ros_testing import installed_executable, node_process
 
 pytestmark = [pytest.mark.integration]
@@ -39,7 +40,7 @@ class _BusProgram:
             [str(installed_executable('dam_sim_bridge', 'dynamixel_bus')), '--config',
              str(config), '--link', str(link)],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-            text=True)
+            text=True, preexec_fn=die_with_parent)
         line = self.process.stdout.readline()
         assert line.startswith('DYNAMIXEL_PORT '), line
 
@@ -54,21 +55,21 @@ def setup(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     directory = tmp_path_factory.mktemp('dynamixel_faults')
     config = config_with_free_ports(directory)
     link = directory / 'ttyDXL'
-    bus = _BusProgram(config, link)
     command = [installed_executable('dam_hand_driver', 'hand_driver'), '--ros-args', '-p',
                'backend:=dynamixel', '-p', f'port:={link}', '-p', 'thread_priority:=0']
     env = {'DAM_CONFIG': str(config)}
+    state = {'bus': _BusProgram(config, link), 'config': config, 'link': link,
+             'command': command, 'env': env}
     try:
         with node_process(command, env=env) as driver:
             client = DriverClient()
             try:
                 assert client.wait_state('ACTIVE', 30.0), driver.output()
-                yield {'client': client, 'driver': driver, 'bus': bus, 'config': config,
-                       'link': link, 'command': command, 'env': env}
+                yield {**state, 'client': client, 'driver': driver, 'state': state}
             finally:
                 client.client.close()
     finally:
-        bus.stop()
+        state['bus'].stop()  # the one a test started last
 
 
 def test_a_second_driver_on_the_port_is_refused_while_the_first_reads_on(setup) -> None:
@@ -111,7 +112,7 @@ def test_a_stall_of_the_driver_trips_the_watchdogs_and_is_an_error_at_once(setup
 def test_the_adapter_vanishing_is_an_error_naming_the_port_and_reset_reopens_it(setup) -> None:
     client, driver, link = setup['client'], setup['driver'], setup['link']
     assert client.wait_state('ACTIVE', 5.0)
-    setup['bus'].stop()  # the pseudo-terminal closes, the link goes
+    setup['state']['bus'].stop()  # the pseudo-terminal closes, the link goes
     gone = time.monotonic()
     assert client.client.spin_until(lambda: client.state() == 'ERROR', 10.0)
     client.client.spin_until(lambda: False, 1.5)
@@ -120,7 +121,7 @@ def test_the_adapter_vanishing_is_an_error_naming_the_port_and_reset_reopens_it(
     assert driver.alive()
     failed = client.reset()
     assert not failed.success and f"'{link}'" in failed.message, failed.message
-    setup['bus'] = _BusProgram(setup['config'], link)  # plugged in again
+    setup['state']['bus'] = _BusProgram(setup['config'], link)  # plugged in again
     reset = client.reset()
     assert reset.success, reset.message
     assert f'opened {link} again' in reset.message, reset.message
