@@ -24,7 +24,6 @@ ERROR naming them, and :meth:`disarm` switches torque off.
 from __future__ import annotations
 
 import os
-import termios
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -34,6 +33,7 @@ import numpy as np
 from dam_common.config import DamConfig
 from dam_common.device_protocol import JointMode
 from dam_hand_driver.device import CommandItemLike, HandDevice, JointSample
+from dam_hand_driver.dynamixel_check import CheckRead, ServoCheck
 from dam_hand_driver.dynamixel_goals import (
     ServoTable,
     goals_raw,
@@ -43,10 +43,40 @@ from dam_hand_driver.dynamixel_goals import (
     update_hold,
 )
 from dam_hand_driver.dynamixel_port import (
+    PORT_ERRORS,
+    PortLost,
+    checked_sync_read,
     close_port,
     latency_timer_fix,
     open_port,
     usb_latency_timer_ms,
+)
+from dam_hand_driver.dynamixel_table import (
+    ADDR_BUS_WATCHDOG,
+    ADDR_CURRENT_LIMIT,
+    ADDR_GOAL_CURRENT,
+    ADDR_GOAL_POSITION,
+    ADDR_HARDWARE_ERROR,
+    ADDR_OPERATING_MODE,
+    ADDR_PRESENT_CURRENT,
+    ADDR_PRESENT_POSITION,
+    ADDR_PRESENT_VELOCITY,
+    ADDR_REALTIME_TICK,
+    ADDR_RETURN_DELAY_TIME,
+    ADDR_TORQUE_ENABLE,
+    ALERT_BIT,
+    CHECK_LENGTH,
+    CHECK_START,
+    DRAIN_LIMIT,
+    GOAL_LENGTH,
+    GOAL_START,
+    QUIET_MS,
+    REBOOT_BITS,
+    STATE_LENGTH,
+    STATE_START,
+    TRANSACTION_TRIES,
+    hardware_error_names,
+    stale_error_bits,
 )
 from dam_hand_driver.errors import HandDriverError
 
@@ -57,127 +87,22 @@ except ImportError as _exc:  # the driver still serves the UDP link without it
     sdk = None
     _SDK_IMPORT_ERROR = str(_exc)
 
-# Control table addresses (X series, shared by the supported models).
-ADDR_MODEL_NUMBER = 0
-ADDR_RETURN_DELAY_TIME = 9
-ADDR_OPERATING_MODE = 11
-ADDR_CURRENT_LIMIT = 38
-ADDR_TORQUE_ENABLE = 64
-ADDR_HARDWARE_ERROR = 70
-ADDR_BUS_WATCHDOG = 98
-ADDR_GOAL_CURRENT = 102
-ADDR_GOAL_POSITION = 116
-ADDR_PRESENT_POSITION_END = 136
-ADDR_REALTIME_TICK = 120
-ADDR_PRESENT_CURRENT = 126
-ADDR_PRESENT_VELOCITY = 128
-ADDR_PRESENT_POSITION = 132
-#: The block one sync read takes per cycle: Realtime Tick .. Present Position.
-STATE_START, STATE_LENGTH = ADDR_REALTIME_TICK, 16
-#: The block one sync write gives per cycle: Goal Current .. Goal Position.
-GOAL_START, GOAL_LENGTH = ADDR_GOAL_CURRENT, 18
-#: Torque Enable .. Goal Position (64-119) is read every this many cycles (twice in a row, as
-#: a fault counts when two reads show it), and at once after a status packet with the Alert
-#: bit.
+#: The servo check (:mod:`dam_hand_driver.dynamixel_check`) reads its block every this many
+#: cycles (twice in a row, as a fault counts when two reads show it), and at once after a
+#: status packet with the Alert bit.
 CHECK_EVERY = 25
-CHECK_START, CHECK_LENGTH = ADDR_TORQUE_ENABLE, ADDR_GOAL_POSITION + 4 - ADDR_TORQUE_ENABLE
-#: Bus Watchdog (98) of a servo whose watchdog tripped (-1): its goals are read-only.
-WATCHDOG_TRIPPED = 255
-#: The Alert bit of a status packet's error byte: the servo has a hardware error.
-ALERT_BIT = 0x80
-#: Hardware Error Status bits (ROBOTIS e-manual, X series).
-HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
-                       3: 'motor encoder error', 4: 'electrical shock error',
-                       5: 'overload error'}
-#: The errors a reboot clears and ``~/reset`` reboots for.
-REBOOT_BITS = (1 << 2) | (1 << 5)
-#: Tries of one start-up, arming or recovery transaction before a servo counts as silent.
-_TRANSACTION_TRIES = 3
 #: The emulated bus on simulated time steps the world at each state read and answers when
 #: its Python process gets the CPU: on a loaded machine later than the SDK's packet timeout
 #: (34 ms). A read the host gave up on would advance the simulated clock unseen, so its
 #: timeouts get this much more [ms] (a simulated clock does not care how long a read takes).
 _EMULATED_PACKET_MARGIN_MS = 1000.0
-#: The SDK's packet timeout without the transfer time [ms]: twice its USB latency timer
-#: (16 ms) plus 2 ms. After a failed transaction the input is drained until the line has
-#: been quiet this long (plus the margin): an answer later than the SDK waited must not be
-#: taken for the next transaction's (the SDK matches status packets by ID only).
-_QUIET_MS = 2.0 * 16.0 + 2.0
-#: A drain ends after this many quiet times even if bytes keep coming.
-_DRAIN_LIMIT = 8
 #: Reads of a Hardware Error Status in :meth:`DynamixelDevice.recover` before a servo that
 #: answers only with stale answers counts as not answering.
 _STATUS_READ_TRIES = 3
-_KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 _TICK_WRAP_MS = 32768
 #: Failed reads in a row after which the compliant (current) joints get zero current.
 LIMP_AFTER_FAILED_READS = 3
 _REBOOT_WAIT_S = 2.0
-
-
-def _stale_error_bits(bits: int | np.ndarray) -> int | np.ndarray:
-    """Bits that no Hardware Error Status has: an answer of an earlier transaction, which the
-    SDK took for this one (it matches status packets by ID only)."""
-    return bits & ~_KNOWN_BITS
-
-
-def hardware_error_names(bits: int) -> str:
-    """``overload error, overheating error`` for Hardware Error Status ``bits``."""
-    names = [name for bit, name in HARDWARE_ERROR_BITS.items() if bits & (1 << bit)]
-    unknown = bits & ~sum(1 << b for b in HARDWARE_ERROR_BITS)
-    if unknown:
-        names.append(f'unknown bits 0x{unknown:02x}')
-    return ', '.join(names) if names else 'none'
-
-
-def _checked_sync_read(sdk_module: object) -> type:
-    """The SDK's ``GroupSyncRead`` that keeps each status packet's error byte (``errors``, by
-    ID: the SDK's own drops it, and with it the Alert bit) and takes only status packets of
-    exactly the block's length. The SDK matches an answer by ID alone and cuts its data to the
-    length asked for: an answer of an earlier, longer read that came later than the host
-    waited (the servo check's 56 bytes) would pass for this read's 16 (``stale`` names it)."""
-    base = sdk_module.GroupSyncRead  # type: ignore[attr-defined]
-    success = sdk_module.COMM_SUCCESS  # type: ignore[attr-defined]
-    corrupt = sdk_module.COMM_RX_CORRUPT  # type: ignore[attr-defined]
-    # Status packet: header (3), reserved, ID, length (2), instruction, error, data, CRC (2).
-    id_at, length_at, error_at, data_at = 4, 5, 8, 9
-
-    class _CheckedSyncRead(base):  # type: ignore[misc, valid-type]
-        errors: dict[int, int]
-        stale: int | None
-
-        def rxPacket(self) -> int:  # noqa: N802 - the SDK's name
-            self.last_result = False
-            self.errors = {}
-            self.stale = None
-            result = sdk_module.COMM_NOT_AVAILABLE  # type: ignore[attr-defined]
-            for dxl_id in self.data_dict:
-                self.data_dict[dxl_id] = []
-                while True:  # answers of other IDs are dropped, as the SDK does
-                    packet, result = self.ph.rxPacket(self.port, False)
-                    if result != success or packet[id_at] == dxl_id:
-                        break
-                if result != success:
-                    return result
-                if packet[length_at] | packet[length_at + 1] << 8 != self.data_length + 4:
-                    self.stale = dxl_id
-                    return corrupt
-                self.errors[dxl_id] = int(packet[error_at])
-                self.data_dict[dxl_id] = bytearray(
-                    packet[data_at:data_at + self.data_length])
-            self.last_result = result == success
-            return result
-
-    return _CheckedSyncRead
-
-
-#: What the SDK's port raises when the device fails: pyserial's SerialException is an OSError,
-#: its ioctls raise termios.error.
-PORT_ERRORS = (OSError, termios.error)
-
-
-class PortLost(HandDriverError):
-    """The serial port failed (an adapter unplugged, a pseudo-terminal closed)."""
 
 
 class DynamixelDevice(HandDevice):
@@ -237,7 +162,7 @@ class DynamixelDevice(HandDevice):
         self._clock_hint_ns = clock_hint_ns
         self._lock = threading.Lock()  # one transaction on the bus at a time
         self._margin_ms = _EMULATED_PACKET_MARGIN_MS if sim_time else 0.0
-        self._quiet_s = (_QUIET_MS + self._margin_ms) / 1000.0
+        self._quiet_s = (QUIET_MS + self._margin_ms) / 1000.0
         self._ph = sdk.PacketHandler(2.0)
         #: Status packets with the Alert bit, and whether they ask for a check of the servos.
         self.alerts = 0
@@ -254,21 +179,9 @@ class DynamixelDevice(HandDevice):
         self.last_read_failure = ''
         self.write_failures = 0
         self.commands_sent = 0
-        self.hardware_errors = np.zeros(self.n, dtype=np.int64)  #: Hardware Error Status
-        self._error_candidates = np.zeros(self.n, dtype=np.int64)
-        #: Servos found with torque off while armed (restarted).
-        self.torque_lost = np.zeros(self.n, dtype=bool)
-        self._torque_off_candidates = np.zeros(self.n, dtype=bool)
-        #: Servos whose Bus Watchdog tripped while armed (two reads in a row).
-        self.watchdog_tripped = np.zeros(self.n, dtype=bool)
-        self._tripped_candidates = np.zeros(self.n, dtype=bool)
-        #: Trips seen since start, per servo (``/diagnostics``).
-        self.watchdog_trips = np.zeros(self.n, dtype=np.int64)
-        #: Servos whose goal registers hold other values than the driver wrote (they refuse
-        #: their goals), two reads in a row; the values read, for the message.
-        self.goals_refused = np.zeros(self.n, dtype=bool)
-        self._refused_candidates = np.zeros(self.n, dtype=bool)
-        self._refused_detail = [''] * self.n
+        #: What the servo check found (hardware errors, torque lost, tripped watchdogs,
+        #: refused goals).
+        self.check = ServoCheck(self.table, dxl.bus_watchdog_s)
         #: Why the port failed (empty: it works): a fault until ``recover`` opens it again.
         self.port_lost = ''
         #: Sync writes of goals since :meth:`arm` (the check compares the goals read back
@@ -308,8 +221,8 @@ class DynamixelDevice(HandDevice):
             close_port(port)
             raise
         sdk = self._sdk
-        self._reader = _checked_sync_read(sdk)(port, self._ph, STATE_START, STATE_LENGTH)
-        self._check_reader = _checked_sync_read(sdk)(port, self._ph, CHECK_START,
+        self._reader = checked_sync_read(sdk)(port, self._ph, STATE_START, STATE_LENGTH)
+        self._check_reader = checked_sync_read(sdk)(port, self._ph, CHECK_START,
                                                       CHECK_LENGTH)
         self._writer = sdk.GroupSyncWrite(port, self._ph, GOAL_START, GOAL_LENGTH)
         self._watchdog_writer = sdk.GroupSyncWrite(port, self._ph, ADDR_BUS_WATCHDOG, 1)
@@ -478,12 +391,12 @@ class DynamixelDevice(HandDevice):
 
     def _clear_input(self) -> None:
         """Drop what the port receives until the line has been quiet for one packet timeout
-        (at most :data:`_DRAIN_LIMIT` of them): answers later than the SDK waited arrive
+        (at most :data:`DRAIN_LIMIT` of them): answers later than the SDK waited arrive
         during the drain, not in the next transaction. Nothing if the port is gone (the
         reads say so)."""
         now = time.monotonic()
         quiet_until = now + self._quiet_s
-        give_up = now + _DRAIN_LIMIT * self._quiet_s
+        give_up = now + DRAIN_LIMIT * self._quiet_s
         try:
             while now < quiet_until and now < give_up:
                 waiting = self._port.getBytesAvailable()
@@ -585,59 +498,23 @@ class DynamixelDevice(HandDevice):
 
         bits = column(ADDR_HARDWARE_ERROR, 1)
         torque = column(ADDR_TORQUE_ENABLE, 1)
-        if np.any(_stale_error_bits(bits)) or np.any(torque > 1):
+        if np.any(stale_error_bits(bits)) or np.any(torque > 1):
             # Not a Hardware Error Status: an answer of an earlier transaction (the SDK
             # matches by ID only). Dropped, like the rest of the input.
             self.read_failures += 1
             self.last_read_failure = 'servo check: a stale answer'
             self._clear_input()
             return
-        watchdog = column(ADDR_BUS_WATCHDOG, 1)
-        goal_current = signed(column(ADDR_GOAL_CURRENT, 2), 16)
-        goal_position = signed(column(ADDR_GOAL_POSITION, 4), 32)
-        # A bit counts when two reads in a row show it.
-        self.hardware_errors = bits & self._error_candidates
-        self._error_candidates = bits
-        armed = self.armed
-        # Torque off while armed, without a hardware error: the servo restarted (a power dip,
-        # a reboot by someone else).
-        off = (torque == 0) & (bits == 0)
-        self.torque_lost = (off & self._torque_off_candidates) if armed else np.zeros_like(off)
-        self._torque_off_candidates = off
-        tripped = watchdog == WATCHDOG_TRIPPED
-        new_trips = tripped & self._tripped_candidates & ~self.watchdog_tripped
-        self.watchdog_tripped = (tripped & self._tripped_candidates) if armed \
-            else np.zeros_like(tripped)
-        self.watchdog_trips += new_trips & armed
-        self._tripped_candidates = tripped
-        # The goals the servos hold against the ones written last (a servo that refuses its
-        # goals: a tripped watchdog, a write that never arrives).
-        refused = np.zeros(self.n, dtype=bool)
-        if armed and self._writes_since_arm > 0:
-            refused = (goal_current != self._goal_current) \
-                | (goal_position != self._goal_position)
-            for j in np.flatnonzero(refused):
-                self._refused_detail[j] = (
-                    f'Goal Current {int(goal_current[j])}, Goal Position '
-                    f'{int(goal_position[j])}; written {int(self._goal_current[j])}, '
-                    f'{int(self._goal_position[j])}')
-        self.goals_refused = refused & self._refused_candidates
-        self._refused_candidates = refused
+        read = CheckRead(torque_enable=torque, hardware_error=bits,
+                         bus_watchdog=column(ADDR_BUS_WATCHDOG, 1),
+                         goal_current=signed(column(ADDR_GOAL_CURRENT, 2), 16),
+                         goal_position=signed(column(ADDR_GOAL_POSITION, 4), 32))
+        written = (self._goal_current, self._goal_position) if self._writes_since_arm \
+            else None
+        self.check.update(read, self.armed, written)
 
     def _fault(self) -> str:
-        bad = np.flatnonzero(self.hardware_errors)
-        faults = [f'servo {self.table.label(j)}: hardware error '
-                  f'{hardware_error_names(int(self.hardware_errors[j]))}' for j in bad]
-        faults += [f'servo {self.table.label(j)}: torque went off (the servo restarted: power '
-                   f'dip or reboot)' for j in np.flatnonzero(self.torque_lost)]
-        faults += [f'servo {self.table.label(j)}: Bus Watchdog tripped (trip '
-                   f'{int(self.watchdog_trips[j])}: no packet from the host for '
-                   f'{self.config.bus_watchdog_s:g} s; its goals are read-only until ~/reset)'
-                   for j in np.flatnonzero(self.watchdog_tripped)]
-        faults += [f'servo {self.table.label(j)}: does not follow its goals (it holds '
-                   f'{self._refused_detail[j]})'
-                   for j in np.flatnonzero(self.goals_refused & ~self.watchdog_tripped)]
-        return '; '.join(faults)
+        return self.check.fault()
 
     def needs_rearm(self) -> str:
         """Why the armed hand must be armed again (empty: it need not): a servo whose torque
@@ -742,10 +619,7 @@ class DynamixelDevice(HandDevice):
                 raise PortLost(self.port_lost) from exc
             self.armed = True
             self._writes_since_arm = 0
-            for flags in (self.torque_lost, self._torque_off_candidates,
-                          self.watchdog_tripped, self._tripped_candidates,
-                          self.goals_refused, self._refused_candidates):
-                flags[:] = False
+            self.check.clear()
 
     def _raise_if_port_lost(self) -> None:
         if self.port_lost:
@@ -766,7 +640,7 @@ class DynamixelDevice(HandDevice):
             except PORT_ERRORS as exc:
                 self._lose_port(exc)
 
-    def _transact(self, call: Callable[[], tuple], tries: int = _TRANSACTION_TRIES) -> tuple:
+    def _transact(self, call: Callable[[], tuple], tries: int = TRANSACTION_TRIES) -> tuple:
         """``call()`` (an SDK transaction returning ``(..., result, error)``) until it
         succeeds, at most ``tries`` times with the input drained in between."""
         for _ in range(tries):
@@ -786,7 +660,7 @@ class DynamixelDevice(HandDevice):
                 lambda: self._ph.read1ByteTxRx(self._port, servo_id, ADDR_HARDWARE_ERROR))
             if result != self._sdk.COMM_SUCCESS:
                 return None
-            if not _stale_error_bits(bits):
+            if not stale_error_bits(bits):
                 return int(bits)
             self.read_failures += 1
             self.last_read_failure = 'hardware error read: a stale answer'
@@ -797,7 +671,7 @@ class DynamixelDevice(HandDevice):
         """Prepare ``~/reset``: open the port again if it failed, reboot the servos in an
         overload or overheating error, wait for them, write their settings again (torque
         stays off until :meth:`arm`). Every transaction is tried
-        :data:`_TRANSACTION_TRIES` times.
+        :data:`TRANSACTION_TRIES` times.
 
         Returns
         -------
@@ -831,13 +705,13 @@ class DynamixelDevice(HandDevice):
                     if bits is None:
                         problems.append(f'servo {self.table.label(j)} does not answer')
                         continue
-                    self.hardware_errors[j] = bits
+                    self.check.hardware_errors[j] = bits
                     if bits & REBOOT_BITS:
                         self._reboot(j)
                         done.append(f'rebooted servo {self.table.label(j)} '
                                     f'({hardware_error_names(int(bits))})')
                         bits = self._read_error_status(servo_id)
-                        self.hardware_errors[j] = bits or 0
+                        self.check.hardware_errors[j] = bits or 0
                     if bits:
                         problems.append(f'servo {self.table.label(j)} keeps '
                                         f'{hardware_error_names(int(bits))} (a reboot does not '
@@ -849,14 +723,10 @@ class DynamixelDevice(HandDevice):
                 problems.append(self.port_lost)
             except HandDriverError as exc:
                 problems.append(str(exc))
-            self._error_candidates[:] = 0
             # Torque is off until arm() on purpose: a loss seen before this recovery (a read
             # of the state thread between two of its transactions) is no fault of the hand
             # that is about to be armed.
-            for flags in (self.torque_lost, self._torque_off_candidates,
-                          self.watchdog_tripped, self._tripped_candidates,
-                          self.goals_refused, self._refused_candidates):
-                flags[:] = False
+            self.check.clear()
         if problems:
             raise HandDriverError('; '.join(done + problems))
         return '; '.join(done)
@@ -887,7 +757,7 @@ class DynamixelDevice(HandDevice):
             'rate_caps': ' | '.join(self.rate_report) if self.rate_report else 'none',
             'port_lost': self.port_lost or 'no',
             'bus_watchdog_s': f'{self.config.bus_watchdog_s:g}',
-            'bus_watchdog_trips': str(int(self.watchdog_trips.sum())),
+            'bus_watchdog_trips': str(int(self.check.watchdog_trips.sum())),
             'status_alerts': str(self.alerts),
             # Present Current of these models is the supply (input) current, not the motor's:
             # their efforts are no torque estimate (docs/dynamixel.md).
@@ -895,7 +765,7 @@ class DynamixelDevice(HandDevice):
                 s.joint for s in self.config.servos if not s.spec.motor_current) or 'none',
         }
         for j in range(self.n):
-            bits = int(self.hardware_errors[j])
+            bits = int(self.check.hardware_errors[j])
             values[f'hardware_error_id{self.table.ids[j]}'] = (
                 f'{bits} ({hardware_error_names(bits)})' if bits else '0')
         return values

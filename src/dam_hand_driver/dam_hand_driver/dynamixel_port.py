@@ -1,4 +1,4 @@
-"""Opening a Dynamixel bus's serial port: exclusively, with the SDK, and what caps its rate.
+"""Opening a Dynamixel bus's serial port exclusively, reading it safely, and what caps its rate.
 
 No rclpy. :func:`open_port` opens a port through the SDK's ``PortHandler`` at a baud rate and
 takes an exclusive advisory lock on it (``flock``, as pyserial's ``exclusive=True`` does), so
@@ -6,7 +6,8 @@ that a second program on the same bus is refused with one line naming the port a
 ``/proc/locks`` tells it, the holder's PID, instead of corrupting the first one's reads. The
 lock goes with the file descriptor: closing the port (or the process ending in any way)
 releases it. Used by the driver (:mod:`dam_hand_driver.dynamixel_device`) and the set-up
-command (``dynamixel_setup``).
+command (``dynamixel_setup``). :func:`checked_sync_read` is the SDK's group sync read that
+keeps the Alert bit and takes no answer of another transaction for its own.
 """
 
 from __future__ import annotations
@@ -14,9 +15,19 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import os
+import select
+import termios
 from pathlib import Path
 
 from dam_hand_driver.errors import HandDriverError
+
+#: What the SDK's port raises when the device fails: pyserial's SerialException is an OSError,
+#: its ioctls raise termios.error.
+PORT_ERRORS = (OSError, termios.error)
+
+
+class PortLost(HandDriverError):
+    """The serial port failed (an adapter unplugged, a pseudo-terminal closed)."""
 
 
 class PortBusyError(HandDriverError):
@@ -113,18 +124,30 @@ def lock_exclusive(port: str) -> int:
     return fd
 
 
-def _port_handler(sdk_module: object, port: str, margin_ms: float) -> object:
-    """The SDK's port handler, its packet timeouts longer by ``margin_ms`` [ms]."""
-    base = sdk_module.PortHandler  # type: ignore[attr-defined]
-    if margin_ms <= 0.0:
-        return base(port)
+#: How long one read of the port waits for a byte before the SDK looks at its packet timeout
+#: again [s]. The SDK polls the port in a loop (a read returns at once, empty or not): a
+#: thread that spins so takes a whole core while it waits for the servos' answers, from the
+#: recorder, the controller and (on simulated time) the emulated bus itself. Waiting in
+#: ``select`` returns as soon as a byte arrives; the SDK's timeouts come at most this late.
+READ_WAIT_S = 0.002
 
-    class _Patient(base):  # type: ignore[misc, valid-type]
+
+def _port_handler(sdk_module: object, port: str, margin_ms: float) -> object:
+    """The SDK's port handler whose reads wait for data (at most :data:`READ_WAIT_S`) instead
+    of spinning, its packet timeouts longer by ``margin_ms`` [ms]."""
+    base = sdk_module.PortHandler  # type: ignore[attr-defined]
+
+    class _Waiting(base):  # type: ignore[misc, valid-type]
+        def readPort(self, length: int) -> bytes:  # noqa: N802 - the SDK's name
+            if self.ser.in_waiting == 0:
+                select.select([self.ser.fileno()], [], [], READ_WAIT_S)
+            return super().readPort(length)
+
         def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 - the SDK's
             super().setPacketTimeout(packet_length)
             self.packet_timeout += margin_ms
 
-    return _Patient(port)
+    return _Waiting(port)
 
 
 def open_port(sdk_module: object, port: str, baud_rate: int, *,
@@ -205,3 +228,44 @@ def set_baud_rate(handler: object, port: str, baud_rate: int) -> None:
         raise HandDriverError(f'cannot set {port!r} to {baud_rate} bit/s: {exc}') from exc
     if not ok:
         raise HandDriverError(f'cannot set {port!r} to {baud_rate} bit/s')
+
+
+def checked_sync_read(sdk_module: object) -> type:
+    """The SDK's ``GroupSyncRead`` that keeps each status packet's error byte (``errors``, by
+    ID: the SDK's own drops it, and with it the Alert bit) and takes only status packets of
+    exactly the block's length. The SDK matches an answer by ID alone and cuts its data to the
+    length asked for: an answer of an earlier, longer read that came later than the host
+    waited (the servo check's 56 bytes) would pass for this read's 16 (``stale`` names it)."""
+    base = sdk_module.GroupSyncRead  # type: ignore[attr-defined]
+    success = sdk_module.COMM_SUCCESS  # type: ignore[attr-defined]
+    corrupt = sdk_module.COMM_RX_CORRUPT  # type: ignore[attr-defined]
+    # Status packet: header (3), reserved, ID, length (2), instruction, error, data, CRC (2).
+    id_at, length_at, error_at, data_at = 4, 5, 8, 9
+
+    class _CheckedSyncRead(base):  # type: ignore[misc, valid-type]
+        errors: dict[int, int]
+        stale: int | None
+
+        def rxPacket(self) -> int:  # noqa: N802 - the SDK's name
+            self.last_result = False
+            self.errors = {}
+            self.stale = None
+            result = sdk_module.COMM_NOT_AVAILABLE  # type: ignore[attr-defined]
+            for dxl_id in self.data_dict:
+                self.data_dict[dxl_id] = []
+                while True:  # answers of other IDs are dropped, as the SDK does
+                    packet, result = self.ph.rxPacket(self.port, False)
+                    if result != success or packet[id_at] == dxl_id:
+                        break
+                if result != success:
+                    return result
+                if packet[length_at] | packet[length_at + 1] << 8 != self.data_length + 4:
+                    self.stale = dxl_id
+                    return corrupt
+                self.errors[dxl_id] = int(packet[error_at])
+                self.data_dict[dxl_id] = bytearray(
+                    packet[data_at:data_at + self.data_length])
+            self.last_result = result == success
+            return result
+
+    return _CheckedSyncRead

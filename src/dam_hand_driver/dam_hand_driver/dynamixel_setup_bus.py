@@ -18,17 +18,19 @@ from typing import TYPE_CHECKING, Any
 from dam_common.dynamixel_config import BAUD_RATES, MODELS
 from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver import dynamixel_port
-from dam_hand_driver.dynamixel_device import (
-    _DRAIN_LIMIT,
-    _QUIET_MS,
-    _TRANSACTION_TRIES,
+from dam_hand_driver.dynamixel_goals import signed
+from dam_hand_driver.dynamixel_setup_exit import EXIT_OK, PROG
+from dam_hand_driver.dynamixel_table import (
+    ADDR_BAUD_RATE,
     ADDR_HARDWARE_ERROR,
+    ADDR_ID,
     ADDR_PRESENT_POSITION,
     ADDR_RETURN_DELAY_TIME,
     ADDR_TORQUE_ENABLE,
+    DRAIN_LIMIT,
+    QUIET_MS,
+    TRANSACTION_TRIES,
 )
-from dam_hand_driver.dynamixel_goals import signed
-from dam_hand_driver.dynamixel_setup_exit import EXIT_OK, PROG
 from dam_hand_driver.errors import HandDriverError
 
 if TYPE_CHECKING:
@@ -42,10 +44,6 @@ if TYPE_CHECKING:
 BAUD_RATE_CODES: dict[int, int] = {9600: 0, 57600: 1, 115200: 2, 1000000: 3, 2000000: 4,
                                    3000000: 5, 4000000: 6}
 
-# Control table addresses (ROBOTIS e-manual, X series, Protocol 2.0) the driver does not use;
-# the others are :mod:`dam_hand_driver.dynamixel_device`'s.
-ADDR_ID = 7
-ADDR_BAUD_RATE = 8
 #: Return Delay Time unit [s].
 RETURN_DELAY_UNIT_S = 2e-6
 #: The largest ID a servo can have.
@@ -54,7 +52,7 @@ MAX_ID = 252
 #: After a failed transaction the input is drained until the line has been quiet this long
 #: [s]: the SDK's packet timeout, as the driver's. An answer later than the SDK waited must not
 #: be taken for the next one's (the SDK matches by ID only).
-_QUIET_S = _QUIET_MS / 1000.0
+_QUIET_S = QUIET_MS / 1000.0
 #: After a write of Baud Rate the servo switches; its next answer comes at the new rate [s].
 _BAUD_SWITCH_S = 0.05
 
@@ -157,9 +155,9 @@ class Bus:
 
     def drain(self) -> None:
         """Drop what arrives until the line has been quiet for :data:`_QUIET_S` (at most
-        ``_DRAIN_LIMIT`` of them)."""
+        ``DRAIN_LIMIT`` of them)."""
         now = time.monotonic()
-        quiet_until, give_up = now + _QUIET_S, now + _DRAIN_LIMIT * _QUIET_S
+        quiet_until, give_up = now + _QUIET_S, now + DRAIN_LIMIT * _QUIET_S
         while now < quiet_until and now < give_up:
             SHUTDOWN.raise_if_requested()
             waiting = self.handler.getBytesAvailable()
@@ -170,7 +168,7 @@ class Bus:
                 time.sleep(0.002)
             now = time.monotonic()
 
-    def _transact(self, call: Callable[[], tuple], tries: int = _TRANSACTION_TRIES) -> tuple:
+    def _transact(self, call: Callable[[], tuple], tries: int = TRANSACTION_TRIES) -> tuple:
         """``call()`` (an SDK transaction returning ``(..., result, error)``) until it
         succeeds, at most ``tries`` times, the input drained after each failure."""
         for _ in range(tries):
@@ -198,7 +196,7 @@ class Bus:
             self.drain()
         return {int(i): (int(v[0]), int(v[1])) for i, v in found.items()}, garbled
 
-    def ping(self, servo_id: int, tries: int = _TRANSACTION_TRIES) -> int | None:
+    def ping(self, servo_id: int, tries: int = TRANSACTION_TRIES) -> int | None:
         """The model number ``servo_id`` answers a ping with (``None``: no answer)."""
         model, result, _error = self._transact(
             lambda: self.packets.ping(self.handler, servo_id), tries)
@@ -210,7 +208,7 @@ class Bus:
         Raises
         ------
         SetupError
-            No answer after ``_TRANSACTION_TRIES`` tries, or the servo's error (named).
+            No answer after ``TRANSACTION_TRIES`` tries, or the servo's error (named).
         """
         read = {1: self.packets.read1ByteTxRx, 2: self.packets.read2ByteTxRx,
                 4: self.packets.read4ByteTxRx}[size]
@@ -224,7 +222,7 @@ class Bus:
         Raises
         ------
         SetupError
-            No answer after ``_TRANSACTION_TRIES`` tries, or the servo's error (named).
+            No answer after ``TRANSACTION_TRIES`` tries, or the servo's error (named).
         """
         write = {1: self.packets.write1ByteTxRx, 2: self.packets.write2ByteTxRx,
                  4: self.packets.write4ByteTxRx}[size]
@@ -252,13 +250,13 @@ class Bus:
         Raises
         ------
         SetupError
-            A servo's data missing after ``_TRANSACTION_TRIES`` tries (named).
+            A servo's data missing after ``TRANSACTION_TRIES`` tries (named).
         """
         reader = self.sdk.GroupSyncRead(self.handler, self.packets, ADDR_PRESENT_POSITION, 4)
         for servo_id in servos:
             reader.addParam(servo_id)
         missing: list[int] = []
-        for _ in range(_TRANSACTION_TRIES):
+        for _ in range(TRANSACTION_TRIES):
             SHUTDOWN.raise_if_requested()
             result = reader.txRxPacket()
             missing = [i for i in servos if not reader.isAvailable(i, ADDR_PRESENT_POSITION, 4)]

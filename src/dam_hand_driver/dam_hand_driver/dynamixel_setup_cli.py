@@ -29,7 +29,6 @@ from dam_common.dynamixel_config import POSITION_RAD_PER_COUNT
 from dam_common.errors import ConfigError
 from dam_common.shutdown import SHUTDOWN
 from dam_hand_driver import dynamixel_port
-from dam_hand_driver.dynamixel_device import hardware_error_names
 from dam_hand_driver.dynamixel_setup_bus import (
     BAUD_RATE_CODES,
     MAX_ID,
@@ -53,6 +52,7 @@ from dam_hand_driver.dynamixel_setup_bus import (
     supported_models,
 )
 from dam_hand_driver.dynamixel_setup_exit import EXIT_FAILED, EXIT_OK, EXIT_USAGE, PROG, refuse
+from dam_hand_driver.dynamixel_table import hardware_error_names
 from dam_hand_driver.errors import HandDriverError
 
 if TYPE_CHECKING:
