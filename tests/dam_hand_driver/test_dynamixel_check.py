@@ -38,7 +38,7 @@ def test_faults_need_two_reads_in_a_row_and_name_the_servo(table: ServoTable) ->
     assert check.fault() == ''  # one read may be an old answer
     check.update(tripped, armed=True, written=written)
     assert check.fault().startswith('servo ID 1 (finger1_compliant_joint): Bus Watchdog '
-                                    'tripped (trip 1: no packet from the host for 0.1 s')
+                                    'tripped (no packet from the host for 0.1 s, trip 1;')
     check.update(tripped, armed=True, written=written)
     assert int(check.watchdog_trips.sum()) == 1  # one trip, however long it lasts
     check.update(_read(n), armed=True, written=written)
@@ -70,7 +70,7 @@ def test_a_hardware_error_is_named_and_clear_forgets_the_rest(table: ServoTable)
     error = _read(n, hardware_error={2: 0x20}, bus_watchdog={3: WATCHDOG_TRIPPED})
     for _ in range(2):
         check.update(error, armed=True, written=None)
-    assert 'servo ID 3 (finger1_position_joint): hardware error overload error' in \
+    assert 'servo ID 3 (finger1_position_joint): hardware error (overload error)' in \
         check.fault()
     check.clear()
     assert 'Bus Watchdog' not in check.fault()

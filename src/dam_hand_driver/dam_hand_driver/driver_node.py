@@ -37,7 +37,7 @@ Services
 --------
 ~/reset : std_srvs/Trigger
     Leave ERROR: the device recovers what it can (the Dynamixel backend opens a failed port
-    again, reboots servos in an overload or overheating error, clears tripped watchdogs);
+    again, reboots servos in a hardware error, clears tripped watchdogs);
     succeeds when state frames arrive again, and every joint then HOLDs its measured position,
     the slew of later torque commands starting afresh from the measured torques. A failure
     says why, and the driver is then in ERROR with that reason: the answer is the state.

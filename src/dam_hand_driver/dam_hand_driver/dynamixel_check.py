@@ -15,12 +15,13 @@ answer of an earlier transaction, or a write still on its way):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from dam_hand_driver.dynamixel_goals import ServoTable
-from dam_hand_driver.dynamixel_table import WATCHDOG_TRIPPED, hardware_error_names
+from dam_hand_driver.dynamixel_table import WATCHDOG_TRIPPED, hardware_error_names, id_ranges
 
 
 class CheckRead(NamedTuple):
@@ -110,18 +111,32 @@ class ServoCheck:
         self._refused_before = refused
 
     def fault(self) -> str:
-        """The faults, each naming its servo (empty: none)."""
-        label = self.table.label
-        faults = [f'servo {label(j)}: hardware error '
-                  f'{hardware_error_names(int(self.hardware_errors[j]))}'
-                  for j in np.flatnonzero(self.hardware_errors)]
-        faults += [f'servo {label(j)}: torque went off (the servo restarted: power dip or '
-                   f'reboot)' for j in np.flatnonzero(self.torque_lost)]
-        faults += [f'servo {label(j)}: Bus Watchdog tripped (trip '
-                   f'{int(self.watchdog_trips[j])}: no packet from the host for '
-                   f'{self.bus_watchdog_s:g} s; its goals are read-only until ~/reset)'
-                   for j in np.flatnonzero(self.watchdog_tripped)]
-        faults += [f'servo {label(j)}: does not follow its goals (it holds '
+        """The faults, each naming its servos (empty: none); servos with the same fault are
+        named together (``servos ID 1-9: Bus Watchdog tripped ...``)."""
+        faults = []
+        errors = self.hardware_errors
+        for bits in sorted({int(b) for b in errors if b}):
+            faults.append(f'{self.servos(np.flatnonzero(errors == bits))}: hardware error '
+                          f'({hardware_error_names(bits)})')
+        lost = np.flatnonzero(self.torque_lost)
+        if lost.size:
+            faults.append(f'{self.servos(lost)}: torque went off (restarted: power dip or '
+                          f'reboot)')
+        tripped = np.flatnonzero(self.watchdog_tripped)
+        if tripped.size:
+            trips = int(self.watchdog_trips[tripped].max())
+            faults.append(f'{self.servos(tripped)}: Bus Watchdog tripped (no packet from the '
+                          f'host for {self.bus_watchdog_s:g} s, trip {trips}; goals read-only '
+                          f'until ~/reset)')
+        faults += [f'{self.servos([j])}: does not follow its goals (it holds '
                    f'{self._refused_detail[j]})'
                    for j in np.flatnonzero(self.goals_refused & ~self.watchdog_tripped)]
         return '; '.join(faults)
+
+    def servos(self, indices: Sequence[int] | np.ndarray) -> str:
+        """``servo ID 3 (finger1_position_joint)`` for one, ``servos ID 1-4, 6`` for more."""
+        js = [int(j) for j in indices]
+        if len(js) == 1:
+            return f'servo {self.table.label(js[0])}'
+        return f'servos ID {id_ranges([self.table.ids[j] for j in js])}'
+

@@ -71,7 +71,6 @@ from dam_hand_driver.dynamixel_table import (
     GOAL_LENGTH,
     GOAL_START,
     QUIET_MS,
-    REBOOT_BITS,
     STATE_LENGTH,
     STATE_START,
     TRANSACTION_TRIES,
@@ -248,16 +247,23 @@ class DynamixelDevice(HandDevice):
     def _check_servos(self) -> None:
         """Ping every servo; refuse the bus naming each one missing or of another model."""
         problems = []
+        silent = []
         for j, servo in enumerate(self.config.servos):
             model, result, _error = self._transact(
                 lambda sid=servo.servo_id: self._ph.ping(self._port, sid))
             if result != self._sdk.COMM_SUCCESS:
+                silent.append(j)
                 problems.append(f'servo {self.table.label(j)} does not answer the ping '
                                 f'({self._ph.getTxRxResult(result)})')
             elif model != servo.spec.model_number:
                 problems.append(f'servo {self.table.label(j)} is model number {model}, the '
                                 f'configuration says {servo.model} '
                                 f'({servo.spec.model_number})')
+        if len(silent) == self.n:
+            raise HandDriverError(
+                f'no servo answers on {self.port} at {self.config.baud_rate} bit/s: the servos '
+                f'at another baud rate, without power, or another adapter? (`dynamixel_setup '
+                f'scan --port {self.port}` tries every rate)')
         if problems:
             raise HandDriverError(
                 f'the Dynamixel bus on {self.port} at {self.config.baud_rate} bit/s does not '
@@ -696,7 +702,7 @@ class DynamixelDevice(HandDevice):
                     self._open()
                 except HandDriverError as exc:
                     raise HandDriverError(f'{self.port_lost}; reopening it: {exc}') from exc
-                done.append(f'opened {self.port} again ({self.port_lost})')
+                done.append(f'opened {self.port} again')
                 self.port_lost = ''
                 self._failed_in_a_row = 0
             try:
@@ -706,16 +712,23 @@ class DynamixelDevice(HandDevice):
                         problems.append(f'servo {self.table.label(j)} does not answer')
                         continue
                     self.check.hardware_errors[j] = bits
-                    if bits & REBOOT_BITS:
-                        self._reboot(j)
-                        done.append(f'rebooted servo {self.table.label(j)} '
-                                    f'({hardware_error_names(int(bits))})')
-                        bits = self._read_error_status(servo_id)
-                        self.check.hardware_errors[j] = bits or 0
-                    if bits:
+                    if not bits:
+                        continue
+                    # Only a reboot clears Hardware Error Status, whatever the error; one
+                    # whose cause is still there (a supply still too low) is set again.
+                    self._reboot(j)
+                    done.append(f'rebooted servo {self.table.label(j)} '
+                                f'({hardware_error_names(int(bits))})')
+                    after = self._read_error_status(servo_id)
+                    self.check.hardware_errors[j] = after or 0
+                    if after is None:
+                        problems.append(f'servo {self.table.label(j)} does not answer after '
+                                        f'its reboot')
+                    elif after:
                         problems.append(f'servo {self.table.label(j)} keeps '
-                                        f'{hardware_error_names(int(bits))} (a reboot does not '
-                                        f'clear it: check the supply and the wiring)')
+                                        f'{hardware_error_names(int(after))} after a reboot '
+                                        f'(its cause is still there: check the supply, the '
+                                        f'wiring and the load)')
                 if not problems:
                     self._configure()
             except PORT_ERRORS as exc:

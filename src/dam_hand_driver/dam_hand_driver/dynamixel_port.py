@@ -79,10 +79,20 @@ def lock_holders(port: str) -> list[int]:
 
 
 def _process_name(pid: int) -> str:
+    """What the process runs: the program a Python interpreter runs (``hand_driver``), not the
+    interpreter's own name; empty when it cannot be known."""
     try:
-        return Path(f'/proc/{pid}/comm').read_text(encoding='utf-8', errors='replace').strip()
+        argv = Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')
     except OSError:
         return ''
+    args = [a.decode('utf-8', 'replace') for a in argv if a]
+    if not args:
+        return ''
+    interpreter = os.path.basename(args[0]).startswith('python')
+    if interpreter and len(args) > 2 and args[1] in ('-m', '-c'):
+        return args[2] if args[1] == '-m' else os.path.basename(args[0])  # not the code
+    programs = [a for a in args[1:] if not a.startswith('-')] if interpreter else args
+    return os.path.basename((programs or args)[0]).splitlines()[0][:40]
 
 
 def busy_message(port: str) -> str:

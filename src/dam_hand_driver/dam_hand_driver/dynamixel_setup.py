@@ -32,9 +32,10 @@ and ``zero`` only read.
 
 Exit status: 0 done (``scan``: the bus matches the configuration); 1 an operation failed (the
 port missing, busy or gone, no servo answering, a servo missing or of an unknown or another
-model, the bus not matching the configuration, an overlay the loader refuses, a file that
-exists): one line on stderr says why; 2 a usage error (a missing or repeated option, no port
-given and ``dynamixel.port`` empty, a configuration that does not load); 130 SIGINT or SIGTERM
+model, the bus not matching the configuration, the overlay ``zero`` made refused by the
+loader, a file that exists): one line on stderr says why; 2 a usage error (a missing or
+repeated option, no port given and ``dynamixel.port`` empty, a configuration or a given
+``--overlay`` that does not load); 130 SIGINT or SIGTERM
 stopped it (one line, no traceback, the port closed, no file half-written).
 
 Modules, imports one way: this entry point catches the signals, then loads the command line,

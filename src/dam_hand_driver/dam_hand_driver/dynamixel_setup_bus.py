@@ -30,6 +30,7 @@ from dam_hand_driver.dynamixel_table import (
     DRAIN_LIMIT,
     QUIET_MS,
     TRANSACTION_TRIES,
+    id_ranges,
 )
 from dam_hand_driver.errors import HandDriverError
 
@@ -92,20 +93,6 @@ def model_name(model_number: int) -> str | None:
 def supported_models() -> str:
     """``XC330-M288 (1240), XM430-W350 (1020)``."""
     return ', '.join(f'{name} ({spec.model_number})' for name, spec in sorted(MODELS.items()))
-
-
-def id_ranges(ids: Sequence[int]) -> str:
-    """``1-3, 5, 7-9`` for IDs 1, 2, 3, 5, 7, 8, 9."""
-    parts: list[str] = []
-    ordered = sorted(set(ids))
-    k = 0
-    while k < len(ordered):
-        end = k
-        while end + 1 < len(ordered) and ordered[end + 1] == ordered[end] + 1:
-            end += 1
-        parts.append(str(ordered[k]) if end == k else f'{ordered[k]}-{ordered[end]}')
-        k = end + 1
-    return ', '.join(parts)
 
 
 # -------------------------------------------------------------------------------------------

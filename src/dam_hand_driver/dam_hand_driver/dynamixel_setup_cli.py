@@ -293,7 +293,9 @@ def driver_command(ctx: Context, output: Path, *, section: bool) -> str:
     """The driver's command line with the overlay (and the port, unless the overlay or the
     configuration holds it)."""
     port = '' if section or ctx.dxl.port == ctx.port else f' -p port:={ctx.port}'
-    return f'hand_driver --ros-args -p backend:=dynamixel -p config_overlay:={output}{port}'
+    # Absolute: a driver started from another directory (a launch file, a service) finds it.
+    return (f'hand_driver --ros-args -p backend:=dynamixel -p config_overlay:='
+            f'{output.absolute()}{port}')
 
 
 def overlay_text(data: Mapping[str, Any], ctx: Context, baud_rate: int, output: Path) -> str:
@@ -318,7 +320,7 @@ def overlay_text(data: Mapping[str, Any], ctx: Context, baud_rate: int, output: 
         f'A configuration overlay of {ctx.config.source}:',
         'it replaces the keys below and keeps every other one. Use it:',
         f'  {driver_command(ctx, output, section="port" in data["dynamixel"])}',
-        f'  dam_common.config.load_config(path, [\'{output}\'])  (Python)',
+        f'  dam_common.config.load_config(path, [\'{output.absolute()}\'])  (Python)',
         f'Check the hand against it: {PROG} scan --port {ctx.port} --overlay {output}',
     ]
     if ctx.overlays:
@@ -426,9 +428,10 @@ def _servo_id(text: str) -> int:
 EXIT_HELP = """\
 exit status: 0 done (scan: the bus matches the configuration); 1 an operation failed (port
 missing, busy or gone, no servo answering, a servo missing or of an unknown or another model,
-the bus not matching the configuration, an overlay the loader refuses, a file that exists);
-2 a usage error (no port given and dynamixel.port empty, an option given twice, a
-configuration that does not load); 130 SIGINT or SIGTERM. Torque is never switched on."""
+the bus not matching the configuration, the overlay zero made refused by the loader, a file
+that exists); 2 a usage error (no port given and dynamixel.port empty, an option given twice,
+a configuration or a given --overlay that does not load); 130 SIGINT or SIGTERM. Torque is
+never switched on."""
 
 
 def _wrap(text: str) -> str:

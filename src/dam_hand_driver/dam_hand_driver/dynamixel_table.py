@@ -9,6 +9,8 @@ the SDK's transactions that the driver and ``dynamixel_setup`` both depend on.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 # Control table addresses (X series, shared by the supported models).
@@ -42,8 +44,6 @@ ALERT_BIT = 0x80
 HARDWARE_ERROR_BITS = {0: 'input voltage error', 2: 'overheating error',
                        3: 'motor encoder error', 4: 'electrical shock error',
                        5: 'overload error'}
-#: The errors a reboot clears and ``~/reset`` reboots for.
-REBOOT_BITS = (1 << 2) | (1 << 5)
 _KNOWN_BITS = sum(1 << b for b in HARDWARE_ERROR_BITS)
 
 #: Tries of one start-up, arming or recovery transaction before a servo counts as silent.
@@ -70,3 +70,17 @@ def hardware_error_names(bits: int) -> str:
     if unknown:
         names.append(f'unknown bits 0x{unknown:02x}')
     return ', '.join(names) if names else 'none'
+
+
+def id_ranges(ids: Sequence[int]) -> str:
+    """``1-3, 5, 7-9`` for IDs 1, 2, 3, 5, 7, 8, 9."""
+    parts: list[str] = []
+    ordered = sorted(set(ids))
+    k = 0
+    while k < len(ordered):
+        end = k
+        while end + 1 < len(ordered) and ordered[end + 1] == ordered[end] + 1:
+            end += 1
+        parts.append(str(ordered[k]) if end == k else f'{ordered[k]}-{ordered[end]}')
+        k = end + 1
+    return ', '.join(parts)
