@@ -674,8 +674,9 @@ class DynamixelDevice(HandDevice):
         return None
 
     def recover(self) -> str:
-        """Prepare ``~/reset``: open the port again if it failed, reboot the servos in an
-        overload or overheating error, wait for them, write their settings again (torque
+        """Prepare ``~/reset``: open the port again if it failed, reboot every servo in a
+        hardware error (only a reboot clears one), wait for it and read its status again,
+        write the settings again (torque
         stays off until :meth:`arm`). Every transaction is tried
         :data:`TRANSACTION_TRIES` times.
 
@@ -688,7 +689,7 @@ class DynamixelDevice(HandDevice):
         ------
         HandDriverError
             The hand cannot be armed: the port is still missing or busy, a servo does not
-            answer, keeps a hardware error a reboot does not clear, or refuses its settings
+            answer, shows its hardware error again after the reboot, or refuses its settings
             (each named). The driver stays in ERROR with this reason.
         """
         done: list[str] = []

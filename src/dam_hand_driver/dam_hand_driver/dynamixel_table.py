@@ -14,8 +14,6 @@ from collections.abc import Sequence
 import numpy as np
 
 # Control table addresses (X series, shared by the supported models).
-ADDR_MODEL_NUMBER = 0
-ADDR_FIRMWARE_VERSION = 6
 ADDR_ID = 7
 ADDR_BAUD_RATE = 8
 ADDR_RETURN_DELAY_TIME = 9
