@@ -24,7 +24,13 @@ import psutil
 import pytest
 
 from dam_experiments.sweep_cli import main
-from dam_experiments.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, read_table
+from dam_experiments.sweep_table import (
+    CELLS_FILE,
+    FORMAT_VERSION,
+    PARAMS_FILE,
+    TABLE_FILE,
+    read_table,
+)
 from ros_testing import installed_executable
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -371,9 +377,17 @@ def test_a_server_that_never_answers_or_is_a_worker_is_refused_in_time(
 def test_another_sweep_in_the_same_directory_is_refused(reference: str, tmp_path: Path,
                                                         capsys: pytest.CaptureFixture[str]
                                                         ) -> None:
-    (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': 1, 'sweep': {'seed': 5}}))
+    (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': FORMAT_VERSION,
+                                                    'sweep': {'seed': 5}}))
     assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
     assert 'holds a different sweep' in capsys.readouterr().err
+    # a sweep of format 1 (lifted by the old rise rule) is not resumed into: its rows mean
+    # something else
+    (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': 1, 'sweep': {'seed': 5}}))
+    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and 'holds a sweep of format 1' in err
+    assert 'it cannot be resumed' in err and not (tmp_path / TABLE_FILE).exists()
 
 
 def test_a_bare_perturbation_is_in_si_units_and_an_implausible_one_is_refused(

@@ -172,7 +172,7 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
     assert '16 of 16 trials, 1 per cell, k_theta axis log' in summary
     # trials 0-7 at 5 deg, 8-15 at 30 deg, classes by trial number (CLASSES)
     for alpha in ('5', '30'):
-        assert (f'alpha {alpha} deg: 8 trials, lifted 5 (62 %), success 3, lifted but DAM '
+        assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), success 3, lifted but DAM '
                 f'failed 2, failure 3; ') in summary
     assert 'eq. 18: no k_theta lifts' in result.summary[2]
     assert '4 trial(s) where the ground truth' in summary
@@ -196,7 +196,7 @@ def test_repeats_give_a_lift_probability_per_cell(repeat_sweep: Path, config: An
     assert panel.get_yscale() == 'linear' and panel.get_ylim() == pytest.approx((0.0, 11.0))
     labels = [t.get_text() for t in panel.get_legend().get_texts()]
     assert labels == [SUFFICIENT_LABEL, CSM_LABEL]
-    assert 'alpha 5 deg: 9 trials, lifted 4 (44 %), success 4' in result.summary[1]
+    assert 'alpha 5 deg: 9 trials, lifted (left the table) 4 (44 %), success 4' in result.summary[1]
     assert '9 of 9 trials, 3 per cell, k_theta axis linear' in result.summary[0]
 
 
@@ -341,8 +341,8 @@ def test_installed_executable(marker_sweep: Path, tmp_path: Path) -> None:
                 '--n-delta-theta-p', '5')
     assert proc.returncode == 0, proc.stderr
     assert out.read_bytes()[:8] == PNG_MAGIC
-    assert 'alpha 5 deg: 8 trials, lifted 5' in proc.stdout
-    assert 'alpha 30 deg: 8 trials, lifted 5' in proc.stdout
+    assert 'alpha 5 deg: 8 trials, lifted (left the table) 5' in proc.stdout
+    assert 'alpha 30 deg: 8 trials, lifted (left the table) 5' in proc.stdout
     assert f'wrote {out}' in proc.stdout and proc.stderr == ''
 
 

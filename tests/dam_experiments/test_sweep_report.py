@@ -61,17 +61,19 @@ CSM_FROM = {5.0: 2.0, 30.0: 1.0}
 #: Columns of particular trials (alpha, dp, k) -> column values (both repeats unless keyed
 #: with the repeat as a fourth element).
 SPECIAL: dict[tuple[float, ...], dict[str, str]] = {
-    # false guarantees, one of each class
-    (5.0, 10.0, 1.0): {'rise_final_mm': '1.0', 'rise_max_mm': '6.0'},
+    # false guarantees, one of each class: left the table and fell back, never rose, rose
+    # without leaving the table
+    (5.0, 10.0, 1.0): {'rise_final_mm': '1.0', 'rise_max_mm': '6.0', 'lift_off_time_s': '2.0'},
     (5.0, 20.0, 16.0): {'rise_final_mm': '0.0', 'rise_max_mm': '0.2', 'phase': 'FAILED',
                         'reason': 'lost contact on finger3: compliant torque 0.003 N*m below '
                                   '0.005 N*m for 0.1 s during rolling_up'},
     (30.0, 10.0, 0.5): {'rise_final_mm': '1.5', 'rise_max_mm': '2.0', 'phase': 'ROLLING_UP',
                         'reason': 'still in phase ROLLING_UP at 4 s'},
-    # evidence: a compliant joint at its limit, a heavier object, a late lift
+    # evidence: a compliant joint at its limit, a heavier object, a late lift (off the table
+    # only after ROLLING_UP ended at 4.5 s)
     (30.0, 10.0, 16.0): {'peak_tau_finger1_compliant_nm': '0.995'},
     (5.0, 30.0, 2.0, 0): {'object_mass_kg': '0.045'},
-    (30.0, 20.0, 0.25): {'rise_rolling_end_mm': '2.0'},
+    (30.0, 20.0, 0.25): {'lift_off_time_s': '4.75'},
 }
 
 
@@ -95,6 +97,8 @@ def synthetic_row(spec: Any, columns: list[str]) -> dict[str, str]:
                phase='DONE', outcome='SUCCESS' if lifted else 'FAILURE', lifted=str(lifted),
                rise_final_mm='8.0' if lifted else '0.1', rise_max_mm='8.5' if lifted else '0.2',
                rise_rolling_end_mm='7.0' if lifted else '0.1',
+               lift_off_time_s='2.5' if lifted else '', rolling_up_end_s='4.5',
+               estimated_rise_mm='8.0' if lifted else '0.1',
                check_lift_guaranteed=str(int((alpha, dp, k) in GUARANTEED)),
                worst_case_margin_n='0.1' if (alpha, dp, k) in GUARANTEED else '-0.1',
                csm_lift=str(int(k >= CSM_FROM[alpha])), csm_margin_n='0.2', sim_time_s='4',
@@ -154,12 +158,14 @@ def test_the_synthetic_numbers_are_the_placed_ones(synthetic_report: SweepReport
     labels = {(f.cell.friction_angle_deg, f.cell.delta_theta_p_deg, f.cell.k_theta,
                f.trial.repeat): f.label for f in r.false_guarantees}
     assert labels == {
-        (5.0, 10.0, 1.0, 0): 'rose then fell back; done',
-        (5.0, 10.0, 1.0, 1): 'rose then fell back; done',
+        (5.0, 10.0, 1.0, 0): 'left the table, then fell back; done',
+        (5.0, 10.0, 1.0, 1): 'left the table, then fell back; done',
         (5.0, 20.0, 16.0, 0): 'never rose; controller failure in rolling_up',
         (5.0, 20.0, 16.0, 1): 'never rose; controller failure in rolling_up',
-        (30.0, 10.0, 0.5, 0): 'rose partly; still running at the time limit (rolling_up)',
-        (30.0, 10.0, 0.5, 1): 'rose partly; still running at the time limit (rolling_up)'}
+        (30.0, 10.0, 0.5, 0): 'rose on the table; still running at the time limit '
+                              '(rolling_up)',
+        (30.0, 10.0, 0.5, 1): 'rose on the table; still running at the time limit '
+                              '(rolling_up)'}
     # section 2a: csm_lift against the ground truth
     assert (a5.n_agree, a30.n_agree) == (17, 13)
     assert a5.agreement == pytest.approx(17 / 21) and a30.agreement == pytest.approx(13 / 21)
@@ -189,8 +195,10 @@ def test_the_synthetic_numbers_are_the_placed_ones(synthetic_report: SweepReport
     assert dict(csm_not.checks) == {'controller failure': 2, 'time limit': 0,
                                     'compliant torque limit': 2, 'servo limit': 0,
                                     'heavier object': 1, 'next to the boundary': 4,
-                                    'left the table': 0}  # every rise_max_mm 0.2 < 0.5
+                                    'fell back': 0}  # none of them left the table
     assert csm_not.unexplained == 18 - 9
+    # the false guarantees' evidence: the pair that left the table and fell back
+    assert dict(cats['suff_not_sim'].checks)['fell back'] == 2
     sim_not = cats['sim_not_csm']
     assert len(sim_not.trials) == 6  # (30, 20, 0.25), (30, 20, 0.5), (30, 30, 0.5)
     # all three next to the CSM boundary (k_csm in 0.25 | 0.5 at dp 20 and 30 deg); late
@@ -367,7 +375,7 @@ def test_the_documents_numbers_agree_with_an_independent_count(
     # section 5, counted from trials.csv here: ground truth against the controller's class
     with open(sweep_dir / TABLE_FILE, encoding='utf-8', newline='') as stream:
         table = list(csv.DictReader(stream))
-    block = text.split('## 5.', 1)[1]
+    block = text.split('## 5.', 1)[1].split('\n\n', 3)[2]  # its first table
     shown = {cells[0].strip(): [int(c) for c in cells[1:]]
              for cells in (line.strip('|').split('|') for line in block.splitlines()
                            if line.startswith('| ') and not line.startswith('| alpha'))}

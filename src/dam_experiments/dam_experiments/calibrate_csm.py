@@ -6,8 +6,9 @@
     ros2 run dam_experiments calibrate_csm BAG_OR_DIR... -o FILE.yaml [--config YAML]
 
 The inputs are one sweep directory (``trials.csv``: pair, friction angle, object, mass and the
-ground truth ``lifted`` of every trial) or episode bags (``dam_recorder``'s, one grasp each:
-the pair, friction angle and object as run, and the controller's outcome: SUCCESS or
+ground truth ``lifted`` of every trial: the object left the table; a table of format 1, whose
+``lifted`` is the old rise rule, is read with a note) or episode bags (``dam_recorder``'s, one
+grasp each: the pair, friction angle and object as run, and the controller's outcome: SUCCESS or
 LIFTED_DAM_FAILED count as lifted, FAILURE as not, ABORTED, REJECTED and UNKNOWN are left out)
 or directories holding them: a real hand's grasps calibrate the same way. The fit
 (:mod:`dam_analysis.csm_calibration`) gives the friction angle of every recorded friction
@@ -65,6 +66,8 @@ def cells_from_sweep(directory: Path, config: Any, object_name: str | None
                      f'config_sha256 differs): the analysis is this configuration\'s')
     if len(whole.trials) < whole.n_planned:
         notes.append(f'the sweep holds {len(whole.trials)} of its {whole.n_planned} trials')
+    if whole.lifted_note is not None:
+        notes.append(whole.lifted_note)
     data = one_object(whole, object_name)
     cells, config = cells_of_sweep(data, config)
     return cells, config, f'sweep {directory}', notes

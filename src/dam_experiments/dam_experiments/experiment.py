@@ -9,8 +9,16 @@ the driver does (:class:`~dam_hand_driver.slew.CommandSlew`,
 ``controller.impedance_on_device``) reach the world with their equilibrium and gains, and the
 world runs the law at every physics step, and slews every torque, exactly as the stand-in
 device does (:meth:`HandWorld.set_joint_commands`). It returns the controller's end phase, the
-outcome as the controller would classify it from joint signals alone, the ground-truth lift of
-the object and, on request, the recorded signals.
+outcome as the controller would classify it from joint signals alone with the rise it
+estimates, the ground truth (whether and when the object left the table, and its rise) and, on
+request, the recorded signals.
+
+Ground truth ``lifted``: the object left the table and was off it over the last 0.1 s of the
+run, by the stand-in's table contacts sampled every device cycle (:mod:`dam_sim_bridge.lift_off`:
+a contact-free run of at least 50 ms is a lift-off, its start the lift-off time; a bounce is
+none), for every shape: a polygon that rolls on the table raises its centroid while it still
+touches, and an object off the table may have risen by less than
+``classification.lift_height_m``. The rises stay beside it.
 
 ``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
 friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
@@ -79,7 +87,15 @@ class ExperimentResult:
     joint_reason
         The classifier's explanation (or the failure reason).
     lifted
-        Ground truth: the object centre ended at least ``lift_height`` above its start.
+        Ground truth: the object left the table and was off it over the last 0.1 s of the run
+        (the module docstring).
+    lift_off_time
+        Ground truth: simulated time of the first lift-off (off the table for at least 50
+        ms), from the goal [s]; NaN when the object never left the table.
+    estimated_rise
+        The controller's estimate of the rise from the final joint angles
+        (``Classification.lift_m``) [m]; NaN when the grasp was not classified (it did not
+        reach DONE) or the classifier gave none.
     lift_final
         Rise of the object centre at the end [m].
     lift_max
@@ -115,6 +131,8 @@ class ExperimentResult:
     wall_time: float
     signals: dict[str, np.ndarray] = field(default_factory=dict)
     peak_torques: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lift_off_time: float = math.nan
+    estimated_rise: float = math.nan
 
     def row(self) -> dict[str, object]:
         """One CSV row (angles in degrees, lengths in millimetres)."""
@@ -125,9 +143,11 @@ class ExperimentResult:
             'phase': self.phase.name,
             'outcome': self.outcome.name,
             'lifted_ground_truth': int(self.lifted),
+            'lift_off_time_s': round(self.lift_off_time, 3),
             'lift_final_mm': round(self.lift_final * 1e3, 3),
             'lift_max_mm': round(self.lift_max * 1e3, 3),
             'lift_rolling_end_mm': round(self.lift_rolling_end * 1e3, 3),
+            'estimated_rise_mm': round(self.estimated_rise * 1e3, 3),
             'sim_time_s': round(self.sim_time, 3),
             'reason': self.failure_reason or self.joint_reason,
         }
@@ -202,6 +222,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         w.reset(object_position=object_position, friction_angle_rad=alpha,
                 table_friction_coefficient=table_mu)
         w.step(round(hold_before / w.time_step_s))
+        t_goal = w.sim_time  # the lift-off time counts from the goal
         params = SequenceParams.from_config(config, **param_overrides)
         seq = DamSequence(params)
         geometry = HandGeometry.from_config(config)
@@ -263,11 +284,14 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                 break
         js = w.joint_states()
         lift_final = float(w.object_pose().position[2]) - z0
+        ground = w.lift_off.state()
+        estimated_rise = math.nan
         if seq.phase is Phase.DONE:
             c = classify_from_joints(geometry, params.layout.lower, params.layout.upper,
                                      js.positions, js.torques, settings,
                                      params.layout.joint_names)
             outcome, reason = c.outcome, c.reason
+            estimated_rise = float(c.lift_m)
         else:
             outcome = Outcome.FAILURE
             reason = seq.failure_reason or f'still in phase {seq.phase.name} at {t:.3g} s'
@@ -275,10 +299,11 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         return ExperimentResult(
             k_theta=float(k_theta), delta_theta_p=float(delta_theta_p), friction_angle=alpha,
             phase=seq.phase, failure_reason=seq.failure_reason, outcome=outcome,
-            joint_reason=reason, lifted=lift_final >= float(settings.lift_height),
+            joint_reason=reason, lifted=ground.lifted,
             lift_final=lift_final, lift_max=lift_max, lift_rolling_end=lift_rolling_end,
             phase_times=phase_times, sim_time=t, wall_time=time.monotonic() - wall0,
-            signals=signals, peak_torques=peak)
+            signals=signals, peak_torques=peak,
+            lift_off_time=ground.lift_off_time - t_goal, estimated_rise=estimated_rise)
     finally:
         if own_world:
             w.close()
@@ -292,7 +317,8 @@ def save_signals(result: ExperimentResult, path: str | Path) -> Path:
     np.savez_compressed(
         out, **result.signals, k_theta=result.k_theta, delta_theta_p=result.delta_theta_p,
         friction_angle=result.friction_angle, end_phase=result.phase.name,
-        outcome=result.outcome.name, lifted=result.lifted, lift_final=result.lift_final)
+        outcome=result.outcome.name, lifted=result.lifted, lift_final=result.lift_final,
+        lift_off_time=result.lift_off_time, estimated_rise=result.estimated_rise)
     return out
 
 
@@ -314,8 +340,9 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
     p = CommandLineParser(
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
-                    'grid, per object and friction angle; prints outcome and ground-truth '
-                    'lift, optionally writes a CSV.')
+                    'grid, per object and friction angle; prints the outcome, the ground '
+                    'truth (lifted: the object left the table) and the rise, optionally '
+                    'writes a CSV.')
     p.add_argument('--object', '--objects', dest='objects', nargs='+', default=None,
                    metavar='NAME',
                    help='objects of the configuration\'s object library (default: the '
@@ -451,7 +478,8 @@ def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
         return 2
     width = max(6, *(len(c.object.name) for c in configs))
     header = (f'{"object":>{width}} {"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} '
-              f'{"outcome":>17} {"lift":>7} {"max":>7} {"suff":>5} {"csm":>5}  reason')
+              f'{"outcome":>17} {"lifted":>6} {"rise":>7} {"max":>7} {"suff":>5} {"csm":>5}  '
+              f'reason')
     print(header)
     overrides: dict[str, bool] = {
         'envelope_constant_torque': args.envelope == 'constant-torque'}
@@ -487,7 +515,8 @@ def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[flo
                     row['csm_region'] = csm
                     print(f'{name:>{width}} {math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} '
                           f'{r.phase.name:>8} '
-                          f'{r.outcome.name:>17} {r.lift_final * 1e3:6.1f}mm '
+                          f'{r.outcome.name:>17} {"yes" if r.lifted else "no":>6} '
+                          f'{r.lift_final * 1e3:5.1f}mm '
                           f'{r.lift_max * 1e3:5.1f}mm {suff:>5} {csm:>5}  '
                           f'{(r.failure_reason or r.joint_reason)[:70]}', flush=True)
                     if args.fixtures is not None:

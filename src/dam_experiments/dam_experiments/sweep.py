@@ -9,8 +9,10 @@ trial's perturbations from its seed (:meth:`Perturbations.draw`) and runs one tr
 (:func:`run_trial`): the stand-in world and the controller core in lockstep, exactly as
 ``dam_experiment`` does (:func:`~dam_experiments.experiment.run_experiment`), classified as in
 the paper's Fig. 7 (SUCCESS, LIFTED_DAM_FAILED, FAILURE: the controller's verdict from joint
-signals alone) together with the ground-truth rise of the object and what ``/check_lift``
-answers for the pair (the sufficient condition, eq. 18, and the contact stiffness model).
+signals alone, with the rise it estimates) together with the ground truth (``lifted``: the
+object left the table, :mod:`dam_sim_bridge.lift_off`; the lift-off time; the rise of the
+object) and what ``/check_lift`` answers for the pair (the sufficient condition, eq. 18, and
+the contact stiffness model).
 :mod:`dam_experiments.sweep_table` writes the table and resumes an interrupted sweep.
 
 Determinism: a trial's row depends only on its inputs (the cell, the sweep's perturbation
@@ -440,6 +442,21 @@ def _mm(value_m: float) -> str:
     return 'nan' if math.isnan(value_m) else f'{round(value_m * 1e3, 4) + 0.0:.4f}'
 
 
+def _seconds(value_s: float) -> str:
+    """A simulated time [s] to the millisecond, ``nan``."""
+    return 'nan' if math.isnan(value_s) else f'{round(value_s, 3) + 0.0:.3f}'
+
+
+def rolling_up_end(phase_times: Mapping[str, float]) -> float:
+    """When ROLLING_UP ended [s from the goal]: the entry into the phase after it (the
+    earliest phase entered later); NaN when it did not end (or was never entered)."""
+    start = phase_times.get('ROLLING_UP')
+    if start is None:
+        return math.nan
+    later = [t for name, t in phase_times.items() if name != 'ROLLING_UP' and t > start]
+    return min(later, default=math.nan)
+
+
 def input_columns(spec: TrialSpec) -> dict[str, str]:
     """The table's input columns of a trial, as written (resume compares them)."""
     return {'trial': str(spec.index), 'object': spec.object_name,
@@ -456,7 +473,8 @@ def table_columns(config: Any) -> list[str]:
     return ['trial', 'object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
             'repeat', 'seed', 'object_mass_kg', 'object_offset_x_mm', 'object_offset_y_mm',
             'table_friction', 'friction_angle_sim_deg', 'phase', 'outcome', 'lifted',
-            'rise_final_mm', 'rise_max_mm', 'rise_rolling_end_mm', *peaks,
+            'lift_off_time_s', 'rolling_up_end_s', 'rise_final_mm', 'rise_max_mm',
+            'rise_rolling_end_mm', 'estimated_rise_mm', *peaks,
             'check_lift_guaranteed', 'worst_case_margin_n', 'csm_lift', 'csm_margin_n',
             'sim_time_s', 'reason']
 
@@ -523,6 +541,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
                            latency_cycles=sweep.latency_cycles, max_time=sweep.max_time_s,
                            **sweep.sequence_overrides())
     reason = r.failure_reason or r.joint_reason
+    classified = r.phase.name == 'DONE'  # the controller classifies a grasp that is done
     try:
         a = analyzer.check_lift([spec.k_theta], [dp],
                                 friction_angle=math.radians(spec.friction_angle_deg))
@@ -546,8 +565,11 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
         'table_friction': _fmt(draw.table_friction),
         'friction_angle_sim_deg': _fmt(draw.friction_angle_deg),
         'phase': r.phase.name, 'outcome': r.outcome.name, 'lifted': str(int(r.lifted)),
+        'lift_off_time_s': '' if math.isnan(r.lift_off_time) else _seconds(r.lift_off_time),
+        'rolling_up_end_s': _seconds(rolling_up_end(r.phase_times)),
         'rise_final_mm': _mm(r.lift_final), 'rise_max_mm': _mm(r.lift_max),
         'rise_rolling_end_mm': _mm(r.lift_rolling_end),
+        'estimated_rise_mm': _mm(r.estimated_rise) if classified else '',
         **peaks,
         'check_lift_guaranteed': str(analysis[0]), 'worst_case_margin_n': _fmt(analysis[1]),
         'csm_lift': str(analysis[2]), 'csm_margin_n': _fmt(analysis[3]),

@@ -12,8 +12,9 @@ the position-joint displacement ``delta_theta_p`` [deg], y the finger-1 complian
 Without repeats every trial is one of the paper's three markers, from the controller's
 classification (column ``outcome``): ``x`` FAILURE, triangle LIFTED_DAM_FAILED (lifted, no
 enveloping grasp), ``o`` SUCCESS; a square ring marks a trial whose ground truth (column
-``lifted``) disagrees with that classification. With repeats every cell is a square coloured by
-its lift probability (ground truth, share of its trials that lifted) with a colour bar. Over
+``lifted``: the object left the table) disagrees with that classification. With repeats every
+cell is a square coloured by its lift probability (ground truth, share of its trials that
+lifted) with a colour bar. Over
 both, the analysis' lower boundaries ``k_theta*(delta_theta_p)`` at the panel's friction angle
 (:func:`dam_analysis.lift_map.compute_boundaries`): the sufficient condition (eq. 18) as a solid
 line, the contact stiffness model (CSM) dashed. The boundaries are those of the configuration
@@ -21,8 +22,9 @@ given with ``--config`` (default: ``DAM_CONFIG`` or the installed ``config/dam.y
 ``sweep``); ``sweep.json`` records only the SHA-256 of the sweep's configuration, and a
 configuration with another digest is named on stderr and in the picture's title.
 
-A short summary goes to stdout: per friction angle the trials, how many lifted (ground truth),
-the outcome counts and the lowest boundary values.
+A short summary goes to stdout: per friction angle the trials, how many lifted (ground truth:
+left the table), the outcome counts and the lowest boundary values. A table of format 1 (its
+``lifted`` the old 5 mm rule) is drawn with a note on stderr and in the title.
 
 Exit status: 0 drawn; 2 bad input (a missing directory, no ``trials.csv`` or ``sweep.json``,
 an empty or malformed table, a bad configuration, an output that cannot be written), with one
@@ -70,7 +72,7 @@ _CLASS_STYLES: dict[str, dict[str, Any]] = {
     'LIFTED_DAM_FAILED': {'marker': '^', 'color': 'tab:orange', 'filled': False},
     'SUCCESS': {'marker': 'o', 'color': 'tab:green', 'filled': False},
 }
-DISAGREE_LABEL = 'ground truth disagrees (lifted vs. outcome)'
+DISAGREE_LABEL = 'outcome disagrees with the ground truth (left the table)'
 SUFFICIENT_LABEL = 'sufficient condition (eq. 18)'
 CSM_LABEL = 'contact stiffness model (CSM)'
 P_LIFT_LABEL = 'lift probability per cell (ground truth) [-]'
@@ -314,6 +316,8 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
              f'{data.n_planned} trials, {data.repeats} per '
              f'cell, k_theta axis {"log" if log_k else "linear"}'
              + (f' ({data.skipped} incomplete row(s) left out)' if data.skipped else '')]
+    word = ('lifted (left the table)' if data.lift_off_recorded
+            else 'lifted (format 1: the old rise rule)')
     for alpha, b in zip(data.friction_angles_deg, boundaries, strict=True):
         trials = data.at(alpha)
         lifted = sum(t.lifted for t in trials)
@@ -323,14 +327,14 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
             low = _lowest(b, field)
             bounds.append(f'{name} lowest k_theta* {low[0]:.3g} N*m/rad at {low[1]:.3g} deg'
                           if low else f'{name}: no k_theta lifts')
-        lines.append(f'  alpha {alpha:g} deg: {len(trials)} trials, lifted {lifted} '
+        lines.append(f'  alpha {alpha:g} deg: {len(trials)} trials, {word} {lifted} '
                      f'({100.0 * lifted / len(trials):.0f} %), success {counts["SUCCESS"]}, '
                      f'lifted but DAM failed {counts["LIFTED_DAM_FAILED"]}, failure '
                      f'{counts["FAILURE"]}; ' + '; '.join(bounds))
     odd = sum(t.disagrees for t in data.trials)
     if odd:
-        lines.append(f'{PROG}: {odd} trial(s) where the ground truth (lifted) disagrees with '
-                     f'the controller\'s outcome')
+        lines.append(f'{PROG}: {odd} trial(s) where the ground truth (lifted: left the table) '
+                     f'disagrees with the controller\'s outcome')
     return lines
 
 
@@ -442,6 +446,8 @@ def plot_sweep(sweep: SweepData | str | os.PathLike[str],
     log_k = k_axis_is_log(data.parameters) if k_scale == 'auto' else k_scale == 'log'
     boundaries = sweep_boundaries(data, analyzer, n_points)
     note = '' if matches else '\nboundaries of a configuration other than the sweep\'s'
+    if data.lifted_note is not None:
+        note += '\nlifted: the old 5 mm rule (a table of format 1), not lift-off'
     figure = sweep_figure(data, boundaries, log_k, note)
     if out is not None:
         try:
@@ -509,6 +515,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (SweepPlotError, DamCommonError) as exc:
         sys.stderr.write(f'{PROG}: {" ".join(str(exc).split())}\n')
         return 2
+    if data.lifted_note is not None:
+        sys.stderr.write(f'{PROG}: note: {data.lifted_note}\n')
     if not result.config_matches:
         sys.stderr.write(f'{PROG}: note: the configuration {str(config.source)!r} is not the '
                          f'sweep\'s (its config_sha256 differs): the boundaries are this '

@@ -280,6 +280,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f'{PROG}: note: the configuration {str(config.source)!r} is not the '
                          f'sweep\'s (its config_sha256 differs): the analysis is this '
                          f'configuration\'s; pass the sweep\'s with --config\n')
+    if data.lifted_note is not None:
+        sys.stderr.write(f'{PROG}: note: {data.lifted_note}\n')
     print('\n'.join(summary_lines(report)))
     print(f'{PROG}: wrote {", ".join(str(p) for p in written)}', flush=True)
     return 0

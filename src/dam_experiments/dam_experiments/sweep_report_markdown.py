@@ -17,9 +17,11 @@ from dam_experiments.sweep_report import LIFT_PROBABILITY, Category, SweepReport
 from dam_experiments.sweep_report_rows import (
     CHECKS_LIFTING,
     CHECKS_NOT_LIFTING,
+    CLASSED_LIFTED,
     LIMIT_FRACTION,
     NEVER_ROSE_FRACTION,
     controller_verdicts,
+    rise_class,
 )
 
 #: Cells listed per disagreement category (the figure shows them all).
@@ -126,6 +128,11 @@ def _header(report: SweepReport, command: str, figures: Mapping[str, str]) -> li
                   f'trials it has.', '']
     if data.skipped:
         lines += [f'{data.skipped} row(s) cut short (being written) were left out.', '']
+    if data.lifted_note is not None:
+        lines += ['**A table of format 1: its `lifted` is the old rule**, the object centre at '
+                  'least the lift height up at the end, not that the object left the table '
+                  '(the table has no column `lift_off_time_s`); the classes below are the '
+                  'old ones. Run the sweep again for lift-off.', '']
     if not report.config_matches:
         lines += ['**The configuration of the analysis is not the sweep\'s** (its SHA-256 '
                   'differs from `sweep.json`\'s `config_sha256`): the boundaries, the lift '
@@ -169,25 +176,44 @@ def _header(report: SweepReport, command: str, figures: Mapping[str, str]) -> li
     return lines
 
 
-def _definitions(report: SweepReport) -> list[str]:
+def _ground_truth(report: SweepReport) -> str:
+    """The definition of ``lifted`` and of the classes of what the object did."""
     h = report.limits.lift_height_mm
+    f = NEVER_ROSE_FRACTION
+    if not report.data.lift_off_recorded:
+        return (f'* **Ground truth (format 1).** A trial lifted when the object centre ended at '
+                f'least the lift height h = {h:g} mm above its start (column `lifted`). A '
+                f'trial that did not lift is classed "rose then fell back" (`rise_max_mm >= h '
+                f'> rise_final_mm`), "rose partly" ({f:g} h <= `rise_max_mm` < h) or "never '
+                f'rose".')
+    return ('* **Ground truth.** A trial lifted when the object left the table: no '
+            'object-table contact point closer than 0.1 mm over the last 0.1 s of the grasp '
+            '(column `lifted`), read from the stand-in\'s contacts every device cycle (2 ms). '
+            'Its lift-off time is the start of the first stretch of at least 50 ms without a '
+            'table contact (column `lift_off_time_s`, from the goal; a bounce is no lift-off). '
+            'It holds for every shape: a polygon that rolls on a vertex raises its centroid '
+            'while it touches, and an object off the table may have risen less than the lift '
+            f'height h = {h:g} mm. A trial that did not lift is classed "left the table, then '
+            f'fell back" (a lift-off time), "rose on the table" (no lift-off, `rise_max_mm` >= '
+            f'{f:g} h: it rolled or tipped) or "never rose"; a lifted one "lifted after the '
+            'rolling-up phase" (lift-off at or after the end of ROLLING_UP, column '
+            '`rolling_up_end_s`) or "lifted".')
+
+
+def _definitions(report: SweepReport) -> list[str]:
     lim = report.limits
     n_points = len(report.boundaries[0].delta_theta_p) if report.boundaries else 0
     return [
         '## Definitions', '',
-        f'* **Ground truth.** A trial lifted when the object centre ended at least the lift '
-        f'height h = {h:g} mm above its start (column `lifted`). A cell\'s lift probability '
-        f'`p_lift` is the share of its trials that lifted; the cell **lifts** when `p_lift >= '
-        f'{LIFT_PROBABILITY:g}`.',
+        _ground_truth(report) + ' A cell\'s lift probability `p_lift` is the share of its '
+        f'trials that lifted; the cell **lifts** when `p_lift >= {LIFT_PROBABILITY:g}`.',
         '* **Analysis.** Per cell, the `/check_lift` answer for the cell\'s pair at its friction '
         'angle with the sweep\'s object as configured (columns `check_lift_guaranteed`, '
         '`worst_case_margin_n`, `csm_lift`, `csm_margin_n`; the first trial\'s, they are the '
         'same for every trial of a cell). A trial\'s perturbations do not enter it.',
         '* **1. False guarantee.** A cell with `check_lift_guaranteed` 1 that does not lift. '
-        'Each of its trials that did not lift is listed and classed from its columns: '
-        f'"rose then fell back" (`rise_max_mm >= h > rise_final_mm`), "rose partly" '
-        f'({NEVER_ROSE_FRACTION:g} h <= `rise_max_mm` < h), "never rose" (`rise_max_mm` < '
-        f'{NEVER_ROSE_FRACTION:g} h); then how it ended: "done" (`phase` DONE), "controller '
+        'Each of its trials that did not lift is listed and classed from its columns as the '
+        'ground truth says; then how it ended: "done" (`phase` DONE), "controller '
         'failure in <phase>" (FAILED, the phase named in `reason`), "still running at the '
         'time limit (<phase>)" (an active phase).',
         '* **2a. CSM agreement.** The share of the cells whose `csm_lift` equals the ground '
@@ -243,20 +269,40 @@ def _summary(report: SweepReport) -> list[str]:
 
 
 def _controller(report: SweepReport) -> list[str]:
-    """The controller's classes (``outcome``) against the ground truth (``lifted``)."""
-    verdicts = controller_verdicts([t for c in report.cells for t in c.trials])
+    """The controller's classes (``outcome``) against the ground truth (``lifted``), and the
+    trials where they differ."""
+    trials = [t for c in report.cells for t in c.trials]
+    verdicts = controller_verdicts(trials)
+    truth = ('the object left the table' if report.data.lift_off_recorded else
+             'format 1: the object centre at least the lift height up at the end')
     header = ('alpha [deg]', 'trials', 'lifted, classed lifted', 'lifted, classed FAILURE',
               'not lifted, classed lifted', 'not lifted, classed FAILURE')
     rows = [(f'{v.friction_angle_deg:g}', str(v.n_trials), str(v.lifted_classed_lifted),
              str(v.lifted_classed_failure), str(v.unlifted_classed_lifted),
              str(v.unlifted_classed_failure)) for v in verdicts]
-    return (['## 5. The controller\'s classes against the ground truth', '',
-             'The sections above judge by the ground truth (`lifted`, the object centre at '
-             'least the lift height up at the end). The controller classes each grasp from its '
-             'joint signals alone (`outcome`: SUCCESS or LIFTED_DAM_FAILED say lifted, '
-             'FAILURE not), as a real hand without ground truth would; where the two differ, '
-             'a researcher reading only the controller\'s classes would count otherwise.', '']
-            + _table(header, rows) + [''])
+    lines = (['## 5. The controller\'s classes against the ground truth', '',
+              f'The sections above judge by the ground truth (`lifted`: {truth}). The '
+              'controller classes each grasp from its joint signals alone (`outcome`: SUCCESS '
+              'or LIFTED_DAM_FAILED say lifted, FAILURE not), with the rise it estimates from '
+              'the joints (`estimated_rise_mm`), as a real hand without ground truth would; '
+              'where the two differ, a researcher reading only the controller\'s classes '
+              'would count otherwise.', '']
+             + _table(header, rows) + [''])
+    odd = [t for t in trials if (t.outcome in CLASSED_LIFTED) != t.lifted]
+    if not odd:
+        return lines + ['No trial where they differ.', '']
+    lines += [f'The {len(odd)} trial(s) where they differ'
+              + (f' (the first {MAX_LISTED_CELLS})' if len(odd) > MAX_LISTED_CELLS else '')
+              + ': the rise the stand-in measured against the controller\'s estimate.', '']
+    header = ('alpha [deg]', 'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'repeat', 'outcome',
+              'lifted', 'lift-off [s]', 'rise_final_mm', 'estimated_rise_mm', 'what it did',
+              'reason')
+    h = report.limits.lift_height_mm
+    rows = [(f'{t.friction_angle_deg:g}', g(t.k_theta, 4), g(t.delta_theta_p_deg, 4),
+             str(t.repeat), t.outcome, 'yes' if t.lifted else 'no', g(t.lift_off_time_s, 4),
+             g(t.rise_final_mm, 4), g(t.estimated_rise_mm, 4), rise_class(t, h), t.reason)
+            for t in odd[:MAX_LISTED_CELLS]]
+    return lines + _table(header, rows) + ['']
 
 
 def _false_guarantees(report: SweepReport) -> list[str]:
@@ -377,8 +423,8 @@ MODEL_GAPS = (
     'those the analysis used, the compliant joints deflect differently (and with them the '
     'torques `k_theta delta_theta_s`), and the table\'s reaction changes. The analysis cannot '
     'tell whether an object that starts to rise keeps rising, falls back, or rises only after '
-    'the rolling-up phase; "rose then fell back", "rose partly" and "lifted after rolling-up" '
-    'count the trials where this shows.',
+    'the rolling-up phase; "left the table, then fell back", "rose on the table" and "lifted '
+    'after the rolling-up phase" count the trials where this shows.',
     '**Bullet\'s contact is not the CSM\'s spring-slider.** The CSM makes the statically '
     'indeterminate contact forces unique with a linear contact stiffness at every contact and '
     'a spring-slider for friction. The stand-in\'s contacts are {contact}; PyBullet resolves '

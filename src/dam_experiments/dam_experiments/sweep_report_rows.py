@@ -3,9 +3,11 @@
 :func:`read_rows` reads, for the trials :func:`~dam_experiments.sweep_results.read_sweep` kept,
 the columns of ``trials.csv`` the report (:mod:`dam_experiments.sweep_report`) needs besides
 those of the picture: the phase and reason, the rises, the simulated mass, the peak torques and
-the analysis columns, checked (naming the file, the line, the trial and the value).
+the analysis columns, and where the table has them (format 2) the end of ROLLING_UP and the
+controller's estimated rise, checked (naming the file, the line, the trial and the value).
 :func:`rise_class`, :func:`ending` and :func:`trial_label` say in words what a trial did, from
-its columns alone; :func:`checks` lists the checks of the evidence that hold for it.
+its columns alone, by lift-off (:mod:`dam_sim_bridge.lift_off`) for every shape;
+:func:`checks` lists the checks of the evidence that hold for it.
 """
 
 from __future__ import annotations
@@ -31,6 +33,8 @@ REPORT_COLUMNS = ('phase', 'reason', 'rise_final_mm', 'rise_max_mm', 'rise_rolli
                   'csm_lift', 'csm_margin_n')
 #: A peak torque at least this share of a limit counts as having reached it [-].
 LIMIT_FRACTION = 0.98
+#: Columns of format 2 the report reads when present (a table of format 1 has none of them).
+OPTIONAL_COLUMNS = ('rolling_up_end_s', 'estimated_rise_mm')
 #: Phases in which a grasp is still running (it was cut at the time limit).
 RUNNING_PHASES = ('IDLE', 'APPROACH', 'ROLLING_UP', 'ENVELOPE')
 _PHASE_IN_REASON = re.compile(r'(?:during (?:phase )?|phase )(approach|rolling_up|envelope)\b')
@@ -54,7 +58,8 @@ class TrialRow:
         The controller's class, the phase it ended in and the failure reason or the
         classifier's explanation.
     lifted
-        Ground truth: the object centre ended at least the lift height up.
+        Ground truth: the object left the table and was off it at the end (format 1: the
+        object centre ended at least the lift height up).
     rise_final_mm, rise_max_mm, rise_rolling_end_mm
         Rise of the object centre at the end, its largest rise, its rise at the end of
         ROLLING_UP (NaN when that phase did not end) [mm].
@@ -65,6 +70,15 @@ class TrialRow:
     guaranteed, worst_case_margin_n, csm_lift, csm_margin_n
         The cell's ``/check_lift`` answer: eq. (18) holds, its margin [N], the CSM verdict and
         its margin [N].
+    lift_off_known
+        The table records lift-off (format 2): ``lifted`` means that the object left the
+        table and the three columns below are there.
+    lift_off_time_s, rolling_up_end_s
+        When the object was first off the table for 50 ms, when ROLLING_UP ended, both from
+        the goal [s] (NaN: it never lifted off; ROLLING_UP did not end; not recorded).
+    estimated_rise_mm
+        The controller's estimate of the rise from the joints [mm] (NaN: not classified, or
+        not recorded).
     """
 
     index: int
@@ -86,6 +100,15 @@ class TrialRow:
     worst_case_margin_n: float
     csm_lift: bool
     csm_margin_n: float
+    lift_off_known: bool = True
+    lift_off_time_s: float = math.nan
+    rolling_up_end_s: float = math.nan
+    estimated_rise_mm: float = math.nan
+
+    @property
+    def lifted_off(self) -> bool:
+        """The object left the table at some time (a lift-off), maybe falling back."""
+        return not math.isnan(self.lift_off_time_s)
 
 
 def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
@@ -113,8 +136,11 @@ _MAY_BE_MINUS_INF = ('worst_case_margin_n', 'csm_margin_n')
 
 def _float(table: Any, line: int, row: Mapping[str, str], column: str) -> float:
     """A number of the row; ``nan`` is allowed (a margin without analysis, a phase that did
-    not end), ``-inf`` in the margin columns (unbounded), any other infinity or text is
-    not."""
+    not end), empty too in :data:`OPTIONAL_COLUMNS` (not classified) and a column the table
+    lacks is NaN there, ``-inf`` in the margin columns (unbounded); any other infinity or text
+    is not."""
+    if column in OPTIONAL_COLUMNS and not row.get(column):
+        return math.nan
     text = row[column]
     try:
         value = float(text)
@@ -170,7 +196,7 @@ def read_rows(data: SweepData) -> list[TrialRow]:
         line, row = by_index[t.index]
         values = {c: _float(table, line, row, c) for c in (
             'rise_final_mm', 'rise_max_mm', 'rise_rolling_end_mm', 'object_mass_kg',
-            'worst_case_margin_n', 'csm_margin_n', *compliant, *position)}
+            'worst_case_margin_n', 'csm_margin_n', *OPTIONAL_COLUMNS, *compliant, *position)}
         out.append(TrialRow(
             index=t.index, repeat=t.repeat, friction_angle_deg=t.friction_angle_deg,
             k_theta=t.k_theta, delta_theta_p_deg=t.delta_theta_p_deg, outcome=t.outcome,
@@ -183,7 +209,9 @@ def read_rows(data: SweepData) -> list[TrialRow]:
             guaranteed=_flag(table, line, row, 'check_lift_guaranteed'),
             worst_case_margin_n=values['worst_case_margin_n'],
             csm_lift=_flag(table, line, row, 'csm_lift'),
-            csm_margin_n=values['csm_margin_n']))
+            csm_margin_n=values['csm_margin_n'], lift_off_known=data.lift_off_recorded,
+            lift_off_time_s=t.lift_off_time_s, rolling_up_end_s=values['rolling_up_end_s'],
+            estimated_rise_mm=values['estimated_rise_mm']))
     return out
 
 
@@ -212,22 +240,37 @@ def ending(trial: TrialRow) -> str:
     return f'still running at the time limit ({trial.phase.lower()})'
 
 
-def rise_class(trial: TrialRow, lift_height_mm: float) -> str:
-    """What the object did, from the rise columns and the lift height ``h`` [mm].
+def lifted_late(trial: TrialRow, lift_height_mm: float) -> bool:
+    """A lifted trial left the table only once ROLLING_UP had ended (its lift-off time at
+    or after the end of ROLLING_UP); in a table of format 1, it reached the lift height only
+    then (its rise at the end of ROLLING_UP is a number below ``lift_height_mm``)."""
+    if not trial.lift_off_known:
+        return (math.isfinite(trial.rise_rolling_end_mm)
+                and trial.rise_rolling_end_mm < lift_height_mm)
+    return (math.isfinite(trial.rolling_up_end_s) and trial.lifted_off
+            and trial.lift_off_time_s >= trial.rolling_up_end_s)
 
-    Not lifted: ``'rose then fell back'`` (``rise_max >= h > rise_final``), ``'rose partly'``
-    (``NEVER_ROSE_FRACTION h <= rise_max < h``) or ``'never rose'``. Lifted: ``'lifted after
-    the rolling-up phase'`` when the rise at the end of ROLLING_UP is a number below ``h``,
-    else ``'lifted'``.
+
+def rise_class(trial: TrialRow, lift_height_mm: float) -> str:
+    """What the object did, by lift-off, the rise columns and the lift height ``h`` [mm].
+
+    Lifted: ``'lifted after the rolling-up phase'`` (:func:`lifted_late`), else ``'lifted'``.
+    Not lifted: ``'left the table, then fell back'`` (a lift-off, on the table at the end),
+    ``'rose on the table'`` (no lift-off; ``rise_max >= NEVER_ROSE_FRACTION h``: it rolled or
+    tipped while touching, as a polygon turning on a vertex does) or ``'never rose'``. In a
+    table of format 1 (no lift-off recorded), not lifted: ``'rose then fell back'``
+    (``rise_max >= h > rise_final``), ``'rose partly'`` (``NEVER_ROSE_FRACTION h <= rise_max
+    < h``) or ``'never rose'``.
     """
     h = lift_height_mm
     if trial.lifted:
-        late = math.isfinite(trial.rise_rolling_end_mm) and trial.rise_rolling_end_mm < h
-        return 'lifted after the rolling-up phase' if late else 'lifted'
-    if trial.rise_max_mm >= h:
+        return 'lifted after the rolling-up phase' if lifted_late(trial, h) else 'lifted'
+    if trial.lift_off_known and trial.lifted_off:
+        return 'left the table, then fell back'
+    if not trial.lift_off_known and trial.rise_max_mm >= h:
         return 'rose then fell back'
     if trial.rise_max_mm >= NEVER_ROSE_FRACTION * h:
-        return 'rose partly'
+        return 'rose on the table' if trial.lift_off_known else 'rose partly'
     return 'never rose'
 
 
@@ -295,13 +338,12 @@ CHECKS_NOT_LIFTING = (
     ('servo limit', 'a position joint reached its servo torque limit'),
     ('heavier object', 'the object was heavier than the analysis assumes'),
     ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
-    ('left the table', 'the object rose at least a tenth of the lift height: it left the table, '
-                       'as a positive margin says, and the displacement ended below the lift '
-                       'height'),
+    ('fell back', 'the object left the table (off it for 50 ms), as a positive margin says, '
+                  'and was back on it at the end'),
 )
 CHECKS_LIFTING = (
-    ('lifted after rolling-up', 'the object reached the lift height only after ROLLING_UP, '
-                                'the phase the analysis covers'),
+    ('lifted after rolling-up', 'the object left the table only after ROLLING_UP, the phase '
+                                'the analysis covers'),
     ('lighter object', 'the object was lighter than the analysis assumes'),
     ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
 )
@@ -316,9 +358,7 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
     near = next_to_boundary(trial.k_theta, k_star, k_grid)
     mass = trial.object_mass_kg
     if sim_lifts:
-        found = {'lifted after rolling-up': (math.isfinite(trial.rise_rolling_end_mm)
-                                             and trial.rise_rolling_end_mm
-                                             < limits.lift_height_mm),
+        found = {'lifted after rolling-up': lifted_late(trial, limits.lift_height_mm),
                  'lighter object': mass < limits.object_mass_kg * (1.0 - 1e-9),
                  'next to the boundary': near}
         names = CHECKS_LIFTING
@@ -331,7 +371,7 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
                                  >= LIMIT_FRACTION * limits.servo_torque_nm),
                  'heavier object': mass > limits.object_mass_kg * (1.0 + 1e-9),
                  'next to the boundary': near,
-                 'left the table': trial.rise_max_mm >= 0.1 * limits.lift_height_mm}
+                 'fell back': trial.lift_off_known and trial.lifted_off}
         names = CHECKS_NOT_LIFTING
     return [name for name, _ in names if found[name]]
 
@@ -345,8 +385,9 @@ CLASSED_LIFTED = ('SUCCESS', 'LIFTED_DAM_FAILED')
 
 @dataclass(frozen=True)
 class ControllerVerdicts:
-    """At one friction angle, the trials by ground truth (``lifted``) and by the controller's
-    class (``outcome``: lifted for :data:`CLASSED_LIFTED`, else FAILURE)."""
+    """At one friction angle, the trials by ground truth (``lifted``: the object left the
+    table) and by the controller's class (``outcome``: lifted for :data:`CLASSED_LIFTED`, else
+    FAILURE)."""
 
     friction_angle_deg: float
     lifted_classed_lifted: int

@@ -2,10 +2,15 @@
 
 What :mod:`dam_experiments.sweep_plot` draws: :func:`read_sweep` checks the files ``sweep``
 (:mod:`dam_experiments.sweep_table`) writes and returns the trials as :class:`Trial` (the cell,
-the controller's classification ``outcome`` and the ground truth ``lifted``), grouped per
-friction angle and per cell on demand (:class:`SweepData`); :func:`k_axis_is_log` tells whether
-the sweep's ``k_theta`` axis was a log range. A sweep still running or interrupted is read as
-far as it got (a row cut short is left out and counted).
+the controller's classification ``outcome`` and the ground truth ``lifted``: the object left the
+table), grouped per friction angle and per cell on demand (:class:`SweepData`);
+:func:`k_axis_is_log` tells whether the sweep's ``k_theta`` axis was a log range. A sweep still
+running or interrupted is read as far as it got (a row cut short is left out and counted).
+
+A table written before ``lifted`` meant lift-off (no column ``lift_off_time_s``: format 1) is
+read all the same; its ``lifted`` is the old rule, the object centre at least
+``classification.lift_height_m`` up at the end, and :attr:`SweepData.lifted_note` says so in
+one line that the commands print.
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ OUTCOMES = ('FAILURE', 'LIFTED_DAM_FAILED', 'SUCCESS')
 #: Columns of ``trials.csv`` the picture needs.
 REQUIRED_COLUMNS = ('trial', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
                     'repeat', 'outcome', 'lifted')
+#: The column whose presence says that ``lifted`` means lift-off (format 2 on).
+LIFT_OFF_COLUMN = 'lift_off_time_s'
 
 
 @dataclass(frozen=True)
@@ -53,13 +60,17 @@ class Trial:
     outcome
         The controller's classification: ``FAILURE``, ``LIFTED_DAM_FAILED`` or ``SUCCESS``.
     lifted
-        Ground truth: the object centre ended at least ``classification.lift_height_m`` up.
+        Ground truth: the object left the table and was off it at the end (in a table of
+        format 1: the object centre ended at least ``classification.lift_height_m`` up).
     object_name
         The object of the configuration's library (column ``object``; '' in a table from
         before objects were an axis: the configured default object).
     object_mass_kg
         The object's mass in the trial [kg] (column ``object_mass_kg``; NaN when absent or
         not a positive number: the configured mass).
+    lift_off_time_s
+        Ground truth: when the object was first off the table for 50 ms, from the goal [s]
+        (column ``lift_off_time_s``; NaN when it never was, or in a table of format 1).
     """
 
     index: int
@@ -71,11 +82,12 @@ class Trial:
     lifted: bool
     object_name: str = ''
     object_mass_kg: float = math.nan
+    lift_off_time_s: float = math.nan
 
     @property
     def disagrees(self) -> bool:
         """True when the classification says lifted (SUCCESS, LIFTED_DAM_FAILED) and the
-        object did not lift, or FAILURE and it did."""
+        object did not leave the table, or FAILURE and it did."""
         return (self.outcome != 'FAILURE') != self.lifted
 
 
@@ -120,6 +132,9 @@ class SweepData:
         The complete rows of ``trials.csv``, in file order.
     skipped
         Rows cut short (a sweep still writing its table) that were left out.
+    lift_off_recorded
+        Whether the table has the column ``lift_off_time_s``, so that ``lifted`` means that
+        the object left the table; False for a table of format 1 (the old 5 mm rule).
     """
 
     directory: Path
@@ -127,6 +142,18 @@ class SweepData:
     parameters: Mapping[str, Any]
     trials: tuple[Trial, ...]
     skipped: int = 0
+    lift_off_recorded: bool = True
+
+    @property
+    def lifted_note(self) -> str | None:
+        """One line for a table of format 1 (None otherwise): its ``lifted`` is the old
+        rule."""
+        if self.lift_off_recorded:
+            return None
+        return (f'{self.directory / TABLE_FILE} has no column {LIFT_OFF_COLUMN!r} (written '
+                f'before format 2): its lifted is the old rule, the object centre at least '
+                f'classification.lift_height_m up at the end, not that it left the table; '
+                f'run the sweep again for lift-off')
 
     @property
     def objects(self) -> tuple[str, ...]:
@@ -275,7 +302,29 @@ def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
                  delta_theta_p_deg=_number(table, line, row, 'delta_theta_p_deg', 0.0),
                  repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1',
                  object_name=row.get('object') or '',
-                 object_mass_kg=_optional_mass(row.get('object_mass_kg')))
+                 object_mass_kg=_optional_mass(row.get('object_mass_kg')),
+                 lift_off_time_s=_lift_off_time(table, line, row))
+
+
+def _lift_off_time(table: Path, line: int, row: Mapping[str, str]) -> float:
+    """The row's ``lift_off_time_s`` [s]: NaN when absent (format 1) or empty (no lift-off,
+    which a lifted trial cannot be), else a finite number."""
+    if LIFT_OFF_COLUMN not in row:
+        return math.nan
+    text = row[LIFT_OFF_COLUMN]
+    if not text:
+        if row['lifted'] == '1':
+            raise _fail_row(table, line, row['trial'], f'lifted 1 without a {LIFT_OFF_COLUMN} '
+                                                       f'(a lifted object lifted off)')
+        return math.nan
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise _fail_row(table, line, row['trial'], f'{LIFT_OFF_COLUMN} {text!r} is not a time '
+                                                   f'[s] (empty: no lift-off)')
+    return value
 
 
 def _optional_mass(text: str | None) -> float:
@@ -360,7 +409,8 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
     if not trials:
         raise SweepPlotError(f'{table} holds no trials (only its header)' if not skipped else
                              f'{table} holds no complete trial ({skipped} row(s) cut short)')
-    return SweepData(root, spec, parameters, tuple(trials), skipped)
+    return SweepData(root, spec, parameters, tuple(trials), skipped,
+                     lift_off_recorded=LIFT_OFF_COLUMN in header)
 
 
 def k_axis_is_log(parameters: Mapping[str, Any]) -> bool:

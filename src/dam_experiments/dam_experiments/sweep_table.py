@@ -7,8 +7,8 @@ An output directory holds
   complete, so that a rerun gives the same bytes;
 * ``sweep.json``: the sweep's parameters (:meth:`SweepSpec.to_dict`), the SHA-256 of the
   configuration's values, the columns and their units, written when the sweep starts;
-* ``cells.csv``: per cell the number of trials, how many lifted (ground truth) and succeeded
-  and the analysis answer, written when the sweep is complete.
+* ``cells.csv``: per cell the number of trials, how many lifted (ground truth: the object left
+  the table) and succeeded and the analysis answer, written when the sweep is complete.
 
 :meth:`TrialTable.open` on a directory that already holds a sweep resumes it: it refuses a
 different sweep (naming the parameter that differs), keeps every complete row whose inputs
@@ -44,8 +44,10 @@ _OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')
 TABLE_FILE = 'trials.csv'
 PARAMS_FILE = 'sweep.json'
 CELLS_FILE = 'cells.csv'
-#: Version of the directory layout and of ``sweep.json``.
-FORMAT_VERSION = 1
+#: Version of the directory layout and of ``sweep.json``: 2 since ``lifted`` means that the
+#: object left the table (with ``lift_off_time_s``, ``rolling_up_end_s`` and
+#: ``estimated_rise_mm``); in format 1 it meant a rise of ``classification.lift_height_m``.
+FORMAT_VERSION = 2
 #: Keys of ``sweep.json`` that must match to resume (the others are information).
 _MATCHING_KEYS = ('format', 'sweep', 'config_sha256', 'columns')
 
@@ -69,9 +71,15 @@ _UNITS = {
     'phase': 'phase the controller ended in',
     'outcome': 'paper Fig. 7 class from joint signals: SUCCESS (o), LIFTED_DAM_FAILED (t), '
                'FAILURE (x)',
-    'lifted': 'ground truth: object centre at least classification.lift_height_m up at the end',
+    'lifted': 'ground truth: the object left the table and was off it over the last 0.1 s '
+              '(dam_sim_bridge.lift_off: no object-table contact point within 0.1 mm)',
+    'lift_off_time_s': 'ground truth: first time the object was off the table for 50 ms, '
+                       'from the goal [s]; empty when it never was',
+    'rolling_up_end_s': 'when ROLLING_UP ended, from the goal [s]; nan when it did not end',
     'rise_final_mm': 'rise of the object centre at the end [mm]',
     'rise_max_mm': 'largest rise [mm]', 'rise_rolling_end_mm': 'rise at the end of ROLLING_UP [mm]',
+    'estimated_rise_mm': 'the controller\'s estimate of the rise from the final joint angles '
+                         '(Classification.lift_m) [mm]; empty when the grasp was not classified',
     'peak_tau_*_nm': 'largest |torque| of that joint during the trial [N*m]',
     'check_lift_guaranteed': '/check_lift: eq. (18) guarantees the lift (cell request)',
     'worst_case_margin_n': 'eq. (18) worst-case margin min c_z^T f_o - m_B g [N]',
@@ -181,6 +189,12 @@ class TrialTable:
                 stored = json.loads(params.read_text(encoding='utf-8'))
             except (OSError, ValueError) as exc:
                 raise SweepError(f'{params}: cannot read it ({exc})') from None
+            if stored.get('format') != FORMAT_VERSION:
+                raise SweepError(
+                    f'{self.directory} holds a sweep of format {stored.get("format")!r}, '
+                    f'written before lifted meant that the object left the table (this is '
+                    f'format {FORMAT_VERSION}); it cannot be resumed: use another --out or '
+                    f'remove it (sweep_plot and sweep_report still read it)')
             for key in _MATCHING_KEYS:
                 diff = _first_difference(stored.get(key), self.parameters[key], key)
                 if diff and key == 'config_sha256' and isinstance(stored.get('config'), dict):
@@ -306,9 +320,9 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
     """Per cell of an object (in order of first appearance): trials, lifts, outcomes, the
     analysis.
 
-    ``p_lift`` is the share of trials whose object lifted (ground truth), ``p_success`` the
-    share the controller classified SUCCESS; the analysis columns are the cell's (the same
-    for every trial of a cell).
+    ``p_lift`` is the share of trials whose object lifted (ground truth: it left the table),
+    ``p_success`` the share the controller classified SUCCESS; the analysis columns are the
+    cell's (the same for every trial of a cell).
     """
     cells: dict[tuple[str, str, str, str], list[Mapping[str, str]]] = {}
     for row in rows:

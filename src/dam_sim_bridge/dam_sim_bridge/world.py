@@ -104,6 +104,13 @@ The watchdog's safe state is a TORQUE command of zero, so it ramps to zero at th
 from the actuator limit in ``torque_limit_nm / torque_rate_limit_nm_per_s`` (50 ms with the
 shipped configuration).
 
+Lift-off
+--------
+:attr:`HandWorld.lift_off` samples the object's table contacts at every :meth:`HandWorld.reset`
+and after every :meth:`HandWorld.step` call and applies the lift-off rule of
+:mod:`dam_sim_bridge.lift_off` (the object left the table: off it for 50 ms is a lift-off,
+off it for the last 0.1 s is lifted).
+
 Torque sensor
 -------------
 :meth:`HandWorld.joint_states` reports, like a joint torque sensor between the actuator and the
@@ -145,6 +152,7 @@ from dam_sim_bridge.column_body import (
     resting_quaternion,
 )
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
+from dam_sim_bridge.lift_off import TOUCH_DISTANCE_M, LiftOffTracker
 from dam_sim_bridge.pybullet_import import bullet_client, pybullet
 
 if TYPE_CHECKING:
@@ -409,6 +417,9 @@ class HandWorld:
         self._build()
         self._friction_angle_rad = float(config.contact.friction_angle_rad)
         self._table_mu = float(config.contact.table_friction_coefficient)
+        #: The lift-off rule (:mod:`dam_sim_bridge.lift_off`) on the object's table contacts,
+        #: sampled at :meth:`reset` and after every :meth:`step` call.
+        self.lift_off = LiftOffTracker()
         self.reset()
 
     # ---------------------------------------------------------------------------------------
@@ -726,6 +737,8 @@ class HandWorld:
         # Refresh the contact cache: otherwise contact queries return the pre-reset contacts
         # until the next step.
         pb.performCollisionDetection()
+        self.lift_off.reset()
+        self.lift_off.update(0.0, self.object_table_contacts())
 
     def joint_modes(self) -> np.ndarray:
         """(n,) current :class:`JointMode` of every joint."""
@@ -927,6 +940,7 @@ class HandWorld:
                 step_simulation()
             self._steps += steps
             self._stepped = True
+            self.lift_off.update(self.sim_time, self.object_table_contacts())
             return
         n_t, n_i = plan.n_torque, len(plan.stiffness)
         k, d, theta_0, max_shift = plan.stiffness, plan.damping, plan.theta_0, plan.max_shift
@@ -964,6 +978,7 @@ class HandWorld:
         for j, i in enumerate(plan.rows[n_t:]):
             self._theta_0_eff[i] = theta_0_eff[j]
             self._saturated[i] = abs(raw_imp[j]) > limit
+        self.lift_off.update(self.sim_time, self.object_table_contacts())
 
     def _step_plan(self) -> _StepPlan:
         """What :meth:`step` needs of the current command (kept until the next command)."""
@@ -1046,9 +1061,21 @@ class HandWorld:
         return [(names.get(c[3], str(c[3])), float(c[9]))
                 for c in self._pb.getContactPoints(self.hand_id, self.object_id)]
 
-    def object_table_contacts(self) -> int:
-        """Number of contact points between the object and the table."""
-        return len(self._pb.getContactPoints(self.object_id, self.table_id))
+    def object_table_contacts(self, max_distance_m: float | None = TOUCH_DISTANCE_M) -> int:
+        """Number of contact points between the object and the table of the last step.
+
+        Parameters
+        ----------
+        max_distance_m
+            Count the points closer than this [m] (Bullet's contact distance, negative in
+            penetration): by default :data:`~dam_sim_bridge.lift_off.TOUCH_DISTANCE_M`
+            (0.1 mm), the points that touch; ``None``: every point Bullet's contact manifold
+            holds, up to about 0.7 mm apart.
+        """
+        points = self._pb.getContactPoints(self.object_id, self.table_id)
+        if max_distance_m is None:
+            return len(points)
+        return sum(1 for c in points if c[8] <= max_distance_m)
 
     def close(self) -> None:
         """Disconnect from the physics server (idempotent)."""
