@@ -489,7 +489,9 @@ def test_sufficient_condition_against_a_per_point_lp(name):
                 assert result.worst_case_margin == pytest.approx(margin, rel=1e-7,
                                                                  abs=1e-9), where
                 guaranteed = margin > 0.0
-                assert result.lift_guaranteed == guaranteed, where
+                # eq. 18 at rest; a section that can roll is then checked in its turned poses
+                assert (result.lift_guaranteed or result.rolling_checked) == guaranteed, where
+                assert guaranteed or not result.lift_guaranteed, where
                 outcomes['guaranteed' if guaranteed else 'not'] += 1
     if name == 'big_hex':
         assert outcomes['guaranteed'] > 5 and outcomes['not'] > 5, outcomes

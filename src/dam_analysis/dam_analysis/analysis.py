@@ -21,13 +21,14 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
+from dam_analysis.csm_path import CsmPathVerdict
 from dam_analysis.errors import InputError, NoSolutionError
 from dam_analysis.hand_limits import HandLimits, csm_penetration
 from dam_analysis.lift import STATUS_BOUNDED, STATUS_NO_SPCM, worst_case_cone
+from dam_analysis.lift_result import LiftResult
 from dam_analysis.model import HandModel, build_hand_model
 from dam_analysis.regions import (
     Boundaries,
@@ -38,6 +39,7 @@ from dam_analysis.regions import (
     lift_map,
     region_boundaries,
 )
+from dam_analysis.rolling import NOT_CHECKED, RollingCheck
 from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths
 from dam_common.config import DamConfig, load_config
 from dam_common.echo import brief_repr
@@ -93,16 +95,6 @@ def _interp(x: float, xp: list[float], fp: list[float]) -> float:
         return fp[j]
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
     return slope * (x - xp[j]) + fp[j]
-
-
-def _world(frame: tuple[list[float], list[float]], u: float, z: float, point: bool
-           ) -> list[float]:
-    """Plane ``(u, z)`` -> world (3,): a point (relative to the base) or a direction."""
-    base, inward = frame
-    out = [b + u * w for b, w in zip(base, inward, strict=True)] if point \
-        else [u * w for w in inward]
-    out[2] += z  # the plane z axis is the world z axis
-    return out
 
 
 def unreachable_object(config: DamConfig, error: NoSolutionError) -> str:
@@ -162,131 +154,6 @@ def check_friction_angle(friction_angle: float, configured: float) -> float:
     return alpha
 
 
-@dataclass(frozen=True)
-class LiftResult:
-    """Answer of :meth:`LiftAnalyzer.check_lift`.
-
-    Attributes
-    ----------
-    lift_guaranteed : eq. (18) holds for every admissible contact force.
-    worst_case_margin : ``min c_z^T f_o - m_B g`` [N]; -inf when the worst case is unbounded,
-        +inf when no admissible force exists (then lift_guaranteed is False); NaN when a
-        finger is beyond the end of its SPCM branch.
-    sufficient_status : (n,) per-finger ``'bounded' | 'unbounded' | 'infeasible'``, or
-        ``'no_spcm'`` for a finger beyond the end of its SPCM branch.
-    csm_lift : the contact stiffness model lifts the object (margin > 0, no separation).
-    csm_margin : ``c_z^T f_o - m_B g`` with the CSM forces [N] (NaN on separation and beyond
-        the end of the SPCM branch).
-    csm_separation : (n,) bool, the CSM normal force would be negative.
-    csm_forces : (n, 3) CSM force of each finger on the object [N].
-    delta_theta_s : (n,) compliant displacement [rad].
-    compliant_torque : (n,) tau_s = -K_theta delta_theta_s [N m].
-    contact_points : (n, 3) [m]; normals : (n, 3) outward object normals n_CB.
-    on_fingertip : (n,) bool.
-    k_theta : (n,) [N m/rad]; delta_theta_p : (n,) [rad]; friction_angle [rad].
-    beyond_branch : (n,) bool, the finger's ``delta_theta_p`` lies beyond the end of its SPCM
-        branch (eqs. 1-4 have no solution there). The per-finger values of such a finger
-        (``delta_theta_s``, ``compliant_torque``, forces, contacts, normals) are NaN; the other
-        fingers keep theirs.
-    branch_message : where and why the branch ends, for the first finger beyond it (its
-        ``delta_theta_p`` and the end in degrees, and the reason); empty when no finger is.
-    torque_limit : the largest compliant torque the hand gives [N m]
-        (:class:`~dam_analysis.hand_limits.HandLimits`).
-    within_torque_limit : every ``|compliant_torque|`` is at most ``torque_limit``; a pair
-        guaranteed by eq. (18) but not within it is not guaranteed for this hand.
-    csm_penetration : (n,) CSM contact penetration ``f_n / k_n`` per finger [m] (negative
-        where the contact would open, NaN beyond the end of the branch).
-    csm_in_domain : every ``csm_penetration`` is finite and at most the configured bound
-        (``contact.csm_max_penetration_m``): the CSM's answer is inside its domain of validity.
-
-    In an answer of ``check_lift`` the per-contact arrays (``csm_separation``, ``csm_forces``,
-    ``contact_points``, ``normals``, ``on_fingertip``) are built on first access.
-    """
-
-    lift_guaranteed: bool
-    worst_case_margin: float
-    sufficient_status: tuple[str, ...]
-    csm_lift: bool
-    csm_margin: float
-    csm_separation: np.ndarray
-    csm_forces: np.ndarray
-    delta_theta_s: np.ndarray
-    compliant_torque: np.ndarray
-    contact_points: np.ndarray
-    normals: np.ndarray
-    on_fingertip: np.ndarray
-    k_theta: np.ndarray
-    delta_theta_p: np.ndarray
-    friction_angle: float
-    beyond_branch: np.ndarray
-    branch_message: str
-    torque_limit: float
-    within_torque_limit: bool
-    csm_penetration: np.ndarray
-    csm_in_domain: bool
-
-    def __getattr__(self, name: str) -> np.ndarray:
-        """Build the per-contact arrays of a :meth:`LiftAnalyzer.check_lift` answer on first use.
-
-        ``check_lift`` leaves ``csm_separation``, ``csm_forces``, ``contact_points``,
-        ``normals`` and ``on_fingertip`` unset and keeps their plane data; Python calls this
-        method only for attributes that are missing, so an ordinary instance never gets here.
-        """
-        state = self.__dict__
-        if name in _LAZY_FIELDS:
-            lazy = state.get('_lazy_contacts')
-            if lazy is not None:
-                state.update(_contact_arrays(*lazy))
-                state.pop('_lazy_contacts', None)
-            if name in state:  # also when another thread has just built them
-                return state[name]
-        raise AttributeError(f'{type(self).__name__!r} object has no attribute {name!r}')
-
-    @classmethod
-    def _with_lazy_contacts(cls, lazy: tuple, **values: object) -> LiftResult:
-        """Instance whose per-contact arrays come from ``_contact_arrays(*lazy)`` when read."""
-        obj = object.__new__(cls)
-        obj.__dict__.update(values)
-        obj.__dict__['_lazy_contacts'] = lazy
-        return obj
-
-
-_LAZY_FIELDS = frozenset({'csm_separation', 'csm_forces', 'contact_points', 'normals',
-                          'on_fingertip'})
-
-
-def _contact_arrays(frames: list[tuple[list[float], list[float]]],
-                    states: list[tuple[float, float, float, float, float, bool]],
-                    f_n: list[float], f_t: list[float]) -> dict[str, np.ndarray]:
-    """World-frame per-contact arrays of :class:`LiftResult` from the plane states.
-
-    Parameters
-    ----------
-    frames : per finger (base position (3,) [m], inward direction (3,)).
-    states : per finger ``(theta_s, p_u, p_z, n_u, n_z, on_fingertip)``
-        (:meth:`SpcmPath.plane_state`), None for a finger beyond its branch end (NaN rows).
-    f_n, f_t : per finger CSM normal (pressing) and tangential force [N].
-
-    Returns
-    -------
-    ``csm_separation`` (n,) ``f_n < 0``; ``csm_forces`` (n, 3) ``-f_n n_CB + f_t t`` [N];
-    ``contact_points`` (n, 3) [m]; ``normals`` (n, 3) n_CB; ``on_fingertip`` (n,).
-    """
-    points, normals, forces = [], [], []
-    nan = math.nan
-    for frame, state, fn, ft in zip(frames, states, f_n, f_t, strict=True):
-        _, p_u, p_z, n_u, n_z, _ = state if state is not None else (nan,) * 6
-        points.append(_world(frame, p_u, p_z, True))
-        nrm = _world(frame, n_u, n_z, False)
-        tan = _world(frame, -n_z, n_u, False)  # t = b x n_CB
-        normals.append(nrm)
-        forces.append([-fn * a + ft * b for a, b in zip(nrm, tan, strict=True)])
-    return {'csm_separation': np.array([v < 0.0 for v in f_n]),
-            'csm_forces': np.array(forces), 'contact_points': np.array(points),
-            'normals': np.array(normals),
-            'on_fingertip': np.array([st is not None and st[5] for st in states])}
-
-
 class LiftAnalyzer:
     """Lift analysis of the configured hand and object (sections 3.1-3.3 of the paper).
 
@@ -319,6 +186,15 @@ class LiftAnalyzer:
         self._branch_ends = [path.valid_until for path in self.table.paths]
         self.limits = HandLimits.from_config(self.config)
         self._k_n = float(self.model.contact_stiffness[0])
+        self._rolling: RollingCheck | None = None
+        self._csm_path = CsmPathVerdict(self.table, self._ratios, self._k_t)
+
+    @property
+    def rolling(self) -> RollingCheck:
+        """The check of the poses the object can roll into (built on first use)."""
+        if self._rolling is None:
+            self._rolling = RollingCheck(self.config, self.model, self.table.paths)
+        return self._rolling
 
     @property
     def n_fingers(self) -> int:
@@ -432,7 +308,12 @@ class LiftAnalyzer:
             margin = worst_total - weight
             csm_margin = nan if separated else csm_total - weight
         guaranteed = margin > 0.0 and all(st == STATUS_BOUNDED for st in statuses)
+        rolling = NOT_CHECKED
+        if guaranteed and not self.model.fingers[0].is_circle:
+            rolling = self.rolling.verdict(k, dp, alpha, weight, cos_phi)
+            guaranteed = rolling.holds
         penetration = csm_penetration(f_ns, self._k_n)
+        path = self._csm_path.verdict(k, dp, alpha, weight, csm_margin)
         return LiftResult._with_lazy_contacts(
             (self._frames, states, f_ns, f_ts),
             lift_guaranteed=guaranteed, worst_case_margin=margin,
@@ -444,7 +325,12 @@ class LiftAnalyzer:
             torque_limit=self.limits.torque_limit,
             within_torque_limit=self.limits.within_torque_limit(taus),
             csm_penetration=np.array(penetration),
-            csm_in_domain=self.limits.csm_in_domain(penetration))
+            csm_in_domain=self.limits.csm_in_domain(penetration),
+            rolling_checked=rolling.checked, rolling_margin=rolling.margin,
+            rolling_turn=rolling.pose.turn if rolling.pose is not None else nan,
+            rolling_slide=rolling.pose.shift[0] if rolling.pose is not None else nan,
+            rolling_message=rolling.message, csm_path_lift=path.lift,
+            csm_path_margin=path.margin, csm_path_delta_theta_p=path.delta_theta_p)
 
     def _validate_floats(self, k_theta: ArrayLike, delta_theta_p: ArrayLike,
                          friction_angle: float) -> tuple[list[float], list[float], float]:
@@ -533,12 +419,58 @@ class LiftAnalyzer:
 
     def lift_map(self, friction_angles: ArrayLike, delta_theta_p: ArrayLike,
                  k_theta: ArrayLike) -> LiftMap:
-        """Margins on an (alpha, delta_theta_p, k_theta of finger 1) grid (see regions)."""
-        return lift_map(self.table, np.asarray(friction_angles, dtype=np.float64),
-                        np.asarray(delta_theta_p, dtype=np.float64),
-                        np.asarray(k_theta, dtype=np.float64))
+        """Margins on an (alpha, delta_theta_p, k_theta of finger 1) grid (see regions).
+
+        For a section that can roll (not a circle) every cell where eq. (18) holds at rest is
+        checked as :meth:`check_lift` checks it (:mod:`dam_analysis.rolling`); where the
+        object can rest in a rolled or slid pose, ``sufficient_margin`` is that pose's margin
+        (NaN: not decided), so the sufficient region is the guarantee ``check_lift`` gives.
+        """
+        result = lift_map(self.table, np.asarray(friction_angles, dtype=np.float64),
+                          np.asarray(delta_theta_p, dtype=np.float64),
+                          np.asarray(k_theta, dtype=np.float64))
+        if self.model.fingers[0].is_circle:
+            return result
+        margin = result.sufficient_margin.copy()
+        ratios = self._ratios
+        for (a_idx, d_idx, k_idx) in zip(*np.nonzero(result.sufficient_lift), strict=True):
+            k1 = float(result.k_theta[k_idx])
+            verdict = self.rolling.verdict(
+                [k1 * r / ratios[0] for r in ratios],
+                [float(result.delta_theta_p[d_idx])] * self.n_fingers,
+                float(result.friction_angle[a_idx]), self.model.object_weight,
+                self._cos_phi_list)
+            if not verdict.holds:
+                margin[a_idx, d_idx, k_idx] = verdict.margin
+        return LiftMap(friction_angle=result.friction_angle,
+                       delta_theta_p=result.delta_theta_p, k_theta=result.k_theta,
+                       sufficient_margin=margin, csm_margin=result.csm_margin)
 
     def boundaries(self, friction_angle: float, delta_theta_p: ArrayLike) -> Boundaries:
-        """Lower boundaries k_theta*(delta_theta_p) of both regions for one friction angle."""
-        return region_boundaries(self.table, friction_angle,
-                                 np.asarray(delta_theta_p, dtype=np.float64))
+        """Lower boundaries k_theta*(delta_theta_p) of both regions for one friction angle.
+
+        For a section that can roll (not a circle) the sufficient boundary ``k*`` of eq. (18)
+        at rest is kept only where the rolling check (:mod:`dam_analysis.rolling`) holds at
+        ``k* (1 + 1e-6)`` and at ``2, 4, ..., 1024`` times ``k*``; elsewhere it is NaN (no
+        guarantee). The rolling check is decided at these stiffnesses, not between them.
+        """
+        result = region_boundaries(self.table, friction_angle,
+                                   np.asarray(delta_theta_p, dtype=np.float64))
+        if self.model.fingers[0].is_circle:
+            return result
+        suff = result.sufficient.copy()
+        ratios = self._ratios
+        for d_idx, k_star in enumerate(result.sufficient):
+            if not np.isfinite(k_star):
+                continue
+            dp = [float(result.delta_theta_p[d_idx])] * self.n_fingers
+            for factor in (1.0 + 1e-6,) + tuple(2.0 ** j for j in range(1, 11)):
+                k1 = float(k_star) * factor
+                verdict = self.rolling.verdict([k1 * r / ratios[0] for r in ratios], dp,
+                                               float(friction_angle),
+                                               self.model.object_weight, self._cos_phi_list)
+                if not verdict.holds:
+                    suff[d_idx] = np.nan
+                    break
+        return Boundaries(friction_angle=result.friction_angle,
+                          delta_theta_p=result.delta_theta_p, sufficient=suff, csm=result.csm)

@@ -87,6 +87,15 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
         f'contact stiffness model  : {yes_no[bool(response.csm_lift)]}'
         f'   margin {_newtons(response.csm_margin)}'
         f'   {"inside" if response.csm_in_domain else "OUTSIDE"} its domain',
+        f'CSM on the way (path)    : {yes_no[bool(response.csm_path_lift)]}'
+        f'   largest margin {_newtons(response.csm_path_margin)}'
+        + ('' if math.isnan(response.csm_path_delta_theta_p) else
+           f' at {math.degrees(response.csm_path_delta_theta_p):.4g} deg'),
+        *([f'turned on the table      : may rest turned '
+           f'{math.degrees(response.rolling_turn):+.4g} deg, margin '
+           f'{_newtons(response.rolling_margin)}']
+          if response.rolling_checked and not response.lift_guaranteed
+          and not math.isnan(response.rolling_turn) else []),
         f'torque within the hand   : {yes_no[bool(response.within_torque_limit)]}'
         f'   limit {response.torque_limit:g} N*m',
         'finger  delta_theta_s [deg]  tau_s [N*m]  CSM f_n/k_n [um]',

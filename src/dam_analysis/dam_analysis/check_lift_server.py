@@ -136,6 +136,8 @@ class CheckLiftServer(Node):
         friction_angle = float(request.friction_angle)
         response.friction_angle = math.nan  # until an answer is computed
         response.torque_limit = math.nan
+        response.rolling_margin = response.rolling_turn = response.rolling_slide = math.nan
+        response.csm_path_margin = response.csm_path_delta_theta_p = math.nan
         defaults: list[str] = []
         name = request.object or self._config.object.name
         analyzer = self._computed(response, 'preparing the object',
@@ -169,8 +171,21 @@ class CheckLiftServer(Node):
         response.within_torque_limit = bool(result.within_torque_limit)
         response.csm_penetration = [float(v) for v in result.csm_penetration]
         response.csm_in_domain = bool(result.csm_in_domain)
+        response.rolling_checked = bool(result.rolling_checked)
+        response.rolling_margin = float(result.rolling_margin)
+        response.rolling_turn = float(result.rolling_turn)
+        response.rolling_slide = float(result.rolling_slide)
+        response.csm_path_lift = bool(result.csm_path_lift)
+        response.csm_path_margin = float(result.csm_path_margin)
+        response.csm_path_delta_theta_p = float(result.csm_path_delta_theta_p)
         if result.branch_message:
             message = result.branch_message
+        elif result.rolling_message:
+            message = ('lift not guaranteed: eq. 18 holds at rest '
+                       f'({result.worst_case_margin:+.4g} N), but {result.rolling_message}')
+        elif result.lift_guaranteed and result.rolling_checked:
+            message = ('lift guaranteed (eq. 18, and the object can rest in none of the poses '
+                       'it can turn into on the table)')
         elif result.lift_guaranteed:
             message = 'lift guaranteed (eq. 18)'
         else:

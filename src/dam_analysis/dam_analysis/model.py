@@ -28,6 +28,7 @@ import numpy as np
 from dam_analysis.errors import NoSolutionError
 from dam_common.config import DamConfig
 from dam_common.cross_section import Circle, CrossSection, SegmentDistance
+from dam_common.turned_section import TurnedSection
 
 #: Step of the scan that closes the compliant joint to the first contact [rad].
 _SCAN_STEP_RAD = math.radians(0.05)
@@ -269,10 +270,23 @@ class HandModel:
         return len(self.fingers)
 
 
-def finger_geometries(config: DamConfig) -> tuple[FingerGeometry, ...]:
-    """Reduce every configured finger to its plane (see the module docstring)."""
+def finger_geometries(config: DamConfig, turn: float = 0.0,
+                      shift: tuple[float, float] = (0.0, 0.0)) -> tuple[FingerGeometry, ...]:
+    """Reduce every configured finger to its plane (see the module docstring).
+
+    Parameters
+    ----------
+    config : validated configuration.
+    turn : the object's turn from its resting pose [rad], counter-clockwise in the section's
+        ``(x, z)`` plane (:class:`~dam_common.turned_section.TurnedSection`); 0: at rest.
+    shift : ``(x, z)`` displacement of the centroid from its resting position [m], ``x``
+        along the section's ``x`` axis (``object.section_x``), ``z`` up.
+    """
     hand, obj = config.hand, config.object
     out = []
+    base_section = obj.section if turn == 0.0 else TurnedSection(obj.section, turn)
+    position = (obj.position_m + shift[0] * obj.section_x
+                + np.array([0.0, 0.0, shift[1]]))
     for finger in hand.fingers:
         base = np.asarray(finger.base_position_m, dtype=np.float64)
         axis = finger.joint_axis
@@ -280,10 +294,10 @@ def finger_geometries(config: DamConfig) -> tuple[FingerGeometry, ...]:
             raise NoSolutionError(f'finger {finger.name}: joint axis {axis.tolist()} is not '
                                   f'parallel to the object axis {obj.axis.tolist()}; the '
                                   'planar contact model needs parallel axes')
-        rel = obj.position_m - base
+        rel = position - base
         # the finger's u axis is the section's x axis or its opposite (both are normal to the
         # object axis): mirror the section for the latter
-        section = obj.section
+        section = base_section
         if float(finger.inward_direction @ obj.section_x) < 0.0:
             section = section.mirrored()
         radius = section.radius if isinstance(section, Circle) else section.circumradius
