@@ -206,3 +206,24 @@ def test_the_map_of_a_rolling_section_agrees_with_check_lift() -> None:
                 assert bool(m.sufficient_lift[a, d, kk]) == r.lift_guaranteed
     b = an.boundaries(math.radians(5.0), dps)
     assert np.all(np.isnan(b.sufficient))
+
+
+def test_the_planner_proposes_no_pair_the_bar_may_rest_turned_with() -> None:
+    """/plan_lift's guaranteed pair passes the rolling check too: for the hexagonal bar, whose
+    eq. 18 holds at rest over these ranges, it proposes none and says why; the same ranges
+    for the cylinder still give a pair."""
+    from dam_analysis.planner import LiftPlanner, check_ranges
+    config = load_config()
+    for name, expect in (('hex_bar', False), ('cylinder', True)):
+        planner = LiftPlanner(config.with_object(name))
+        ranges = check_ranges(planner.config, (math.radians(4.0), math.radians(5.0)),
+                              (0.04, 0.04), 0.0, 50.0,
+                              (math.radians(5.0), math.radians(10.0)), 0.01)
+        plan = planner.plan(ranges)
+        assert plan.found == expect, plan.reason
+        if not expect:
+            assert 'eq. 18 holds at rest' in plan.reason and 'may roll' in plan.reason
+        else:
+            r = planner.analyzer_at(0.0).check_lift([plan.k_theta], [plan.delta_theta_p],
+                                                     math.radians(5.0))
+            assert r.lift_guaranteed

@@ -190,6 +190,12 @@ class LiftAnalyzer:
         self._csm_path = CsmPathVerdict(self.table, self._ratios, self._k_t)
 
     @property
+    def rolling_cos_phi(self) -> list[float]:
+        """``cos(2 pi k / L)`` of the friction cone's span vectors (eq. 7), for the rolling
+        check."""
+        return self._cos_phi_list
+
+    @property
     def rolling(self) -> RollingCheck:
         """The check of the poses the object can roll into (built on first use)."""
         if self._rolling is None:

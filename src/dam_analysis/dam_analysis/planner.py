@@ -342,6 +342,10 @@ class LiftPlanner:
             margin_at_cap = np.where((slope_eff > 0.0) & np.isfinite(cap),
                                      cap * slope_eff - weight_max, -np.inf)
         feasible = np.isfinite(k_needed) & np.isfinite(cap) & (k_needed <= cap)
+        rolling = ''
+        if np.any(feasible) and not analyzers[0].model.fingers[0].is_circle:
+            feasible, rolling = self._rolling_filter(analyzers, dps, k_needed, feasible,
+                                                     alpha_max, ranges, check_stop)
         best = int(np.argmax(margin_at_cap))
         best_exists = bool(np.isfinite(margin_at_cap[best]))
         csm = self._csm_pair(analyzers, dps, cap, ranges)
@@ -355,7 +359,7 @@ class LiftPlanner:
         else:
             d = best
             k, found, margin, error = math.nan, False, math.nan, math.nan
-            reason = self._reason(dps, k_needed, cap, alpha_max, ranges)
+            reason = rolling or self._reason(dps, k_needed, cap, alpha_max, ranges)
         return PlanResult(
             found=found, k_theta=k, delta_theta_p=float(dps[d]) if found else math.nan,
             worst_case_margin=margin, position_error_bound=error,
@@ -365,6 +369,39 @@ class LiftPlanner:
             csm_k_theta=csm[0], csm_delta_theta_p=csm[1], csm_margin=csm[2],
             csm_in_domain=csm[3], k_theta_cap=float(cap[d]), reason=reason, method=method,
             offsets=offsets)
+
+    def _rolling_filter(self, analyzers: list[LiftAnalyzer], dps: np.ndarray,
+                        k_needed: np.ndarray, feasible: np.ndarray, alpha_max: float,
+                        ranges: PlanRanges, check_stop: Callable[[], None]
+                        ) -> tuple[np.ndarray, str]:
+        """Drop the displacements where a section that can turn on the table may rest turned.
+
+        At the pair a displacement would propose (``k_needed``), the rolling check
+        (:mod:`dam_analysis.rolling`) of every position node at ``alpha_max`` (a larger cone
+        admits more forces) with the weight a variable over the mass range. Returns the
+        remaining displacements and, when none remains, why.
+        """
+        g = float(self.config.task.gravity_m_per_s2)
+        weights = (ranges.mass[0] * g, ranges.mass[1] * g)
+        kept = feasible.copy()
+        first = ''
+        for d in np.flatnonzero(feasible):
+            k1 = float(k_needed[d])
+            for analyzer in analyzers:
+                check_stop()
+                ratios = analyzer.model.stiffness_ratios
+                verdict = analyzer.rolling.verdict(
+                    [k1 * float(r) / float(ratios[0]) for r in ratios],
+                    [float(dps[d])] * analyzer.n_fingers, alpha_max, weights,
+                    analyzer.rolling_cos_phi)
+                if not verdict.holds:
+                    kept[d] = False
+                    first = first or (
+                        f'eq. 18 holds at rest, but at k_theta {k1:.4g} N*m/rad, '
+                        f'delta_theta_p {math.degrees(float(dps[d])):g} deg '
+                        f'{verdict.message}')
+                    break
+        return kept, '' if np.any(kept) else first
 
     def _csm_pair(self, analyzers: list[LiftAnalyzer], dps: np.ndarray, cap: np.ndarray,
                   ranges: PlanRanges) -> tuple[float, float, float, bool]:

@@ -372,15 +372,15 @@ class RollingCheck:
         return None
 
     def verdict(self, k_theta: list[float], delta_theta_p: list[float],
-                friction_angle: float, weight: float, cos_phi: list[float],
-                complete: bool = False) -> RollingVerdict:
+                friction_angle: float, weight: float | tuple[float, float],
+                cos_phi: list[float], complete: bool = False) -> RollingVerdict:
         """Whether the object can rest in any rolled or slid pose, for one request.
 
         Parameters
         ----------
         k_theta : per finger [N m/rad]; delta_theta_p : per finger [rad];
-        friction_angle : alpha [rad]; weight : m_B g [N]; cos_phi : the cone's
-        ``cos(2 pi k / L)``.
+        friction_angle : alpha [rad]; weight : m_B g [N], or its range (the object rests
+        for some weight in it); cos_phi : the cone's ``cos(2 pi k / L)``.
         complete : evaluate every pose (the smallest margin); False stops at the first pose
             where the object can rest (the verdict is the same, the margin an upper bound of
             the smallest), trying the pose that failed last first.
@@ -421,10 +421,10 @@ class RollingCheck:
 
 
 def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: float,
-                cos_phi: list[float], weight: float, pivots: list[tuple[float, float]],
-                signs: list[float], gravity_arm: float, balance_moment: bool
-                ) -> float:
-    """Least vertical force the table must NOT supply in one rolled pose, minus the weight.
+                cos_phi: list[float], weight: float | tuple[float, float],
+                pivots: list[tuple[float, float]], signs: list[float], gravity_arm: float,
+                balance_moment: bool) -> float:
+    """Least ``c_z^T f_o - m_B g`` over the admissible forces that balance a turned pose.
 
     The linear program (eqs. 7-9 with the pose's contacts): minimise ``c_z^T sum_i f_ci``
     over the friction cones' span vectors, ``lambda >= 0``, subject to each finger's torque
@@ -437,7 +437,9 @@ def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: 
     ----------
     states : the fingers in this pose; k_theta : per finger [N m/rad];
     friction_angle : alpha [rad]; cos_phi : the cone's ``cos(2 pi k / L)``; weight : m_B g
-    [N]; pivots : the pivot ``(u, z)`` in each finger's plane [m]; signs : +1 where a finger's
+    [N], or its range ``(least, largest)``: then the weight is a variable of the program too
+    (a rest with any weight in the range); pivots : the pivot ``(u, z)`` in each finger's
+    plane [m]; signs : +1 where a finger's
     ``u`` axis is the section's ``x`` axis, -1 where it is mirrored; gravity_arm : moment of
     the weight about the pivot per newton [m] (section frame); balance_moment : False where
     the object rests on a whole face (two supports carry any moment).
@@ -469,25 +471,29 @@ def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: 
         blocks.append((n_cols, block_h, -k_theta[i] * state.delta_theta_s))
         moment_row.extend(block_m)
         n_cols += len(cos_phi)
+    low, high = (weight, weight) if isinstance(weight, float | int) else weight
+    if n_cols == 0:  # no finger touches: the weight alone, balanced only on the pivot's line
+        return -high if not balance_moment or abs(gravity_arm) < 1e-12 else math.inf
+    # the last column is the weight W in [low, high]: minimise c_z^T f_o - W
+    cost.append(-1.0)
     for start, block_h, tau in blocks:
-        row = [0.0] * n_cols
+        row = [0.0] * (n_cols + 1)
         row[start:start + len(block_h)] = block_h
         rows.append(row)
         rhs.append(tau)
-    if balance_moment:
-        rows.append(moment_row)
-        rhs.append(-weight * gravity_arm)
-    if n_cols == 0:  # no finger touches: the weight alone, balanced only on the pivot's line
-        return -weight if not balance_moment or abs(gravity_arm) < 1e-12 else math.inf
-    res = linprog(np.array(cost), A_eq=np.array(rows), b_eq=np.array(rhs),
-                  bounds=(0.0, None), method='highs')
+    if balance_moment:  # sum m lambda + W * arm = 0
+        rows.append(moment_row + [gravity_arm])
+        rhs.append(0.0)
+    bounds = [(0.0, None)] * n_cols + [(float(low), float(high))]
+    res = linprog(np.array(cost), A_eq=np.array(rows), b_eq=np.array(rhs), bounds=bounds,
+                  method='highs')
     if res.status == 2:
         return math.inf
     if res.status == 3:
         return -math.inf
     if res.status != 0:
         raise RuntimeError(f'linear program of a rolled pose failed: {res.message}')
-    return float(res.fun) - weight
+    return float(res.fun)
 
 
 def _newtons(value: float) -> str:
