@@ -10,6 +10,10 @@ without asking the code under test:
 - ``/dam/status`` at 10 Hz through the phases in :data:`PHASES`, ``DONE`` with outcome 1;
 - ``/sim/object_pose`` at 50 Hz, the object rising from 0.0125 m after 1.2 s;
 - ``/dam_grasp/_action/feedback``, three messages, the last two with the margins;
+- when asked for, ``/sim/object_table_contact`` at 50 Hz beside the pose (a bounce of two
+  messages, then off the table from message ``LIFT_FROM`` on, :func:`contact_state`) and the
+  ENDED event on ``/dam/episode``, with the controller's estimate (``ESTIMATE``) in a
+  ``GraspEpisode`` whose definition has its fields, or without;
 - ``custom_data``: the recorder's lost, dropped, paused and trimmed counts, its backlog and
   (optionally) the episode metadata, complete unless ``custom`` says otherwise.
 """
@@ -46,6 +50,13 @@ TRIMMED = {'/dam/status': 1}
 DROPPED = {'/sim/object_pose': 5}
 BACKLOG = {'max_s': 0.0125, 'mean_s': 0.0031, 'messages': 400}
 GOAL_ID = '0123456789abcdef' * 2
+#: ``/sim/object_table_contact``: message k beside pose message k; a bounce (off the table for
+#: messages BOUNCE[0] .. BOUNCE[1] - 1, 40 ms), then off from LIFT_FROM on (1.302 s).
+BOUNCE = (30, 32)
+LIFT_FROM = 65
+ENDED_NS = T0 + 1_800_000_000  # the goal's end (the summary's ended_ns) [ns]
+#: The controller's estimate in the ENDED event (GraspEpisode fields where the message has them).
+ESTIMATE = {'object_rise': 0.0061, 'object_left_table': True, 'object_orientation': 0.2}
 K_THETA = [10.0, 5.0, 5.0]
 DELTA_THETA_P = [0.17453292519943295] * 3
 CHECK_LIFT = {'ok': True, 'message': 'lift guaranteed', 'lift_guaranteed': True,
@@ -69,6 +80,19 @@ def pose_z(k: int) -> float:
     """Height of the object in pose message ``k`` [m]."""
     t = k * POSE_STEP_NS * 1e-9
     return Z0 + max(0.0, t - 1.2) * 0.02
+
+
+def contact_state(k: int) -> tuple[bool, float, bool, bool]:
+    """(on_table, off_table_s, lifted_off, lifted) of contact message ``k`` (the stand-in's
+    rule on its own clock: 50 ms off is a lift-off, 0.1 s lifted)."""
+    step = POSE_STEP_NS * 1e-9
+    if BOUNCE[0] <= k < BOUNCE[1]:
+        off = (k - BOUNCE[0]) * step
+    elif k >= LIFT_FROM:
+        off = (k - LIFT_FROM) * step
+    else:
+        return True, 0.0, False, False
+    return False, off, off >= 0.05 - 1e-9, off >= 0.1 - 1e-9
 
 
 def summary(**changes: Any) -> dict[str, Any]:
@@ -110,8 +134,10 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                                                '/sim/object_pose',
                                                '/dam_grasp/_action/feedback'),
                     episode: dict[str, Any] | None = None,
-                    custom: dict[str, str] | None = None, storage: str = 'mcap') -> GraspBag:
-    """Write the grasp bag described in the module to ``path`` (only ``topics``)."""
+                    custom: dict[str, str] | None = None, storage: str = 'mcap',
+                    estimate: dict[str, Any] | None = None) -> GraspBag:
+    """Write the grasp bag described in the module to ``path`` (only ``topics``); the ENDED
+    event's GraspEpisode gets the fields of ``estimate`` (a definition with them) when given."""
     t = typestore.types
     data = {'dam_recorder.lost_messages': json.dumps(LOST),
             'dam_recorder.paused_messages': json.dumps(PAUSED),
@@ -131,11 +157,17 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
     types = {'/joint_states': 'sensor_msgs/msg/JointState',
              '/dam/status': 'dam_interfaces/msg/DamStatus',
              '/sim/object_pose': 'geometry_msgs/msg/PoseStamped',
-             '/dam_grasp/_action/feedback': 'dam_interfaces/action/DamGrasp_FeedbackMessage'}
+             '/dam_grasp/_action/feedback': 'dam_interfaces/action/DamGrasp_FeedbackMessage',
+             '/sim/object_table_contact': 'dam_interfaces/msg/ObjectTableContact',
+             '/dam/episode': 'dam_interfaces/msg/GraspEpisode'}
     ids = {}
+    stores = dict.fromkeys(topics, typestore)
     for topic in topics:
         kind = load_message_type(types[topic], prefixes)
-        ids[topic] = writer.add_topic(topic, kind.name, kind.definition(), kind.type_hash, [])
+        definition = kind.definition()
+        if topic == '/dam/episode' and estimate is not None:
+            definition, stores[topic] = _with_fields(definition, estimate)
+        ids[topic] = writer.add_topic(topic, kind.name, definition, kind.type_hash, [])
     out = GraspBag(path)
     pending: list[tuple[int, str, Any]] = []
     if '/joint_states' in topics:
@@ -182,9 +214,21 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                     uuid=np.frombuffer(bytes.fromhex(GOAL_ID), dtype=np.uint8).copy()),
                 feedback=feedback)
             pending.append((T0 + offset, '/dam_grasp/_action/feedback', msg))
+    if '/sim/object_table_contact' in topics:
+        for k in range(POSE_COUNT):
+            on, off, lifted_off, lifted = contact_state(k)
+            msg = t['dam_interfaces/msg/ObjectTableContact'](
+                header=_header(t, 300 + k, 0, 'world'), table_contacts=2 if on else 0,
+                on_table=on, off_table_s=off, lifted_off=lifted_off, lifted=lifted)
+            pending.append((T0 + POSE_OFFSET_NS + k * POSE_STEP_NS, '/sim/object_table_contact',
+                            msg))
+    if '/dam/episode' in topics:
+        pending.append((ENDED_NS, '/dam/episode',
+                        _ended_event(stores['/dam/episode'], estimate or {})))
     pending.sort(key=lambda item: item[0])
     for time_ns, topic, msg in pending:
-        writer.write(ids[topic], time_ns, bytes(typestore.serialize_cdr(msg, types[topic])))
+        store = stores[topic]
+        writer.write(ids[topic], time_ns, bytes(store.serialize_cdr(msg, types[topic])))
         out.times.setdefault(topic, []).append(time_ns)
         out.values.setdefault(topic, []).append(msg)
     writer.close()
@@ -192,3 +236,39 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
         out.times.setdefault(topic, [])
         out.values.setdefault(topic, [])
     return out
+
+
+_FIELD_TYPES = {bool: 'bool', float: 'float64'}
+
+
+def _with_fields(definition: str, fields: dict[str, Any]) -> tuple[str, Any]:
+    """A GraspEpisode definition with ``fields`` appended to its own part (as a newer
+    controller's message would have them), and a type store of it."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    separator = '\n' + '=' * 80 + '\n'
+    own, _, nested = definition.partition(separator)
+    lines = ''.join(f'{_FIELD_TYPES[type(v)]} {name}\n' for name, v in fields.items())
+    text = own.rstrip('\n') + '\n' + lines + (separator + nested if nested else '')
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(text, 'dam_interfaces/msg/GraspEpisode'))
+    return text, store
+
+
+def _ended_event(store: Any, fields: dict[str, Any]) -> Any:
+    """The goal's ENDED event, every field a plain value, with ``fields`` added."""
+    t = store.types
+    answer = t['dam_interfaces/msg/LiftAnswer'](
+        ok=True, message='', lift_guaranteed=True, worst_case_margin=0.04, csm_lift=True,
+        csm_margin=1.3, delta_theta_s=np.zeros(3), compliant_torque=np.zeros(3),
+        friction_angle=0.087, torque_limit=0.6, within_torque_limit=True,
+        csm_penetration=np.zeros(3), csm_in_domain=True, object='cylinder')
+    values = {name: None for name, _ in store.fielddefs['dam_interfaces/msg/GraspEpisode'][1]}
+    values.update(
+        header=_header(t, 400, 0, ''), event=1, goal_id=GOAL_ID,
+        goal_k_theta=np.array([10.0]), goal_delta_theta_p=np.zeros(0), object='cylinder',
+        k_theta=np.array(K_THETA), delta_theta_p=np.array(DELTA_THETA_P), lift_checked=True,
+        check_lift=answer, outcome=1, outcome_name='SUCCESS', message='grasp done: enveloped',
+        duration=1.55, config_source='', config_yaml='', software_version='')
+    values.update(fields)
+    return t['dam_interfaces/msg/GraspEpisode'](**values)

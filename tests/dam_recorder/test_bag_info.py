@@ -14,13 +14,15 @@ import pytest
 
 from dam_recorder.bag_info import (
     bag_info,
-    bag_info_json,
     episodes_info,
+    grasps_from_status,
+    topic_stats,
+)
+from dam_recorder.bag_info_text import (
+    bag_info_json,
     episodes_json,
     format_bag_info,
     format_episodes,
-    grasps_from_status,
-    topic_stats,
 )
 from dam_recorder.errors import BagReadError
 

@@ -125,7 +125,7 @@ def test_height_is_the_rise_in_mm_and_the_margins_and_title_are_written(grasp_ba
     result = plot_bag(grasp_bag.path)
     height_ax = result.figure.axes[6]
     assert height_ax.get_ylabel() == 'object rise [mm]'
-    line = lines_by_label(height_ax)['object rise']
+    line = lines_by_label(height_ax)['object rise (stand-in)']
     k = np.arange(gb.POSE_COUNT)
     assert np.allclose(line.get_xdata(), (gb.POSE_OFFSET_NS + k * gb.POSE_STEP_NS) / 1e9,
                        atol=1e-12)

@@ -66,8 +66,11 @@ def build_parser() -> argparse.ArgumentParser:
         description='Draw the grasp recorded in BAG: per finger the compliant and position '
                     'joint angles [deg] and torques [N*m] (/joint_states), the controller '
                     'phases (/dam/status) as shaded spans, the object rise [mm] '
-                    '(/sim/object_pose) and the check_lift margins (episode metadata, or '
-                    'the action feedback). What the bag lacks is listed in the picture.')
+                    '(/sim/object_pose) with the stretches off the table and the lift-off '
+                    '(/sim/object_table_contact: the stand-in\'s ground truth) and the '
+                    'controller\'s estimated rise (/dam/episode), and the check_lift margins '
+                    '(episode metadata, or the action feedback). What the bag lacks is listed '
+                    'in the picture.')
     plot.add_argument('bag', metavar='BAG', help='the bag directory')
     plot.add_argument('-o', '--output', metavar='FILE', type=Path,
                       help='picture to write; the suffix picks the format (.png, .pdf, .svg); '
@@ -137,17 +140,18 @@ def _one_bag(path: str) -> None:
 
 def run_info(args: argparse.Namespace) -> int:
     from dam_recorder import bag_info as core
+    from dam_recorder import bag_info_text as text
     from dam_recorder.bag_reading import locate
 
     kind, _bags = locate(args.bag)
     if kind == 'bag':
         info = core.bag_info(args.bag)
-        print(json.dumps(core.bag_info_json(info), indent=1) if args.json
-              else core.format_bag_info(info))
+        print(json.dumps(text.bag_info_json(info), indent=1) if args.json
+              else text.format_bag_info(info))
         return 0
     episodes = core.episodes_info(args.bag)
-    print(json.dumps(core.episodes_json(episodes), indent=1) if args.json
-          else core.format_episodes(episodes))
+    print(json.dumps(text.episodes_json(episodes), indent=1) if args.json
+          else text.format_episodes(episodes))
     for error in episodes.errors:
         print(f'{PROG} info: {error}', file=sys.stderr)
     return 1 if episodes.errors else 0
@@ -172,10 +176,12 @@ def run_plot(args: argparse.Namespace) -> int:
             print(f'  {note}')
     print(f'  {len(data.joints)} joints, {len(data.phases)} phase spans'
           + (', check_lift margins' if data.margins else ''))
-    if data.height_rise_mm is not None and len(data.height_rise_mm):
-        rise = data.height_rise_mm
-        print(f'  object rise (/sim/object_pose, from the bag\'s first pose): at the end '
-              f'{rise[-1]:.2f} mm, highest {rise.max():.2f} mm')
+    if data.object_truth is not None and (data.object_truth.rise_final_mm is not None
+                                          or data.object_truth.contact_recorded):
+        from dam_recorder.object_record import object_lines
+
+        for line in object_lines(data.object_truth, data.object_estimate):
+            print(f'  {line}')
     for item in data.missing:
         print(f'  missing: {item}')
     return 0

@@ -5,7 +5,10 @@ largest gap between consecutive messages per topic and when it began, the record
 lost, dropped, paused and trimmed messages and its backlog (``custom_data``), the episode
 metadata when it is an episode bag with whether the bag holds the whole episode and what it
 lacks (:mod:`dam_recorder.completeness`), and the grasps ``/dam/status`` shows (from the phase
-leaving ``IDLE`` to ``DONE``, ``ABORTED`` or ``FAILED``, with the outcome it then reports).
+leaving ``IDLE`` to ``DONE``, ``ABORTED`` or ``FAILED``, with the outcome it then reports), and
+the object (:mod:`dam_recorder.object_record`): the stand-in's ground truth (its rise, whether
+it left the table, whether it was off it at the end of the grasp) and the controller's
+estimate, each labelled as such.
 
 For a directory of episode bags (:func:`episodes_info`): one row per episode (name, start,
 durations, outcome, whether it is complete, ``k_theta``, ``delta_theta_p``, whether the lift
@@ -18,13 +21,10 @@ Times are receive times; "s" columns are seconds since the bag's first message.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from collections import Counter
 from dataclasses import dataclass, replace
-from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -42,10 +42,17 @@ from dam_recorder.episode import (
     OUTCOME_NAMES,
     OUTCOME_ORDER,
     Episode,
-    format_floats,
     parse_episode_name,
 )
 from dam_recorder.errors import BagReadError
+from dam_recorder.object_record import (
+    OBJECT_POSE_TOPIC,
+    OBJECT_TOPICS,
+    TABLE_CONTACT_TOPIC,
+    ObjectCollector,
+    ObjectEstimate,
+    ObjectTruth,
+)
 
 STATUS_TOPIC = '/dam/status'
 #: Phases of a running grasp, and the phases a grasp ends in.
@@ -149,6 +156,12 @@ class BagInfo:
         Whether the episode bag holds its whole episode; ``None`` when not recorded.
     backlog : dict or None
         The recorder's backlog (``max_s``, ``mean_s``, ``messages``).
+    object_truth : ObjectTruth or None
+        The stand-in's ground truth of the object (rise, left the table, lifted at the end of
+        the grasp: :mod:`dam_recorder.object_record`); None when the bag has neither
+        ``/sim/object_pose`` nor ``/sim/object_table_contact``.
+    object_estimate : ObjectEstimate or None
+        The controller's estimate of the object from its ENDED event, where recorded.
     """
 
     path: Path
@@ -166,6 +179,8 @@ class BagInfo:
     dropped: dict[str, int] = dataclasses.field(default_factory=dict)
     completeness: Completeness | None = None
     backlog: dict[str, float] | None = None
+    object_truth: ObjectTruth | None = None
+    object_estimate: ObjectEstimate | None = None
 
     @property
     def duration_ns(self) -> int:
@@ -335,6 +350,10 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
         if types.get(STATUS_TOPIC) == 'dam_interfaces/msg/DamStatus':
             status = [(m.time_ns, str(m.message.phase), int(m.message.outcome),
                        str(m.message.message)) for m in bag.messages([STATUS_TOPIC])]
+        starts = [int(v[0]) for v in times.values() if v.size]
+        collector = ObjectCollector(min(starts, default=0))
+        for m in bag.messages([t for t in OBJECT_TOPICS if t in bag.topics]):
+            collector.add(m.topic, m.time_ns, m.message)
     topics = []
     for name in sorted(types):
         stats = topic_stats(name, types[name], times.get(name, np.zeros(0, np.int64)))
@@ -349,7 +368,10 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
         start_ns=min(firsts) if firsts else None, end_ns=max(lasts) if lasts else None,
         message_count=sum(t.count for t in topics), topics=topics, lost=lost, paused=paused,
         trimmed=trimmed, episode=episode, grasps=grasps_from_status(status), dropped=dropped,
-        completeness=completeness, backlog=meta.backlog())
+        completeness=completeness, backlog=meta.backlog(),
+        object_truth=(collector.truth(episode.summary.ended_ns if episode else None)
+                      if {OBJECT_POSE_TOPIC, TABLE_CONTACT_TOPIC} & set(types) else None),
+        object_estimate=collector.estimate())
 
 
 def episode_row(bag_dir: Path) -> EpisodeRow:
@@ -402,181 +424,3 @@ def episodes_info(path: str | os.PathLike[str]) -> EpisodesInfo:
     if kind != 'episodes':
         raise BagReadError(f'{path}: is one bag, not a directory of episode bags')
     return EpisodesInfo(Path(path), [episode_row(b) for b in bags])
-
-
-# -- text ------------------------------------------------------------------------------------
-
-def local_time(time_ns: int | None) -> str:
-    """``YYYY-MM-DD HH:MM:SS.mmm`` in local time (``-`` for ``None``)."""
-    if time_ns is None:
-        return '-'
-    return datetime.fromtimestamp(time_ns * 1e-9).strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]
-
-
-def _num(value: float | None, spec: str) -> str:
-    return '-' if value is None else format(value, spec)
-
-
-def _margin(value: float) -> str:
-    return f'{value:+.4g} N' if math.isfinite(value) else f'{value} N'
-
-
-def _yes(value: bool | None) -> str:
-    return '-' if value is None else ('yes' if value else 'no')
-
-
-def _table(header: list[str], rows: list[list[str]], right: set[int]) -> list[str]:
-    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
-    lines = []
-    for row in [header, *rows]:
-        cells = [c.rjust(w) if i in right else c.ljust(w)
-                 for i, (c, w) in enumerate(zip(row, widths, strict=True))]
-        lines.append('  '.join(cells).rstrip())
-    return lines
-
-
-def episode_lines(episode: Episode) -> list[str]:
-    """The episode metadata as text lines."""
-    s = episode.summary
-    lines = [f'episode:    {s.outcome_name} ({s.message})',
-             f'  goal id {s.goal_id}, grasp {s.duration_s:.3f} s, pre-roll {s.pre_roll_s:g} s, '
-             f'post-roll {s.post_roll_s:g} s, object {s.object or "not recorded"}',
-             f'  k_theta [N*m/rad] {format_floats(s.k_theta)}   delta_theta_p [deg] '
-             f'{format_floats(s.delta_theta_p, math.degrees(1.0))}   friction angle '
-             f'{math.degrees(s.friction_angle):.4g} deg',
-             f'  goal as sent: k_theta [N*m/rad] {format_floats(s.goal_k_theta)}   '
-             f'delta_theta_p [deg] {format_floats(s.goal_delta_theta_p, math.degrees(1.0))}'
-             ' (empty: the configured value)']
-    c = s.check_lift
-    if c is None:
-        lines.append('  check_lift: none')
-    else:
-        lines.append(f'  check_lift: lift guaranteed {_yes(c.lift_guaranteed)} '
-                     f'(worst-case margin {_margin(c.worst_case_margin)}), contact stiffness '
-                     f'model {_yes(c.csm_lift)} (margin {_margin(c.csm_margin)})')
-    config = 'none' if episode.config_text is None else \
-        f'{len(episode.config_text.splitlines())} lines'
-    lines.append(f'  config: {config}; version: {episode.version or "none"}')
-    return lines
-
-
-def completeness_lines(completeness: Completeness | None) -> list[str]:
-    """Whether the episode bag is complete, and what it lacks, as text lines."""
-    if completeness is None:
-        return []
-    if completeness.complete:
-        return ['complete:   yes']
-    return ['complete:   NO, INCOMPLETE: the bag lacks',
-            *(f'  {line}' for line in describe(completeness.missing))]
-
-
-def format_bag_info(info: BagInfo) -> str:
-    """``info`` as the text ``bag info`` prints."""
-    start = info.start_ns
-    lines = [f'bag:        {info.path}',
-             f'storage:    {info.storage} ({len(info.files)} file'
-             f'{"" if len(info.files) == 1 else "s"}: {", ".join(info.files)})',
-             f'start:      {local_time(start)}',
-             f'duration:   {info.duration_ns * 1e-9:.3f} s',
-             f'messages:   {info.message_count}']
-    rows = []
-    for t in info.topics:
-        gap = '-' if t.max_gap_ns is None or start is None or t.max_gap_at_ns is None else \
-            f'{t.max_gap_ns * 1e-9:.3f} at {(t.max_gap_at_ns - start) * 1e-9:.3f}'
-        rows.append([t.name, t.type, str(t.count), _num(t.rate_hz, '.2f'), gap,
-                     str(t.lost), str(t.dropped), str(t.paused), str(t.trimmed)])
-    header = ['topic', 'type', 'count', 'rate [Hz]', 'largest gap [s] at [s]', 'lost',
-              'dropped', 'paused', 'trimmed']
-    lines += ['', *_table(header, rows, {2, 3, 4, 5, 6, 7, 8})]
-    others = sorted({*info.lost, *info.dropped, *info.paused, *info.trimmed}
-                    - {t.name for t in info.topics})
-    for name in others:
-        lines.append(f'(not in the bag) {name}: lost {info.lost.get(name, 0)}, dropped '
-                     f'{info.dropped.get(name, 0)}, paused {info.paused.get(name, 0)}, '
-                     f'trimmed {info.trimmed.get(name, 0)}')
-    if info.backlog is not None:
-        lines.append(f'backlog:    max {info.backlog["max_s"]:.3f} s, mean '
-                     f'{info.backlog["mean_s"]:.3f} s over {info.backlog["messages"]} messages '
-                     '(from receipt to the bag)')
-    lines.append('')
-    lines += episode_lines(info.episode) if info.episode else ['episode:    none']
-    lines += completeness_lines(info.completeness)
-    if info.grasps:
-        lines.append(f'grasps on {STATUS_TOPIC}:')
-        for i, g in enumerate(info.grasps, 1):
-            t0 = (g.start_ns - start) * 1e-9 if start is not None else 0.0
-            t1 = '-' if g.end_ns is None or start is None else f'{(g.end_ns - start) * 1e-9:.3f}'
-            lines.append(f'  {i}: {t0:.3f} s to {t1} s: {g.end_phase}, outcome {g.outcome}'
-                         + (f' ({g.message})' if g.message else ''))
-    else:
-        lines.append(f'grasps on {STATUS_TOPIC}: none')
-    return '\n'.join(lines)
-
-
-def format_episodes(info: EpisodesInfo) -> str:
-    """``info`` as the tables ``bag info`` prints for a directory of bags: the episodes with
-    their outcomes and totals, then the ordinary bags with their sizes."""
-    episodes, bags = info.episodes, info.bags
-    counted = [f'{len(episodes)} episode{"" if len(episodes) == 1 else "s"}']
-    if bags:
-        counted.append(f'{len(bags)} other bag{"" if len(bags) == 1 else "s"} (not episodes)')
-    lines = [f'{info.path}: {", ".join(counted)}']
-    if episodes:
-        rows = []
-        for r in episodes:
-            rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
-                         _num(r.grasp_duration_s, '.3f'), r.outcome,
-                         '-' if r.complete is None else ('yes' if r.complete else 'NO'),
-                         format_floats(r.k_theta),
-                         format_floats(r.delta_theta_p, math.degrees(1.0)),
-                         _yes(r.lift_guaranteed)])
-        header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'complete',
-                  'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
-        lines += ['', *_table(header, rows, {2, 3})]
-        incomplete = [r for r in episodes if r.complete is False]
-        if incomplete:
-            lines += ['', 'incomplete (the bag lacks part of the episode):']
-            for r in incomplete:
-                lines.append(f'  {r.name}:')
-                lines += [f'    {line}' for line in r.missing] or ['    (not recorded)']
-        lines += ['', 'totals:']
-        lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
-    if bags:
-        rows = [[r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
-                 _num(r.message_count, 'd'), _num(r.topic_count, 'd')] for r in bags]
-        lines += ['', 'bags (no episode metadata: bag info BAG describes one, its grasps '
-                      'included):',
-                  *_table(['bag', 'start', 'duration [s]', 'messages', 'topics'], rows,
-                          {2, 3, 4})]
-    return '\n'.join(lines)
-
-
-# -- JSON ------------------------------------------------------------------------------------
-
-def jsonable(value: Any) -> Any:
-    """``value`` (dataclasses, paths, tuples, floats) as JSON-ready Python; non-finite floats
-    become the strings ``"nan"``, ``"inf"``, ``"-inf"``."""
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return 'nan' if math.isnan(value) else ('inf' if value > 0 else '-inf')
-    return value
-
-
-def bag_info_json(info: BagInfo) -> dict[str, Any]:
-    """``info`` for ``--json``: every field, plus ``duration_ns``."""
-    data = jsonable(info)
-    data['duration_ns'] = info.duration_ns
-    return data
-
-
-def episodes_json(info: EpisodesInfo) -> dict[str, Any]:
-    """``info`` for ``--json``: the rows and the totals per outcome."""
-    return {'path': str(info.path), 'episodes': jsonable(info.episodes),
-            'bags': jsonable(info.bags), 'totals': info.totals}

@@ -2,9 +2,12 @@
 
 Per finger, the compliant and the position joint's angle [deg] and torque [N*m] from
 ``/joint_states``; the controller's phases from ``/dam/status`` shaded as labelled spans on
-every time axis; the object's rise above its first height [mm] from ``/sim/object_pose``; the
-``/check_lift`` margins from the episode metadata or, without it, from the last
-``/dam_grasp/_action/feedback`` that carries them. The title names the bag, the outcome
+every time axis; the object's rise above its first height [mm] from ``/sim/object_pose``, with
+the stretches the stand-in found it off the table (``/sim/object_table_contact``) shaded, its
+lift-off marked and the controller's estimated rise (``/dam/episode``) as a dashed line, each
+labelled as what it is (:mod:`dam_recorder.object_record`); the ``/check_lift`` margins from
+the episode metadata or, without it, from the last ``/dam_grasp/_action/feedback`` that carries
+them. The title names the bag, the outcome
 (``, INCOMPLETE episode`` after it when the bag lacks part of the episode,
 :mod:`dam_recorder.completeness`), ``k_theta`` and ``delta_theta_p``. Time runs in seconds
 from the bag's first message.
@@ -40,6 +43,13 @@ from dam_recorder.bag_selection import Selection, select
 from dam_recorder.completeness import describe
 from dam_recorder.episode import Episode, format_floats
 from dam_recorder.errors import BagReadError
+from dam_recorder.object_record import (
+    OBJECT_TOPICS,
+    ObjectCollector,
+    ObjectEstimate,
+    ObjectTruth,
+    object_lines,
+)
 
 JOINT_STATES_TOPIC = '/joint_states'
 OBJECT_POSE_TOPIC = '/sim/object_pose'
@@ -151,6 +161,11 @@ class GraspData:
         else ``'outcome unknown'``.
     missing : list of str
         What the picture lacks, one phrase each.
+    object_truth : ObjectTruth or None
+        The stand-in's ground truth of the object in the window shown (rise, left the table,
+        lifted at the end of the grasp).
+    object_estimate : ObjectEstimate or None
+        The controller's estimate from its ENDED event, where recorded.
     """
 
     bag: Path
@@ -166,6 +181,8 @@ class GraspData:
     outcome: str
     missing: list[str] = field(default_factory=list)
     selection: Selection | None = None
+    object_truth: ObjectTruth | None = None
+    object_estimate: ObjectEstimate | None = None
 
     @property
     def window_s(self) -> tuple[float, float]:
@@ -291,7 +308,8 @@ def read_grasp_data(bag_dir: str | os.PathLike[str],
         nonempty = [t for t, v in times.items() if v.size]
         start_ns = min((int(times[t][0]) for t in nonempty), default=meta.start_ns)
         end_ns = max((int(times[t][-1]) for t in nonempty), default=start_ns)
-        for item in bag.messages([t for t in wanted if t in present]):
+        objects = ObjectCollector(start_ns)
+        for item in bag.messages([t for t in {*wanted, *OBJECT_TOPICS} if t in present]):
             t_s = (item.time_ns - start_ns) * 1e-9
             msg = item.message
             if selection is not None and not selection.contains(item.time_ns):
@@ -300,6 +318,7 @@ def read_grasp_data(bag_dir: str | os.PathLike[str],
                     status[:] = [(selection.start_ns, str(msg.phase), int(msg.outcome),
                                   str(msg.message))]
                 continue
+            objects.add(item.topic, item.time_ns, msg)
             if item.topic == JOINT_STATES_TOPIC:
                 names = tuple(msg.name)
                 index = index_cache.setdefault(names, {n: i for i, n in enumerate(names)})
@@ -361,6 +380,8 @@ def read_grasp_data(bag_dir: str | os.PathLike[str],
     if completeness is not None and not completeness.complete:
         outcome += ', INCOMPLETE episode'  # the bag lacks part of it: the picture too
         missing += [f'episode: {line}' for line in describe(completeness.missing)]
+    grasp_end_ns = episode.summary.ended_ns if episode is not None and not several else (
+        selection.end_ns if selection is not None else None)
     height_t = height_mm = None
     if heights:
         h = np.asarray(heights, dtype=float)
@@ -370,7 +391,8 @@ def read_grasp_data(bag_dir: str | os.PathLike[str],
         phases=phase_spans([((t - start_ns) * 1e-9, p) for t, p, _, _ in status],
                            shown_end_s),
         height_time_s=height_t, height_rise_mm=height_mm, margins=margins, episode=episode,
-        outcome=outcome, missing=missing, selection=selection)
+        outcome=outcome, missing=missing, selection=selection,
+        object_truth=objects.truth(grasp_end_ns), object_estimate=objects.estimate())
 
 
 def _shade_phases(ax: Any, phases: Sequence[PhaseSpan], label: bool) -> None:
@@ -429,7 +451,8 @@ def _say_missing(ax: Any, text: str) -> None:
 def grasp_figure(data: GraspData) -> Any:
     """Draw ``data`` into a new matplotlib Figure (Agg canvas) and return it.
 
-    Every line carries its joint name (or ``object rise``) as label: angle axes in deg,
+    Every line carries its joint name (or ``object rise (stand-in)``, ``lift-off (stand-in)``,
+    ``controller's estimate``) as label: angle axes in deg,
     torque axes in N*m, the height axis in mm. Phase spans are patches with ``gid='phase'``
     and ``label='phase <NAME>'``.
     """
@@ -468,10 +491,23 @@ def grasp_figure(data: GraspData) -> Any:
     height_ax.set_ylabel('object rise [mm]')
     height_ax.set_xlabel('time [s] from the bag start')
     _shade_phases(height_ax, data.phases, label=False)
+    truth, estimate = data.object_truth, data.object_estimate
+    for i, (start, end) in enumerate(truth.off_table_s if truth is not None else ()):
+        height_ax.axvspan(start, end, color='tab:blue', alpha=0.15, lw=0, gid='off_table',
+                          label='off the table (stand-in)' if i == 0 else None, zorder=1)
+    if truth is not None and truth.lift_off_s is not None:
+        height_ax.axvline(truth.lift_off_s, color='tab:blue', lw=1.0, ls=':', gid='lift_off',
+                          label='lift-off (stand-in)')
     if data.height_time_s is not None and data.height_rise_mm is not None:
         height_ax.plot(*with_gaps(data.height_time_s, data.height_rise_mm),
-                       label='object rise', color='k', lw=1.2)
-        _legend(height_ax)
+                       label='object rise (stand-in)', color='k', lw=1.2)
+        if estimate is not None and estimate.rise_mm is not None:
+            height_ax.axhline(estimate.rise_mm, color='tab:red', lw=1.0, ls='--',
+                              label='controller\'s estimate', gid='estimated_rise')
+        spans = [p for p in height_ax.patches if p.get_gid() == 'off_table'][:1]
+        height_ax.legend([*height_ax.get_lines(), *spans],
+                         [h.get_label() for h in [*height_ax.get_lines(), *spans]],
+                         loc='upper left', fontsize=7)
         # Millimetres as they are (no offset), at least 1 mm of axis: a still object's
         # micrometre noise must not look like a lift.
         height_ax.ticklabel_format(axis='y', useOffset=False, style='plain')
@@ -486,6 +522,8 @@ def grasp_figure(data: GraspData) -> Any:
     axes[-2][1].set_xlabel('time [s] from the bag start')
     text_ax.axis('off')
     lines = ['check_lift:', data.margins.text() if data.margins else 'no margins recorded']
+    if truth is not None:
+        lines += ['', *object_lines(truth, estimate)]
     if data.episode is not None and data.episode.summary.message:
         lines += ['', f'{data.episode.summary.outcome_name}: {data.episode.summary.message}']
     if data.missing:

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from dam_recorder.errors import ConfigurationError
 
 #: The hand's state and commands, the grasp's status, the action's status and feedback, the
-#: driver's diagnostics, the robot model (latched) and the stand-in's ground truth.
+#: driver's diagnostics, the robot model (latched) and the stand-in's ground truth (the
+#: object's pose and whether it is on the table).
 DEFAULT_TOPICS: tuple[str, ...] = (
     '/joint_states',
     '/hand/command',
@@ -27,6 +28,7 @@ DEFAULT_TOPICS: tuple[str, ...] = (
     '/diagnostics',
     '/robot_description',
     '/sim/object_pose',
+    '/sim/object_table_contact',
 )
 
 _TOPIC_NAME = re.compile(r'^(/[A-Za-z_~][A-Za-z0-9_]*)+$')

@@ -17,6 +17,11 @@ Topics
 ------
 /sim/object_pose : geometry_msgs/PoseStamped
     Ground-truth pose of the object (its centroid), frame ``world``, at ``pose_rate_hz``.
+/sim/object_table_contact : dam_interfaces/ObjectTableContact
+    Ground truth of lift-off beside the pose (the same stamp): the object's table contacts and
+    the world's lift-off rule (:mod:`dam_sim_bridge.lift_off`): on the table, how long off it,
+    lifted off (50 ms off), lifted (0.1 s off). The rule is sampled every device cycle; a reset
+    of the world starts it again.
 /clock : rosgraph_msgs/Clock
     Simulated time, at ``pose_rate_hz`` of wall time, with ``use_sim_time`` or
     ``publish_clock``.
@@ -48,7 +53,8 @@ use_sim_time : bool, fixed at start-up
 publish_clock : bool, read-only
     Publish ``/clock`` from the simulated time also in real-time mode.
 pose_rate_hz : double [Hz], in [1, 1000]
-    Rate of ``/sim/object_pose`` (and ``/clock``); may be changed at run time.
+    Rate of ``/sim/object_pose``, ``/sim/object_table_contact`` (and ``/clock``); may be
+    changed at run time.
 bus : string, read-only, ``udp`` (default) or ``dynamixel``
     ``dynamixel``: serve the world as nine emulated Dynamixel servos on a pseudo-terminal
     (:class:`~dam_sim_bridge.dynamixel_standin.DynamixelStandIn`, the ``dynamixel:`` section of
@@ -110,6 +116,7 @@ from dam_common.realtime import SWITCH_INTERVAL_S, set_thread_priority
 from dam_common.ros_args import strip_ros_args
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
+from dam_interfaces.msg import ObjectTableContact
 from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.dynamixel_bus import WATCHDOG_FEED_ADDRESSED, WATCHDOG_FEEDS
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
@@ -118,6 +125,8 @@ from dam_sim_bridge.sim_device import SimDevice
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
 _POSE_RATE_RANGE = (1.0, 1000.0)
+#: The stand-in's ground truth of lift-off, published beside ``/sim/object_pose``.
+TABLE_CONTACT_TOPIC = '/sim/object_table_contact'
 _BUSES = ('udp', 'dynamixel')
 _FAULT_PARAMETERS = ('fault_crc_error_ids', 'fault_silent_ids', 'fault_status_delay_s',
                      'fault_hardware_error')
@@ -160,7 +169,8 @@ class SimBridgeNode(Node):
                             'use_sim_time)', read_only=True)).value) or self._sim_time
         self._pose_rate_hz = float(self.declare_parameter(
             'pose_rate_hz', 100.0, ParameterDescriptor(
-                description='rate of /sim/object_pose and /clock [Hz]',
+                description='rate of /sim/object_pose, /sim/object_table_contact and '
+                            '/clock [Hz]',
                 floating_point_range=[FloatingPointRange(
                     from_value=_POSE_RATE_RANGE[0], to_value=_POSE_RATE_RANGE[1],
                     step=0.0)])).value)
@@ -214,6 +224,8 @@ class SimBridgeNode(Node):
         # (5 s at the default 100 Hz), so that a recorder that falls behind loses none.
         self._pose_pub = self.create_publisher(PoseStamped, '/sim/object_pose',
                                                STREAM_HISTORY_DEPTH)
+        self._contact_pub = self.create_publisher(ObjectTableContact, TABLE_CONTACT_TOPIC,
+                                                  STREAM_HISTORY_DEPTH)
         self._clock_pub = (self.create_publisher(Clock, '/clock', 10)
                            if self._publish_clock else None)
         self._timer = create_steady_timer(self, 1.0 / self._pose_rate_hz, self._on_timer)
@@ -355,6 +367,7 @@ class SimBridgeNode(Node):
     def _on_timer(self) -> None:
         with self._device.lock:
             pose = self._device.world.object_pose()
+            ground = self._device.world.lift_off.state()
             # The device clock runs on across resets of the world; /clock must never go back.
             clock_s = self._device.now() if self._sim_time else pose.sim_time
         stamp = _sim_stamp(clock_s) if self._publish_clock \
@@ -368,6 +381,12 @@ class SimBridgeNode(Node):
         (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
          msg.pose.orientation.w) = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         self._pose_pub.publish(msg)
+        contact = ObjectTableContact(
+            table_contacts=int(ground.table_contacts), on_table=bool(ground.on_table),
+            off_table_s=float(ground.off_table_s), lifted_off=bool(ground.off_now),
+            lifted=bool(ground.lifted))
+        contact.header = msg.header
+        self._contact_pub.publish(contact)
         if self._clock_pub is not None:
             self._clock_pub.publish(Clock(clock=stamp))
 
