@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from dam_common.config_node import ConfigNode as _Node
 from dam_common.cross_section import Circle, CrossSection, Ellipse
 from dam_common.dynamixel_config import DynamixelConfig, parse_dynamixel
 from dam_common.echo import brief_repr
@@ -115,6 +116,10 @@ class ObjectConfig:
     ``section`` is its cross-section in the plane normal to ``axis``
     (:mod:`dam_common.cross_section`: ``x`` along ``axis x z``, ``z`` up, origin at the
     centroid), in the pose it rests in; ``position_m`` is the centroid resting on the table.
+    ``csm_tangential_stiffness_n_per_m`` is the contact stiffness model's effective tangential
+    stiffness for this object (a value ``calibrate_csm`` fitted to its grasps), in place of
+    the ``contact`` section's ``k_t`` in series with the finger; None: the ``contact``
+    section's. Only the lift analysis reads it.
     """
 
     name: str
@@ -123,6 +128,7 @@ class ObjectConfig:
     mass_kg: float
     position_m: np.ndarray  # (3,) centre of gravity [m], resting on the table
     axis: np.ndarray  # (3,) unit axis, horizontal
+    csm_tangential_stiffness_n_per_m: float | None = None
 
     @property
     def radius_m(self) -> float:
@@ -578,7 +584,8 @@ def _library_object(node: _Node, name: str, axis: np.ndarray, place: np.ndarray
     shape = shape_node.string()
     if shape not in _SHAPE_KEYS:
         raise shape_node.error(f'unknown shape {shape!r} (known: {", ".join(_SHAPE_KEYS)})')
-    node.only_keys({'shape', 'length_m', 'mass_kg'} | _SHAPE_KEYS[shape])
+    node.only_keys({'shape', 'length_m', 'mass_kg', 'csm_tangential_stiffness_n_per_m'}
+                   | _SHAPE_KEYS[shape])
     section: CrossSection
     if shape == 'circle':
         section = Circle(node.child('radius_m').number(positive=True))
@@ -595,10 +602,13 @@ def _library_object(node: _Node, name: str, axis: np.ndarray, place: np.ndarray
     else:
         section = _convex_polygon(node.child('vertices_m'), name)
     position = np.array([float(place[0]), float(place[1]), section.rest_height])
+    k_t = None
+    if 'csm_tangential_stiffness_n_per_m' in node.require_mapping():
+        k_t = node.child('csm_tangential_stiffness_n_per_m').number(positive=True)
     return ObjectConfig(name=name, section=section,
                         length_m=node.child('length_m').number(positive=True),
                         mass_kg=node.child('mass_kg').number(positive=True),
-                        position_m=position, axis=axis)
+                        position_m=position, axis=axis, csm_tangential_stiffness_n_per_m=k_t)
 
 
 def _convex_polygon(node: _Node, name: str) -> ConvexPolygon:
@@ -848,86 +858,3 @@ def _check_within(node: _Node, value_rad: float, limits: tuple[float, float]) ->
 
 # --------------------------------------------------------------------------------------------
 # A cursor into the parsed YAML that knows its key path, for error messages.
-
-
-class _Node:
-    def __init__(self, raw: Any, path: str, source: str) -> None:
-        self.raw = raw
-        self.path = path
-        self.source = source
-
-    def error(self, message: str) -> ConfigError:
-        where = self.path or '<root>'
-        return ConfigError(f'{where}: {message} (in {self.source})')
-
-    def require_mapping(self) -> Mapping[str, Any]:
-        if not isinstance(self.raw, Mapping):
-            raise self.error(f'expected a mapping, got {self.raw!r}')
-        return self.raw
-
-    def only_keys(self, allowed: set[str]) -> None:
-        mapping = self.require_mapping()
-        unknown = sorted(str(k) for k in mapping if k not in allowed)
-        if unknown:
-            raise self.error(f'unknown key(s) {unknown} (allowed: {sorted(allowed)})')
-
-    def child(self, key: str) -> _Node:
-        mapping = self.require_mapping()
-        path = f'{self.path}.{key}' if self.path else key
-        if key not in mapping:
-            raise _Node(None, path, self.source).error('missing key')
-        return _Node(mapping[key], path, self.source)
-
-    def sequence(self, length: int | None = None) -> list[Any]:
-        if isinstance(self.raw, (str, bytes)) or not isinstance(self.raw, Sequence):
-            raise self.error(f'expected a list, got {self.raw!r}')
-        if length is not None and len(self.raw) != length:
-            raise self.error(f'expected {length} values, got {len(self.raw)}: {self.raw!r}')
-        return list(self.raw)
-
-    def item(self, index: int) -> _Node:
-        return _Node(self.raw[index], f'{self.path}[{index}]', self.source)
-
-    def number(self, positive: bool = False, nonnegative: bool = False) -> float:
-        value = self.raw
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.error(f'expected a number, got {value!r}')
-        value = float(value)
-        if not math.isfinite(value):
-            raise self.error(f'expected a finite number, got {value!r}')
-        if positive and value <= 0.0:
-            raise self.error(f'expected a positive number, got {value!r}')
-        if nonnegative and value < 0.0:
-            raise self.error(f'expected a non-negative number, got {value!r}')
-        return value
-
-    def integer(self, minimum: int | None = None, maximum: int | None = None) -> int:
-        value = self.raw
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self.error(f'expected an integer, got {value!r}')
-        if minimum is not None and value < minimum:
-            raise self.error(f'expected an integer >= {minimum}, got {value!r}')
-        if maximum is not None and value > maximum:
-            raise self.error(f'expected an integer <= {maximum}, got {value!r}')
-        return value
-
-    def vector(self, length: int, positive: bool = False) -> np.ndarray:
-        items = self.sequence(length)
-        return np.array([self.item(i).number(positive=positive) for i in range(len(items))],
-                        dtype=np.float64)
-
-    def boolean(self) -> bool:
-        if not isinstance(self.raw, bool):
-            raise self.error(f'expected true or false, got {self.raw!r}')
-        return self.raw
-
-    def string(self) -> str:
-        if not isinstance(self.raw, str) or not self.raw:
-            raise self.error(f'expected a non-empty string, got {self.raw!r}')
-        return self.raw
-
-    def identifier(self) -> str:
-        value = self.string()
-        if not value.isidentifier() or not value.isascii():
-            raise self.error(f'expected a name of letters, digits and underscores, got {value!r}')
-        return value

@@ -21,8 +21,8 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:  # the cursor type of dam_common.config (which imports this module)
-    from dam_common.config import _Node
+if TYPE_CHECKING:
+    from dam_common.config_node import ConfigNode
 
 #: Encoder counts per revolution of the X series (0.088 deg per count).
 COUNTS_PER_REV = 4096
@@ -100,14 +100,14 @@ class DynamixelConfig:
         return int(round(self.bus_watchdog_s / BUS_WATCHDOG_UNIT_S))
 
 
-def parse_dynamixel(node: _Node, joint_names: tuple[str, ...], joint_roles: tuple[str, ...],
+def parse_dynamixel(node: ConfigNode, joint_names: tuple[str, ...], joint_roles: tuple[str, ...],
                     joint_limits_rad: tuple[tuple[float, float], ...]) -> DynamixelConfig:
     """Validate the ``dynamixel:`` section.
 
     Parameters
     ----------
     node
-        The section's cursor (:class:`dam_common.config._Node`).
+        The section's cursor (:class:`dam_common.config_node.ConfigNode`).
     joint_names, joint_roles
         (n,) the hand's joint names and each one's role.
     joint_limits_rad
