@@ -70,3 +70,38 @@ def test_beyond_the_branch_end_the_way_up_to_it_counts() -> None:
               if 0.0 < d <= end)
     assert r.csm_path_margin == pytest.approx(way, abs=1e-9)
     assert r.csm_path_lift == (way > 0.0)
+
+
+def test_an_object_calibrated_tangential_stiffness_is_its_csm(tmp_path) -> None:
+    """object.library.<name>.csm_tangential_stiffness_n_per_m (an overlay of calibrate_csm's
+    values for one object) gives that object the CSM of a contact section whose k_t it is,
+    and leaves the other objects and eq. 18 alone."""
+    from dam_common.config import load_config as load
+    from dam_common.errors import ConfigError
+    overlay = tmp_path / 'square.yaml'
+    overlay.write_text('object:\n  library:\n    square_bar:\n'
+                       '      csm_tangential_stiffness_n_per_m: 31.6\n', encoding='utf-8')
+    global_kt = tmp_path / 'contact.yaml'
+    global_kt.write_text('contact:\n  contact_stiffness_n_per_m: [1.0e+5, 31.6, 1.0e+5]\n',
+                         encoding='utf-8')
+    per_object = load(None, [overlay])
+    everywhere = load(None, [global_kt])
+    square = LiftAnalyzer(per_object.with_object('square_bar'))
+    reference = LiftAnalyzer(everywhere.with_object('square_bar'))
+    plain = LiftAnalyzer(load().with_object('square_bar'))
+    changed = 0
+    for k, dp_deg, a_deg in ((5.0, 10.0, 10.0), (3.0, 30.0, 30.0), (10.0, 15.0, 5.0)):
+        args = ([k], [math.radians(dp_deg)], math.radians(a_deg))
+        got, ref, before = (an.check_lift(*args) for an in (square, reference, plain))
+        assert got.csm_margin == ref.csm_margin
+        assert got.csm_path_margin == ref.csm_path_margin
+        assert got.worst_case_margin == before.worst_case_margin
+        changed += got.csm_margin != before.csm_margin
+    assert changed > 0
+    cylinder = per_object.with_object('cylinder')
+    assert cylinder.object.csm_tangential_stiffness_n_per_m is None
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('object:\n  library:\n    square_bar:\n'
+                   '      csm_tangential_stiffness_n_per_m: -3.0\n', encoding='utf-8')
+    with pytest.raises(ConfigError, match='square_bar.csm_tangential_stiffness_n_per_m'):
+        load(None, [bad])

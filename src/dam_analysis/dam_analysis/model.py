@@ -247,7 +247,8 @@ class HandModel:
     contact_stiffness : (3,) diagonal of K_pi [N/m] (normal, in-plane tangent, axial).
     delta_theta_p_max : largest accepted delta_theta_p [rad].
     tangential_stiffness : the CSM's tangential spring [N/m]: ``contact_stiffness[1]`` in
-        series with ``contact.series_stiffness_n_per_m`` (equal to it when that is infinite).
+        series with ``contact.series_stiffness_n_per_m`` (equal to it when that is infinite),
+        or the object's calibrated ``csm_tangential_stiffness_n_per_m`` where it has one.
     """
 
     fingers: tuple[FingerGeometry, ...]
@@ -388,4 +389,6 @@ def build_hand_model(config: DamConfig) -> HandModel:
         contact_stiffness=np.asarray(config.contact.contact_stiffness_n_per_m,
                                      dtype=np.float64),
         delta_theta_p_max=config.task.delta_theta_p_max_rad,
-        tangential_stiffness=config.contact.tangential_stiffness_n_per_m)
+        tangential_stiffness=(config.contact.tangential_stiffness_n_per_m
+                              if config.object.csm_tangential_stiffness_n_per_m is None
+                              else config.object.csm_tangential_stiffness_n_per_m))
