@@ -3,7 +3,7 @@
 Per finger, the compliant and the position joint's angle [deg] and torque [N*m] from
 ``/joint_states``; the controller's phases from ``/dam/status`` shaded as labelled spans on
 every time axis; the object's rise above its first height [mm] from ``/sim/object_pose``, with
-the stretches the stand-in found it off the table (``/sim/object_table_contact``) shaded, its
+the stretches the stand-in found it off the table (``/sim/object_table_contact``) as a bar, its
 lift-off marked and the controller's estimated rise (``/dam/episode``) as a dashed line, each
 labelled as what it is (:mod:`dam_recorder.object_record`); the ``/check_lift`` margins from
 the episode metadata or, without it, from the last ``/dam_grasp/_action/feedback`` that carries
@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -71,6 +72,10 @@ LABEL_ROW = 0.11
 GAP_FACTOR = 20.0
 #: The shortest pause that breaks a line [s].
 GAP_MIN_S = 0.5
+#: Height of the bar marking the object off the table [axes fraction].
+OFF_TABLE_BAR = 0.06
+#: Characters per line of the text panel.
+PANEL_WIDTH = 92
 _JOINT_NAME = re.compile(r'^(?P<finger>.+)_(?P<role>' + '|'.join(JOINT_ROLES) + r')_joint$')
 
 
@@ -493,10 +498,12 @@ def grasp_figure(data: GraspData) -> Any:
     _shade_phases(height_ax, data.phases, label=False)
     truth, estimate = data.object_truth, data.object_estimate
     for i, (start, end) in enumerate(truth.off_table_s if truth is not None else ()):
-        height_ax.axvspan(start, end, color='tab:blue', alpha=0.15, lw=0, gid='off_table',
+        # a bar along the bottom of the axes, apart from the phase shading
+        height_ax.axvspan(start, end, ymin=0.0, ymax=OFF_TABLE_BAR, color='k', alpha=0.55,
+                          lw=0, gid='off_table',
                           label='off the table (stand-in)' if i == 0 else None, zorder=1)
     if truth is not None and truth.lift_off_s is not None:
-        height_ax.axvline(truth.lift_off_s, color='tab:blue', lw=1.0, ls=':', gid='lift_off',
+        height_ax.axvline(truth.lift_off_s, color='k', lw=1.0, ls=':', gid='lift_off',
                           label='lift-off (stand-in)')
     if data.height_time_s is not None and data.height_rise_mm is not None:
         height_ax.plot(*with_gaps(data.height_time_s, data.height_rise_mm),
@@ -523,7 +530,8 @@ def grasp_figure(data: GraspData) -> Any:
     text_ax.axis('off')
     lines = ['check_lift:', data.margins.text() if data.margins else 'no margins recorded']
     if truth is not None:
-        lines += ['', *object_lines(truth, estimate)]
+        lines += ['', *(textwrap.fill(line, PANEL_WIDTH, subsequent_indent='  ')
+                        for line in object_lines(truth, estimate))]
     if data.episode is not None and data.episode.summary.message:
         lines += ['', f'{data.episode.summary.outcome_name}: {data.episode.summary.message}']
     if data.missing:
