@@ -137,6 +137,29 @@ def test_answer_is_the_core_answer(client: RosClient, analyzer: LiftAnalyzer,
     np.testing.assert_allclose(response.delta_theta_s, expected.delta_theta_s)
     np.testing.assert_allclose(response.compliant_torque, expected.compliant_torque)
     assert len(response.delta_theta_s) == CONFIG.hand.n_fingers
+    # the CSM's path verdict beside the end verdict; the cylinder is never checked for turns
+    assert response.csm_path_lift == expected.csm_path_lift
+    np.testing.assert_allclose(response.csm_path_margin, expected.csm_path_margin)
+    np.testing.assert_allclose(response.csm_path_delta_theta_p,
+                               expected.csm_path_delta_theta_p)
+    assert response.csm_path_margin >= np.nan_to_num(response.csm_margin, nan=-np.inf)
+    assert not response.rolling_checked and math.isnan(response.rolling_margin)
+
+
+def test_a_section_that_can_turn_is_checked_in_its_turned_poses(client: RosClient) -> None:
+    """The hexagonal bar the stand-in rolled +25 deg on the table (alpha 5 deg, k_theta 7,
+    delta_theta_p 5 deg): eq. 18 holds at rest, the answer is "may roll" with the pose."""
+    request = _request([7.0], [math.radians(5.0)], math.radians(5.0))
+    request.object = 'hex_bar'
+    response = _call(client, request)
+    assert response.ok, response.message
+    assert response.worst_case_margin > 0.0 and not response.lift_guaranteed
+    assert response.rolling_checked and response.rolling_margin <= 0.0
+    assert 20.0 <= abs(math.degrees(response.rolling_turn)) <= 30.0
+    assert abs(response.rolling_slide) < 1e-9
+    assert 'lift not guaranteed: eq. 18 holds at rest' in response.message
+    assert 'may roll' in response.message
+    assert response.csm_path_lift  # the CSM lifts it on the way (the stand-in: it hops off)
 
 
 def test_single_values_expand_with_the_configured_ratios(client: RosClient) -> None:
@@ -413,6 +436,10 @@ def test_command_line_client_defaults_and_beyond_the_branch(
     assert ('from the configuration: k_theta = 10 N*m/rad, delta_theta_p = 10 deg, '
             'friction_angle = 5 deg, object = cylinder]') in default.stdout
     assert 'object                   : cylinder' in default.stdout
+    turned = _run_client('--object', 'hex_bar', '--k-theta', '7', '--delta-theta-p', '5deg')
+    assert turned.returncode == 0, turned.stderr
+    assert 'turned on the table      : may rest turned' in turned.stdout
+    assert 'CSM on the way (path)    : yes' in turned.stdout
     bar = _run_client('--object', 'square_bar', '--delta-theta-p', '20deg')
     assert bar.returncode == 0, bar.stderr
     assert 'object                   : square_bar' in bar.stdout
