@@ -172,8 +172,8 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
     assert '16 of 16 trials, 1 per cell, k_theta axis log' in summary
     # trials 0-7 at 5 deg, 8-15 at 30 deg, classes by trial number (CLASSES)
     for alpha in ('5', '30'):
-        assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), success 3, lifted but DAM '
-                f'failed 2, failure 3; ') in summary
+        assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), success 3, '
+                f'lifted but DAM failed 2, failure 3; ') in summary
     assert 'eq. 18: no k_theta lifts' in result.summary[2]
     assert '4 trial(s) where the ground truth' in summary
 
