@@ -51,7 +51,7 @@ def test_a_determined_friction_angle_is_written_and_an_undetermined_k_t_is_not(
     text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
     data = yaml.safe_load(text)
     assert result.fit.log10_tangential_stiffness.status != 'determined'
-    assert 'contact_stiffness_n_per_m' not in data['contact']
+    assert 'object' not in data and 'contact_stiffness_n_per_m' not in data['contact']
     alpha = result.fit.friction_angle[0]
     assert alpha.status == 'determined'
     assert alpha.contains(math.radians(20.0)) and not alpha.contains(math.radians(15.0))
@@ -95,3 +95,30 @@ def test_grasps_that_never_lift_write_nothing(tmp_path: Path) -> None:
     np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
                                   CONFIG.contact.contact_stiffness_n_per_m)
     assert merged.contact.series_stiffness_n_per_m == CONFIG.contact.series_stiffness_n_per_m
+
+
+def test_a_determined_k_t_is_written_for_the_grasped_object(tmp_path: Path) -> None:
+    """Outcomes of the end verdict with a soft tangential spring (30 N/m, where sticking
+    matters) at the recorded angle: k_t is determined and goes to the grasped object's
+    csm_tangential_stiffness_n_per_m, which the loader takes and the analysis then uses; the
+    contact section and the other objects keep theirs."""
+    base = _cells(30.0)
+    margins = CellMargins(PathTable(build_hand_model(CONFIG)), base.k_theta,
+                          base.delta_theta_p, base.object_mass, CONFIG.task.gravity_m_per_s2)
+    truth = margins.margins(math.radians(30.0), 30.0, 'end') > 0.0
+    assert 0 < truth.sum() < truth.size
+    result = calibrate(_cells(30.0, truth.astype(float)), CONFIG, verdict='end', folds=0,
+                       fit_friction_angle=False)
+    kt = result.fit.log10_tangential_stiffness
+    assert kt.status == 'determined' and kt.contains(math.log10(30.0))
+    assert result.overlay_helps
+    text = overlay(result, CONFIG, 'test cells', CONFIG.object.name)
+    data = yaml.safe_load(text)
+    written = data['object']['library'][CONFIG.object.name]['csm_tangential_stiffness_n_per_m']
+    assert written == pytest.approx(result.overlay_tangential_stiffness, rel=1e-5)
+    merged = load_config(CONFIG_PATH, [_write(tmp_path, text)])
+    assert merged.object.csm_tangential_stiffness_n_per_m == written
+    np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
+                                  CONFIG.contact.contact_stiffness_n_per_m)
+    assert merged.objects['hex_bar'].csm_tangential_stiffness_n_per_m is None
+    assert build_hand_model(merged).tangential_stiffness == written

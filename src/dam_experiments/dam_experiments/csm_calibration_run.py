@@ -215,9 +215,11 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     one side only, or not at all, keeps the configuration's value), and only when the written
     values make ``/check_lift``'s end verdict agree with more of the grasps than the
     configured ones (:attr:`Calibration.overlay_helps`; otherwise the overlay is ``{}``):
-    ``contact.contact_stiffness_n_per_m[1]`` takes the fitted effective tangential stiffness
-    and ``contact.series_stiffness_n_per_m`` becomes ``.inf`` (the fit is of the series
-    combination); ``contact.friction_angle_deg`` is written only when the grasps hold one
+    the fitted effective tangential stiffness goes to the grasped object,
+    ``object.library.<object_name>.csm_tangential_stiffness_n_per_m`` (the fit is of the
+    series combination of the contact and the finger, for that object; the other objects and
+    the stand-in keep the ``contact`` section); ``contact.friction_angle_deg`` is written only
+    when the grasps hold one
     recorded friction angle (a sweep over several angles sets each). The comments say what
     was fitted, on which verdict and object, and what was left out.
     """
@@ -225,11 +227,11 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     kt = fit.log10_tangential_stiffness
     helps = calibration.overlay_helps
     contact: dict[str, Any] = {}
+    document: dict[str, Any] = {}
     if helps and calibration.overlay_tangential_stiffness is not None:
-        stiffness = [float(v) for v in np.ravel(config.contact.contact_stiffness_n_per_m)]
-        stiffness[1] = float(f'{calibration.overlay_tangential_stiffness:.6g}')
-        contact['contact_stiffness_n_per_m'] = stiffness
-        contact['series_stiffness_n_per_m'] = math.inf
+        value = float(f'{calibration.overlay_tangential_stiffness:.6g}')
+        document['object'] = {'library': {object_name: {
+            'csm_tangential_stiffness_n_per_m': value}}}
     alpha = fit.friction_angle[0]
     one_group = len(fit.friction_angle) == 1 and fit.fitted_friction_angle
     if helps and calibration.overlay_friction_angle is not None:
@@ -264,7 +266,9 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     if calibration.verdict == 'path':
         lines.append('# The values were fitted to the path verdict (--verdict end fits the '
                      'one /check_lift answers).')
-    body = yaml.safe_dump({'contact': contact}, sort_keys=False) if contact else '{}\n'
+    if contact:
+        document['contact'] = contact
+    body = yaml.safe_dump(document, sort_keys=False) if document else '{}\n'
     return '\n'.join(lines) + '\n' + body
 
 
