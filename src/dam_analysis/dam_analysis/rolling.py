@@ -74,15 +74,17 @@ ROLL_CONTACT, ROLL_FREE, ROLL_BLOCKED = 'contact', 'free', 'blocked'
 
 @dataclass(frozen=True)
 class RollPose:
-    """A pose of the object rolled on the table, in the section's frame.
+    """A pose of the object turned on the table, in the section's frame.
 
     Attributes
     ----------
     turn : rotation from the resting pose [rad], counter-clockwise in the section's
-        ``(x, z)`` plane (positive: the object rolls towards ``-x``).
-    shift : ``(x, z)`` displacement of the centroid from its resting position [m].
+        ``(x, z)`` plane (``x`` towards ``z``).
+    shift : ``(x, z)`` displacement of the centroid from its resting position [m]: the slide
+        along the table and the rise.
     pivot : ``x`` of the table contact relative to the resting centroid [m] (a polygon's
-        vertex; an ellipse's contact point).
+        vertex; an ellipse's lowest point).
+    resting : a polygon's face lies flat on the table (two supports carry any moment).
     """
 
     turn: float
@@ -91,9 +93,11 @@ class RollPose:
     resting: bool = False
 
     def describe(self) -> str:
-        """E.g. ``'turned +25.0 deg, slid +0.5 mm, centroid 1.35 mm higher'``."""
-        return (f'turned {math.degrees(self.turn):+.1f} deg, slid {self.shift[0] * 1e3:+.1f} '
-                f'mm, centroid {self.shift[1] * 1e3:.2f} mm higher')
+        """E.g. ``'turned +26.0 deg, centroid 1.37 mm higher'`` (``slid +0.5 mm`` too
+        where it slid)."""
+        slid = f', slid {self.shift[0] * 1e3:+.1f} mm' if self.shift[0] != 0.0 else ''
+        return (f'turned {math.degrees(self.turn):+.1f} deg{slid}, centroid '
+                f'{self.shift[1] * 1e3:.2f} mm higher')
 
 
 def _turn(angle: float, x: float, z: float) -> tuple[float, float]:
@@ -415,8 +419,8 @@ class RollingCheck:
         holds = worst > 0.0
         pose = self.poses[worst_j]
         message = '' if holds else (
-            f'the object may roll: it can rest {pose.describe()} on the table, where the '
-            f'least vertical force the fingers give is {_newtons(worst)} from its weight')
+            f'the object may roll: it can rest {pose.describe()} on the table, '
+            f'{_shortfall(worst)}')
         return RollingVerdict(True, holds, worst, pose, message)
 
 
@@ -496,6 +500,9 @@ def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: 
     return float(res.fun)
 
 
-def _newtons(value: float) -> str:
-    return '-inf N (an internal force of any size is admissible)' if value == -math.inf \
-        else f'{value:+.4g} N'
+def _shortfall(margin: float) -> str:
+    """Why the object can rest there, from the pose's margin ``min c_z^T f_o - m_B g`` [N]."""
+    if margin == -math.inf:
+        return 'where an internal force of any size is admissible'
+    return (f'where the fingers may lift {-margin:.4g} N less than its weight '
+            f'(margin {margin:+.4g} N)')
