@@ -1,10 +1,14 @@
 """Lift-off: whether and when the object left the table, from its table contacts (pure).
 
-The stand-in's ground truth of "lifted" is that the object left the table, whatever its shape:
-a polygon that rolls on the table raises its centroid by up to its circumradius minus its
-apothem (1.35 mm for the 18 mm hexagonal bar turned by 25 deg) while it still touches, and an
-object that left the table may have risen by less than ``classification.lift_height_m``. So
-the rule reads the object-table contacts, not the rise.
+The stand-in's ground truth of "lifted" is that the object **left the table** during the
+grasp (a lift-off, the event eq. 18 promises: "the object leaves the table"), whatever its
+shape and whatever it did after: a polygon that rolls on the table raises its centroid by up
+to its circumradius minus its apothem (1.35 mm for the 18 mm hexagonal bar turned by 25 deg)
+while it still touches, an object that left the table may have risen by less than
+``classification.lift_height_m``, and a column that left it may tip out of the plane
+afterwards until one end rests on the table again. So the rule reads the object-table
+contacts, not the rise, and whether the object was still off the table at the end is a
+separate fact.
 
 Samples
     ``(t_i, n_i)``: the simulated time [s] and the number of object-table contact points
@@ -19,9 +23,12 @@ Lift-off
     The first off-table run at least :data:`LIFT_OFF_MIN_S` (50 ms) long; the **lift-off
     time** is its start ``t_a``. A bounce, a shorter run, is no lift-off.
 Lifted
+    A lift-off happened since the record began (the world's reset; a lockstep trial begins
+    it again at the goal). It stays true when the object falls back or an end of it comes to
+    rest on the table.
+Off the table at the end
     At the end of the record (the end of the grasp), the object is off the table and has been
-    for at least :data:`LIFTED_WINDOW_S` (0.1 s): no sample of the last 0.1 s touches. An
-    object that lifted off and fell back is not lifted (its lift-off time stays).
+    for at least :data:`AT_END_WINDOW_S` (0.1 s): no sample of the last 0.1 s touches.
 
 :class:`LiftOffTracker` applies the rule sample by sample (the world keeps one,
 :attr:`~dam_sim_bridge.world.HandWorld.lift_off`), :func:`lift_off_of_samples` to a recorded
@@ -39,8 +46,8 @@ from dataclasses import dataclass
 TOUCH_DISTANCE_M = 1.0e-4
 #: Shortest off-table run that is a lift-off [s]; a shorter one is a bounce.
 LIFT_OFF_MIN_S = 0.05
-#: The object is lifted when it has been off the table this long at the end [s].
-LIFTED_WINDOW_S = 0.1
+#: The object is off the table at the end when it has been off it this long then [s].
+AT_END_WINDOW_S = 0.1
 #: Slack of the time comparisons [s] (sample times are sums of physics steps).
 _TIME_SLACK_S = 1e-9
 
@@ -57,8 +64,8 @@ class LiftOffState:
         Length of the off-table run the last sample belongs to [s]; 0 when it touches.
     lift_off_time
         Start of the first lift-off [s, the samples' clock]; NaN when none.
-    lifted
-        Off the table for at least :data:`LIFTED_WINDOW_S` at the last sample.
+    off_table_at_end
+        Off the table for at least :data:`AT_END_WINDOW_S` at the last sample.
     samples
         Samples taken.
     """
@@ -66,23 +73,18 @@ class LiftOffState:
     table_contacts: int
     off_table_s: float
     lift_off_time: float
-    lifted: bool
+    off_table_at_end: bool
     samples: int
+
+    @property
+    def lifted(self) -> bool:
+        """A lift-off happened (the object may have fallen back since)."""
+        return not math.isnan(self.lift_off_time)
 
     @property
     def on_table(self) -> bool:
         """The last sample touches (or there was none)."""
         return self.samples == 0 or self.table_contacts > 0
-
-    @property
-    def lifted_off(self) -> bool:
-        """A lift-off happened (the object may have fallen back since)."""
-        return not math.isnan(self.lift_off_time)
-
-    @property
-    def off_now(self) -> bool:
-        """The last sample is in an off-table run of at least :data:`LIFT_OFF_MIN_S`."""
-        return self.off_table_s >= LIFT_OFF_MIN_S - _TIME_SLACK_S
 
 
 class LiftOffTracker:
@@ -92,8 +94,9 @@ class LiftOffTracker:
     ----------
     lift_off_min_s
         Shortest off-table run that is a lift-off [s] (> 0).
-    lifted_window_s
-        Off-table time at the end that makes the object lifted [s] (> 0).
+    at_end_window_s
+        Off-table time at the last sample that makes the object off the table at the end
+        [s] (> 0).
 
     Raises
     ------
@@ -102,17 +105,18 @@ class LiftOffTracker:
     """
 
     def __init__(self, lift_off_min_s: float = LIFT_OFF_MIN_S,
-                 lifted_window_s: float = LIFTED_WINDOW_S) -> None:
+                 at_end_window_s: float = AT_END_WINDOW_S) -> None:
         for name, value in (('lift_off_min_s', lift_off_min_s),
-                            ('lifted_window_s', lifted_window_s)):
+                            ('at_end_window_s', at_end_window_s)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
                 raise ValueError(f'{name} must be a positive number of seconds, got {value!r}')
         self.lift_off_min_s = float(lift_off_min_s)
-        self.lifted_window_s = float(lifted_window_s)
+        self.at_end_window_s = float(at_end_window_s)
         self.reset()
 
     def reset(self) -> None:
-        """Forget every sample (the world was reset: the object rests on the table)."""
+        """Forget every sample: a new record begins (the world was reset, or a grasp
+        starts)."""
         self._samples = 0
         self._last_t = -math.inf
         self._contacts = 0
@@ -165,9 +169,14 @@ class LiftOffTracker:
 
     @property
     def lifted(self) -> bool:
-        """Off the table for at least ``lifted_window_s`` at the last sample."""
+        """A lift-off happened since the record began."""
+        return not math.isnan(self._lift_off)
+
+    @property
+    def off_table_at_end(self) -> bool:
+        """Off the table for at least ``at_end_window_s`` at the last sample."""
         return (not math.isnan(self._off_since)
-                and self.off_table_s >= self.lifted_window_s - _TIME_SLACK_S)
+                and self.off_table_s >= self.at_end_window_s - _TIME_SLACK_S)
 
     @property
     def table_contacts(self) -> int:
@@ -177,13 +186,13 @@ class LiftOffTracker:
     def state(self) -> LiftOffState:
         """The verdict after the last sample."""
         return LiftOffState(table_contacts=self._contacts, off_table_s=self.off_table_s,
-                            lift_off_time=self._lift_off, lifted=self.lifted,
-                            samples=self._samples)
+                            lift_off_time=self._lift_off,
+                            off_table_at_end=self.off_table_at_end, samples=self._samples)
 
 
 def lift_off_of_samples(samples: Iterable[tuple[float, int]],
                         lift_off_min_s: float = LIFT_OFF_MIN_S,
-                        lifted_window_s: float = LIFTED_WINDOW_S) -> LiftOffState:
+                        at_end_window_s: float = AT_END_WINDOW_S) -> LiftOffState:
     """The rule applied to a whole record of ``(time [s], table contacts)`` samples.
 
     Raises
@@ -191,7 +200,7 @@ def lift_off_of_samples(samples: Iterable[tuple[float, int]],
     ValueError
         As :meth:`LiftOffTracker.update`, naming the bad sample.
     """
-    tracker = LiftOffTracker(lift_off_min_s, lifted_window_s)
+    tracker = LiftOffTracker(lift_off_min_s, at_end_window_s)
     for t, n in samples:
         tracker.update(t, n)
     return tracker.state()

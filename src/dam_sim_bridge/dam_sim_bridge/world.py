@@ -109,7 +109,8 @@ Lift-off
 :attr:`HandWorld.lift_off` samples the object's table contacts at every :meth:`HandWorld.reset`
 and after every :meth:`HandWorld.step` call and applies the lift-off rule of
 :mod:`dam_sim_bridge.lift_off` (the object left the table: off it for 50 ms is a lift-off,
-off it for the last 0.1 s is lifted).
+and the object is lifted once one happened; off it for the last 0.1 s is off the table at the
+end).
 
 Torque sensor
 -------------
