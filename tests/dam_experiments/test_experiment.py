@@ -55,7 +55,7 @@ def test_stiff_pair_lifts_and_holds(recorded: dict[str, ExperimentResult]) -> No
     r = recorded['stiff']
     assert r.phase is Phase.DONE, r.failure_reason
     assert list(r.phase_times) == ['APPROACH', 'ROLLING_UP', 'ENVELOPE', 'DONE']
-    assert r.lifted and r.lift_final > 0.005
+    assert r.lifted and r.off_table_at_end and r.lift_final > 0.005
     assert r.lift_rolling_end > 0.005  # the SPCM lifted it, the envelope kept it up
     assert r.outcome is Outcome.SUCCESS, r.joint_reason
     # the object is still up one second after DONE
@@ -67,7 +67,7 @@ def test_stiff_pair_lifts_and_holds(recorded: dict[str, ExperimentResult]) -> No
 
 def test_weak_pair_does_not_lift(recorded: dict[str, ExperimentResult]) -> None:
     r = recorded['weak']
-    assert not r.lifted and r.lift_max < 0.002
+    assert not r.lifted and not r.off_table_at_end and r.lift_max < 0.002
     assert r.outcome is not Outcome.SUCCESS
 
 
@@ -105,6 +105,7 @@ def test_signals_round_trip_through_npz(recorded: dict[str, ExperimentResult],
         assert data['positions'].shape == r.signals['positions'].shape
         assert data['positions'].shape[1] == 9
         assert str(data['outcome']) == 'SUCCESS' and bool(data['lifted'])
+        assert bool(data['off_table_at_end']) is r.off_table_at_end is True
         assert float(data['k_theta']) == 10.0
     assert path.stat().st_size < 200_000
 

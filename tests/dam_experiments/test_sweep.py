@@ -284,16 +284,16 @@ def test_rows_of_other_trials_are_dropped(cfg: DamConfig, tmp_path: Path) -> Non
 
 def test_cell_summary_counts_outcomes() -> None:
     rows = [{'friction_angle_deg': '5', 'k_theta_nm_per_rad': '1', 'delta_theta_p_deg': '10',
-             'lifted': str(v), 'outcome': o, 'rise_final_mm': str(r),
-             'check_lift_guaranteed': '0', 'worst_case_margin_n': '-0.1', 'csm_lift': '1',
-             'csm_margin_n': '0.2'}
-            for v, o, r in ((1, 'SUCCESS', 8.0), (1, 'LIFTED_DAM_FAILED', 6.0),
-                            (0, 'FAILURE', 1.0))]
+             'lifted': str(v), 'off_table_at_end': str(e), 'outcome': o,
+             'rise_final_mm': str(r), 'check_lift_guaranteed': '0',
+             'worst_case_margin_n': '-0.1', 'csm_lift': '1', 'csm_margin_n': '0.2'}
+            for v, e, o, r in ((1, 1, 'SUCCESS', 8.0), (1, 0, 'LIFTED_DAM_FAILED', 6.0),
+                               (0, 0, 'FAILURE', 1.0))]
     [cell] = cell_summary(rows)
-    assert (cell['trials'], cell['lifted'], cell['p_lift'], cell['success'],
-            cell['lifted_dam_failed'], cell['failure'], cell['p_success'],
-            cell['rise_final_mm_mean']) == ('3', '2', '0.666667', '1', '1', '1', '0.333333',
-                                            '5')
+    assert (cell['trials'], cell['lifted'], cell['p_lift'], cell['off_table_at_end'],
+            cell['success'], cell['lifted_dam_failed'], cell['failure'], cell['p_success'],
+            cell['rise_final_mm_mean']) == ('3', '2', '0.666667', '1', '1', '1', '1',
+                                            '0.333333', '5')
 
 
 def test_an_output_whose_parent_does_not_exist_is_refused_not_created(

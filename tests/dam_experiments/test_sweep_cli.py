@@ -198,12 +198,13 @@ def test_a_worker_that_leaves_mid_sweep_loses_nothing(reference: str, tmp_path: 
 
 def test_resume_runs_edited_rows_again(reference: str, tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
-    """Rows whose ``lifted`` or ``outcome`` is not a value the sweep writes (an edited table)
-    are dropped on resume and run again."""
+    """Rows whose ``lifted``, ``off_table_at_end`` or ``outcome`` is not a value the sweep
+    writes (an edited table) are dropped on resume and run again."""
     (tmp_path / TABLE_FILE).parent.mkdir(exist_ok=True)
     assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
     rows = read_table(tmp_path / TABLE_FILE)
     rows[1]['lifted'] = 'x'
+    rows[2]['off_table_at_end'] = ''
     rows[4]['outcome'] = 'LIFTED'
     with (tmp_path / TABLE_FILE).open('w', encoding='utf-8', newline='') as handle:
         writer = csv.DictWriter(handle, list(rows[0]), lineterminator='\n')
@@ -212,9 +213,13 @@ def test_resume_runs_edited_rows_again(reference: str, tmp_path: Path,
     capsys.readouterr()
     assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 0
     out = capsys.readouterr().out
-    assert f'resuming: {N_TRIALS - 2} done, 2 to run (2 incomplete, malformed or repeated ' \
+    assert f'resuming: {N_TRIALS - 3} done, 3 to run (3 incomplete, malformed or repeated ' \
            'row(s) dropped)' in out, out
     assert (tmp_path / TABLE_FILE).read_text(encoding='utf-8') == reference
+    table = read_table(tmp_path / TABLE_FILE)
+    lifted = sum(r['lifted'] == '1' for r in table)
+    held = sum(r['off_table_at_end'] == '1' for r in table)
+    assert f'lifted (left the table) {lifted}, off the table at the end {held}, ' in out
 
 
 def test_loopback_dask_cluster_gives_the_same_table(reference: str, loopback_cluster: str,
@@ -381,13 +386,15 @@ def test_another_sweep_in_the_same_directory_is_refused(reference: str, tmp_path
                                                     'sweep': {'seed': 5}}))
     assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
     assert 'holds a different sweep' in capsys.readouterr().err
-    # a sweep of format 1 (lifted by the old rise rule) is not resumed into: its rows mean
-    # something else
-    (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': 1, 'sweep': {'seed': 5}}))
-    assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
-    err = capsys.readouterr().err
-    assert len(err.splitlines()) == 1 and 'holds a sweep of format 1' in err
-    assert 'it cannot be resumed' in err and not (tmp_path / TABLE_FILE).exists()
+    # a sweep of format 1 (lifted by the old rise rule) or 2 (lifted: off the table at the
+    # end) is not resumed into: its rows mean something else
+    for old in (1, 2):
+        (tmp_path / PARAMS_FILE).write_text(json.dumps({'format': old, 'sweep': {'seed': 5}}))
+        assert main([*SWEEP, '--out', str(tmp_path), '--workers', '1']) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1 and f'holds a sweep of format {old}' in err
+        assert 'written before lifted meant a lift-off during the grasp' in err
+        assert 'it cannot be resumed' in err and not (tmp_path / TABLE_FILE).exists()
 
 
 def test_a_bare_perturbation_is_in_si_units_and_an_implausible_one_is_refused(

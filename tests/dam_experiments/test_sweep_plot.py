@@ -63,7 +63,7 @@ def write_sweep(directory: Path, config: Any, sweep: SweepSpec, k_given: list[st
                 outcome: Callable[[int], tuple[str, int]], n_rows: int | None = None) -> Path:
     """A sweep directory as ``sweep`` leaves it (its ``TrialTable`` writes the files), with
     the outcome of trial ``i`` from ``outcome(i)`` and the first ``n_rows`` trials (all when
-    None)."""
+    None); a lifted trial classed SUCCESS ends off the table, the other lifted ones on it."""
     info = {'axes_as_given': {'k_theta': k_given}} if k_given is not None else {}
     table = TrialTable(directory, sweep, config, info)
     columns = table_columns(config)
@@ -73,7 +73,9 @@ def write_sweep(directory: Path, config: Any, sweep: SweepSpec, k_given: list[st
             row = dict.fromkeys(columns, '0')
             row.update(input_columns(spec))
             row.update(outcome=name, lifted=str(lifted), phase='DONE', reason='',
-                       rise_final_mm='12.0' if lifted else '0.0')
+                       rise_final_mm='12.0' if lifted else '0.0',
+                       lift_off_time_s='2.5' if lifted else '',
+                       off_table_at_end=str(int(lifted and name == 'SUCCESS')))
             table.append(row)
         table.finalize()
     return directory
@@ -172,8 +174,9 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
     assert '16 of 16 trials, 1 per cell, k_theta axis log' in summary
     # trials 0-7 at 5 deg, 8-15 at 30 deg, classes by trial number (CLASSES)
     for alpha in ('5', '30'):
-        assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), success 3, '
-                f'lifted but DAM failed 2, failure 3; ') in summary
+        assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), off the '
+                f'table at the end 2, success 3, lifted but DAM failed 2, failure 3; '
+                ) in summary
     assert 'eq. 18: no k_theta lifts' in result.summary[2]
     assert '4 trial(s) where the ground truth' in summary
 
@@ -196,7 +199,8 @@ def test_repeats_give_a_lift_probability_per_cell(repeat_sweep: Path, config: An
     assert panel.get_yscale() == 'linear' and panel.get_ylim() == pytest.approx((0.0, 11.0))
     labels = [t.get_text() for t in panel.get_legend().get_texts()]
     assert labels == [SUFFICIENT_LABEL, CSM_LABEL]
-    assert 'alpha 5 deg: 9 trials, lifted (left the table) 4 (44 %), success 4' in result.summary[1]
+    assert ('alpha 5 deg: 9 trials, lifted (left the table) 4 (44 %), off the table at the '
+            'end 4, success 4') in result.summary[1]
     assert '9 of 9 trials, 3 per cell, k_theta axis linear' in result.summary[0]
 
 

@@ -274,10 +274,11 @@ def test_grasp_keeps_every_contact_inside_the_csm_domain(
 
 @pytest.mark.parametrize('alpha_deg', [5.0, 30.0])
 def test_grasp_outcome_is_the_rigid_one(cfg: DamConfig, grasps: dict, alpha_deg: float) -> None:
-    """The controller's class and whether the object rose by the lift height are the rigid
-    contacts' ones. (Whether it left the table is not: at 5 deg the rigid contacts let the
-    cylinder tip about 15 deg along its length and slide 8 mm along its axis until one end rests
-    on the table again, 8.1 mm up; the compliant ones lift it clear.)"""
+    """The controller's class, whether the object rose by the lift height and whether it left
+    the table (lifted) are the rigid contacts' ones. (Whether it was off the table at the end
+    is not: at 5 deg the rigid contacts let the cylinder tip about 15 deg along its length and
+    slide 8 mm along its axis until one end rests on the table again, 8.1 mm up; the compliant
+    ones hold it clear.)"""
     rigid, _ = grasps['rigid', alpha_deg]
     compliant, _ = grasps['compliant', alpha_deg]
     h = cfg.classification.lift_height_m
@@ -286,4 +287,5 @@ def test_grasp_outcome_is_the_rigid_one(cfg: DamConfig, grasps: dict, alpha_deg:
         f'rigid {rigid.outcome.name} ({rigid.lift_final * 1e3:.2f} mm), compliant '
         f'{compliant.outcome.name} ({compliant.lift_final * 1e3:.2f} mm): '
         f'{compliant.failure_reason or compliant.joint_reason}')
-    assert compliant.lifted == (compliant.lift_final >= h)  # it left the table when it rose
+    assert compliant.lifted == rigid.lifted == (compliant.lift_final >= h)
+    assert compliant.off_table_at_end  # held clear of the table

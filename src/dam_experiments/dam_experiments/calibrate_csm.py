@@ -6,11 +6,14 @@
     ros2 run dam_experiments calibrate_csm BAG_OR_DIR... -o FILE.yaml [--config YAML]
 
 The inputs are one sweep directory (``trials.csv``: pair, friction angle, object, mass and the
-ground truth ``lifted`` of every trial: the object left the table; a table of format 1, whose
-``lifted`` is the old rise rule, is read with a note) or episode bags (``dam_recorder``'s, one
-grasp each: the pair, friction angle and object as run, and the controller's outcome: SUCCESS or
-LIFTED_DAM_FAILED count as lifted, FAILURE as not, ABORTED, REJECTED and UNKNOWN are left out)
-or directories holding them: a real hand's grasps calibrate the same way. The fit
+ground truth ``lifted`` of every trial: the object left the table during the grasp, the lift
+eq. 18 and the CSM predict, whatever it did after; a table of format 2, whose ``lifted`` meant
+off the table at the end, is read with a note, ``lifted`` from its lift-off times, and one of
+format 1, whose ``lifted`` is the old rise rule, with a note) or episode bags
+(``dam_recorder``'s, one grasp each: the pair, friction angle and object as run, and the
+controller's outcome: SUCCESS or LIFTED_DAM_FAILED count as lifted, FAILURE as not, ABORTED,
+REJECTED and UNKNOWN are left out) or directories holding them: a real hand's grasps calibrate
+the same way. The fit
 (:mod:`dam_analysis.csm_calibration`) gives the friction angle of every recorded friction
 angle (unless ``--fixed-friction-angle``) and the effective tangential contact stiffness with
 their profile-likelihood intervals, says which the data do not determine, checks the fit on

@@ -10,15 +10,18 @@ the driver does (:class:`~dam_hand_driver.slew.CommandSlew`,
 world runs the law at every physics step, and slews every torque, exactly as the stand-in
 device does (:meth:`HandWorld.set_joint_commands`). It returns the controller's end phase, the
 outcome as the controller would classify it from joint signals alone with the rise it
-estimates, the ground truth (whether and when the object left the table, and its rise) and, on
-request, the recorded signals.
+estimates, the ground truth (whether and when the object left the table, whether it was off it
+at the end, and its rise) and, on request, the recorded signals.
 
-Ground truth ``lifted``: the object left the table and was off it over the last 0.1 s of the
-run, by the stand-in's table contacts sampled every device cycle (:mod:`dam_sim_bridge.lift_off`:
-a contact-free run of at least 50 ms is a lift-off, its start the lift-off time; a bounce is
-none), for every shape: a polygon that rolls on the table raises its centroid while it still
-touches, and an object off the table may have risen by less than
-``classification.lift_height_m``. The rises stay beside it.
+Ground truth ``lifted``: the object left the table during the grasp (a lift-off, the event
+eq. 18 promises), by the stand-in's table contacts sampled every device cycle
+(:mod:`dam_sim_bridge.lift_off`: a contact-free run of at least 50 ms is a lift-off, its start
+the lift-off time; a bounce is none; the rule begins again at the goal), for every shape: a
+polygon that rolls on the table raises its centroid while it still touches, and an object off
+the table may have risen by less than ``classification.lift_height_m``. Beside it
+``off_table_at_end``: no table contact over the last 0.1 s of the run (an object that lifted
+may have fallen back, or tipped out of the plane until one end rests on the table), and the
+rises.
 
 ``dam_experiment`` (:func:`main`) runs a small ``(k_theta, delta_theta_p)`` grid at one or more
 friction angles and prints a table to compare with the analysis regions (paper Fig. 7)::
@@ -87,11 +90,13 @@ class ExperimentResult:
     joint_reason
         The classifier's explanation (or the failure reason).
     lifted
-        Ground truth: the object left the table and was off it over the last 0.1 s of the run
-        (the module docstring).
+        Ground truth: the object left the table during the grasp, a lift-off (the module
+        docstring).
     lift_off_time
         Ground truth: simulated time of the first lift-off (off the table for at least 50
         ms), from the goal [s]; NaN when the object never left the table.
+    off_table_at_end
+        Ground truth: no table contact over the last 0.1 s of the run.
     estimated_rise
         The controller's estimate of the rise from the final joint angles
         (``Classification.lift_m``) [m]; NaN when the grasp was not classified (it did not
@@ -133,6 +138,7 @@ class ExperimentResult:
     peak_torques: np.ndarray = field(default_factory=lambda: np.zeros(0))
     lift_off_time: float = math.nan
     estimated_rise: float = math.nan
+    off_table_at_end: bool = False
 
     def row(self) -> dict[str, object]:
         """One CSV row (angles in degrees, lengths in millimetres)."""
@@ -144,6 +150,7 @@ class ExperimentResult:
             'outcome': self.outcome.name,
             'lifted_ground_truth': int(self.lifted),
             'lift_off_time_s': round(self.lift_off_time, 3),
+            'off_table_at_end': int(self.off_table_at_end),
             'lift_final_mm': round(self.lift_final * 1e3, 3),
             'lift_max_mm': round(self.lift_max * 1e3, 3),
             'lift_rolling_end_mm': round(self.lift_rolling_end * 1e3, 3),
@@ -223,6 +230,8 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
                 table_friction_coefficient=table_mu)
         w.step(round(hold_before / w.time_step_s))
         t_goal = w.sim_time  # the lift-off time counts from the goal
+        w.lift_off.reset()  # lifted: a lift-off during the grasp
+        w.lift_off.update(t_goal, w.object_table_contacts())
         params = SequenceParams.from_config(config, **param_overrides)
         seq = DamSequence(params)
         geometry = HandGeometry.from_config(config)
@@ -303,7 +312,8 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
             lift_final=lift_final, lift_max=lift_max, lift_rolling_end=lift_rolling_end,
             phase_times=phase_times, sim_time=t, wall_time=time.monotonic() - wall0,
             signals=signals, peak_torques=peak,
-            lift_off_time=ground.lift_off_time - t_goal, estimated_rise=estimated_rise)
+            lift_off_time=ground.lift_off_time - t_goal, estimated_rise=estimated_rise,
+            off_table_at_end=ground.off_table_at_end)
     finally:
         if own_world:
             w.close()
@@ -318,7 +328,8 @@ def save_signals(result: ExperimentResult, path: str | Path) -> Path:
         out, **result.signals, k_theta=result.k_theta, delta_theta_p=result.delta_theta_p,
         friction_angle=result.friction_angle, end_phase=result.phase.name,
         outcome=result.outcome.name, lifted=result.lifted, lift_final=result.lift_final,
-        lift_off_time=result.lift_off_time, estimated_rise=result.estimated_rise)
+        lift_off_time=result.lift_off_time, estimated_rise=result.estimated_rise,
+        off_table_at_end=result.off_table_at_end)
     return out
 
 
@@ -341,7 +352,8 @@ def _parse(argv: Sequence[str] | None) -> argparse.Namespace:
         prog='dam_experiment',
         description='DAM grasps in the lockstep simulator over a (k_theta, delta_theta_p) '
                     'grid, per object and friction angle; prints the outcome, the ground '
-                    'truth (lifted: the object left the table) and the rise, optionally '
+                    'truth (lifted: the object left the table; off the table at the end) '
+                    'and the rise, optionally '
                     'writes a CSV.')
     p.add_argument('--object', '--objects', dest='objects', nargs='+', default=None,
                    metavar='NAME',
@@ -478,8 +490,8 @@ def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
         return 2
     width = max(6, *(len(c.object.name) for c in configs))
     header = (f'{"object":>{width}} {"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} '
-              f'{"outcome":>17} {"lifted":>6} {"rise":>7} {"max":>7} {"suff":>5} {"csm":>5}  '
-              f'reason')
+              f'{"outcome":>17} {"lifted":>6} {"at end":>6} {"rise":>7} {"max":>7} '
+              f'{"suff":>5} {"csm":>5}  reason')
     print(header)
     overrides: dict[str, bool] = {
         'envelope_constant_torque': args.envelope == 'constant-torque'}
@@ -516,6 +528,7 @@ def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[flo
                     print(f'{name:>{width}} {math.degrees(alpha):6.1f} {k:8.3g} {dp:6.1f} '
                           f'{r.phase.name:>8} '
                           f'{r.outcome.name:>17} {"yes" if r.lifted else "no":>6} '
+                          f'{"off" if r.off_table_at_end else "on":>6} '
                           f'{r.lift_final * 1e3:5.1f}mm '
                           f'{r.lift_max * 1e3:5.1f}mm {suff:>5} {csm:>5}  '
                           f'{(r.failure_reason or r.joint_reason)[:70]}', flush=True)

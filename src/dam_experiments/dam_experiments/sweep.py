@@ -10,9 +10,9 @@ trial's perturbations from its seed (:meth:`Perturbations.draw`) and runs one tr
 ``dam_experiment`` does (:func:`~dam_experiments.experiment.run_experiment`), classified as in
 the paper's Fig. 7 (SUCCESS, LIFTED_DAM_FAILED, FAILURE: the controller's verdict from joint
 signals alone, with the rise it estimates) together with the ground truth (``lifted``: the
-object left the table, :mod:`dam_sim_bridge.lift_off`; the lift-off time; the rise of the
-object) and what ``/check_lift`` answers for the pair (the sufficient condition, eq. 18, and
-the contact stiffness model).
+object left the table during the grasp, :mod:`dam_sim_bridge.lift_off`; the lift-off time;
+whether it was off the table at the end; the rise of the object) and what ``/check_lift``
+answers for the pair (the sufficient condition, eq. 18, and the contact stiffness model).
 :mod:`dam_experiments.sweep_table` writes the table and resumes an interrupted sweep.
 
 Determinism: a trial's row depends only on its inputs (the cell, the sweep's perturbation
@@ -473,8 +473,8 @@ def table_columns(config: Any) -> list[str]:
     return ['trial', 'object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
             'repeat', 'seed', 'object_mass_kg', 'object_offset_x_mm', 'object_offset_y_mm',
             'table_friction', 'friction_angle_sim_deg', 'phase', 'outcome', 'lifted',
-            'lift_off_time_s', 'rolling_up_end_s', 'rise_final_mm', 'rise_max_mm',
-            'rise_rolling_end_mm', 'estimated_rise_mm', *peaks,
+            'lift_off_time_s', 'off_table_at_end', 'rolling_up_end_s', 'rise_final_mm',
+            'rise_max_mm', 'rise_rolling_end_mm', 'estimated_rise_mm', *peaks,
             'check_lift_guaranteed', 'worst_case_margin_n', 'csm_lift', 'csm_margin_n',
             'sim_time_s', 'reason']
 
@@ -566,6 +566,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
         'friction_angle_sim_deg': _fmt(draw.friction_angle_deg),
         'phase': r.phase.name, 'outcome': r.outcome.name, 'lifted': str(int(r.lifted)),
         'lift_off_time_s': '' if math.isnan(r.lift_off_time) else _seconds(r.lift_off_time),
+        'off_table_at_end': str(int(r.off_table_at_end)),
         'rolling_up_end_s': _seconds(rolling_up_end(r.phase_times)),
         'rise_final_mm': _mm(r.lift_final), 'rise_max_mm': _mm(r.lift_max),
         'rise_rolling_end_mm': _mm(r.lift_rolling_end),

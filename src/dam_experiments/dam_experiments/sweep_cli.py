@@ -405,9 +405,11 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
         print(f'{PROG}: {len(costs)} trials in {elapsed:.1f} s; per trial {wall:.2f} s wall, '
               f'{cpu:.2f} s CPU (mean)', flush=True)
     outcomes = [r['outcome'] for r in table.rows.values()]
+    held = sum(int(r['off_table_at_end']) for r in table.rows.values())
     print(f'{PROG}: {len(table.rows)} of {n} rows in {args.out / TABLE_FILE}: lifted (left '
-          f'the table) {lifted}, ' + ', '.join(f'{o} {outcomes.count(o)}' for o in
-                                    ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')), flush=True)
+          f'the table) {lifted}, off the table at the end {held}, '
+          + ', '.join(f'{o} {outcomes.count(o)}' for o in
+                      ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')), flush=True)
     if failures:
         spec, error = failures[0]
         sys.stderr.write(f'{PROG}: {len(failures)} trial(s) failed (first: trial {spec.index}: '

@@ -12,18 +12,20 @@ the position-joint displacement ``delta_theta_p`` [deg], y the finger-1 complian
 Without repeats every trial is one of the paper's three markers, from the controller's
 classification (column ``outcome``): ``x`` FAILURE, triangle LIFTED_DAM_FAILED (lifted, no
 enveloping grasp), ``o`` SUCCESS; a square ring marks a trial whose ground truth (column
-``lifted``: the object left the table) disagrees with that classification. With repeats every
-cell is a square coloured by its lift probability (ground truth, share of its trials that
-lifted) with a colour bar. Over
-both, the analysis' lower boundaries ``k_theta*(delta_theta_p)`` at the panel's friction angle
-(:func:`dam_analysis.lift_map.compute_boundaries`): the sufficient condition (eq. 18) as a solid
-line, the contact stiffness model (CSM) dashed. The boundaries are those of the configuration
+``lifted``: the object left the table during the grasp) disagrees with that classification.
+With repeats every cell is a square coloured by its lift probability (ground truth, share of
+its trials that lifted) with a colour bar. Over both, the analysis' lower boundaries
+``k_theta*(delta_theta_p)`` at the panel's friction angle
+(:func:`dam_analysis.lift_map.compute_boundaries`): the sufficient condition (eq. 18) as a
+solid line, the contact stiffness model (CSM) dashed. The boundaries are those of the configuration
 given with ``--config`` (default: ``DAM_CONFIG`` or the installed ``config/dam.yaml``, as for
 ``sweep``); ``sweep.json`` records only the SHA-256 of the sweep's configuration, and a
 configuration with another digest is named on stderr and in the picture's title.
 
 A short summary goes to stdout: per friction angle the trials, how many lifted (ground truth:
-left the table), the outcome counts and the lowest boundary values. A table of format 1 (its
+left the table during the grasp) and how many of them were off the table at the end, the
+outcome counts and the lowest boundary values. A table of format 2 (its ``lifted`` meant off
+the table at the end; ``lifted`` is read from its lift-off times) or of format 1 (its
 ``lifted`` the old 5 mm rule) is drawn with a note on stderr and in the title.
 
 Exit status: 0 drawn; 2 bad input (a missing directory, no ``trials.csv`` or ``sweep.json``,
@@ -309,7 +311,8 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
 
 def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> list[str]:
     """The text summary: the sweep, then per friction angle the trials, how many lifted
-    (ground truth), the outcome counts and the lowest boundary values."""
+    (ground truth) and how many were off the table at the end (format 2 on), the outcome
+    counts and the lowest boundary values."""
     n = len(data.trials)
     shown = data.object_label
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{n} of '
@@ -321,6 +324,8 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
     for alpha, b in zip(data.friction_angles_deg, boundaries, strict=True):
         trials = data.at(alpha)
         lifted = sum(t.lifted for t in trials)
+        held = (f', off the table at the end {sum(bool(t.off_table_at_end) for t in trials)}'
+                if data.lift_off_recorded else '')
         counts = {o: sum(t.outcome == o for t in trials) for o in OUTCOMES}
         bounds = []
         for name, field in (('eq. 18', 'sufficient'), ('CSM', 'csm')):
@@ -328,7 +333,7 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
             bounds.append(f'{name} lowest k_theta* {low[0]:.3g} N*m/rad at {low[1]:.3g} deg'
                           if low else f'{name}: no k_theta lifts')
         lines.append(f'  alpha {alpha:g} deg: {len(trials)} trials, {word} {lifted} '
-                     f'({100.0 * lifted / len(trials):.0f} %), success {counts["SUCCESS"]}, '
+                     f'({100.0 * lifted / len(trials):.0f} %){held}, success {counts["SUCCESS"]}, '
                      f'lifted but DAM failed {counts["LIFTED_DAM_FAILED"]}, failure '
                      f'{counts["FAILURE"]}; ' + '; '.join(bounds))
     odd = sum(t.disagrees for t in data.trials)
@@ -446,8 +451,10 @@ def plot_sweep(sweep: SweepData | str | os.PathLike[str],
     log_k = k_axis_is_log(data.parameters) if k_scale == 'auto' else k_scale == 'log'
     boundaries = sweep_boundaries(data, analyzer, n_points)
     note = '' if matches else '\nboundaries of a configuration other than the sweep\'s'
-    if data.lifted_note is not None:
+    if data.table_format == 1:
         note += '\nlifted: the old 5 mm rule (a table of format 1), not lift-off'
+    elif data.table_format == 2:
+        note += '\nlifted: from the lift-off times (a table of format 2)'
     figure = sweep_figure(data, boundaries, log_k, note)
     if out is not None:
         try:

@@ -13,11 +13,11 @@ configuration, :func:`compute_report` answers, per friction angle alpha:
 4. where the two disagree, with the evidence the table's columns hold.
 
 Ground truth per cell: the share of its trials whose object lifted (column ``lifted``: it left
-the table, :mod:`dam_sim_bridge.lift_off`), ``p_lift``; the cell lifts when ``p_lift >=
-LIFT_PROBABILITY``. The analysis columns (``check_lift_guaranteed``, ``csm_lift`` and the
-margins) are the cell's ``/check_lift`` answer, the same for every trial of a cell; the first
-trial's are used. The rows come from :mod:`dam_experiments.sweep_report_rows`. No rclpy, no
-matplotlib: numpy and the analysis.
+the table during the grasp, :mod:`dam_sim_bridge.lift_off`, whatever it did after), ``p_lift``;
+the cell lifts when ``p_lift >= LIFT_PROBABILITY``. The analysis columns
+(``check_lift_guaranteed``, ``csm_lift`` and the margins) are the cell's ``/check_lift``
+answer, the same for every trial of a cell; the first trial's are used. The rows come from
+:mod:`dam_experiments.sweep_report_rows`. No rclpy, no matplotlib: numpy and the analysis.
 """
 
 from __future__ import annotations

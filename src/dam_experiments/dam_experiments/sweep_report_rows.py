@@ -3,11 +3,12 @@
 :func:`read_rows` reads, for the trials :func:`~dam_experiments.sweep_results.read_sweep` kept,
 the columns of ``trials.csv`` the report (:mod:`dam_experiments.sweep_report`) needs besides
 those of the picture: the phase and reason, the rises, the simulated mass, the peak torques and
-the analysis columns, and where the table has them (format 2) the end of ROLLING_UP and the
+the analysis columns, and where the table has them (format 2 on) the end of ROLLING_UP and the
 controller's estimated rise, checked (naming the file, the line, the trial and the value).
 :func:`rise_class`, :func:`ending` and :func:`trial_label` say in words what a trial did, from
-its columns alone, by lift-off (:mod:`dam_sim_bridge.lift_off`) for every shape;
-:func:`checks` lists the checks of the evidence that hold for it.
+its columns alone, by lift-off (:mod:`dam_sim_bridge.lift_off`) and whether the object was off
+the table at the end, for every shape; :func:`checks` lists the checks of the evidence that
+hold for it.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ class TrialRow:
         The controller's class, the phase it ended in and the failure reason or the
         classifier's explanation.
     lifted
-        Ground truth: the object left the table and was off it at the end (format 1: the
+        Ground truth: the object left the table during the grasp, a lift-off (format 1: the
         object centre ended at least the lift height up).
     rise_final_mm, rise_max_mm, rise_rolling_end_mm
         Rise of the object centre at the end, its largest rise, its rise at the end of
@@ -71,11 +72,14 @@ class TrialRow:
         The cell's ``/check_lift`` answer: eq. (18) holds, its margin [N], the CSM verdict and
         its margin [N].
     lift_off_known
-        The table records lift-off (format 2): ``lifted`` means that the object left the
-        table and the three columns below are there.
+        The table records lift-off (format 2 on): ``lifted`` means that the object left the
+        table and the four columns below are there.
     lift_off_time_s, rolling_up_end_s
         When the object was first off the table for 50 ms, when ROLLING_UP ended, both from
         the goal [s] (NaN: it never lifted off; ROLLING_UP did not end; not recorded).
+    off_table_at_end
+        Ground truth: the object was off the table over the last 0.1 s of the grasp (None:
+        not recorded, format 1).
     estimated_rise_mm
         The controller's estimate of the rise from the joints [mm] (NaN: not classified, or
         not recorded).
@@ -104,11 +108,7 @@ class TrialRow:
     lift_off_time_s: float = math.nan
     rolling_up_end_s: float = math.nan
     estimated_rise_mm: float = math.nan
-
-    @property
-    def lifted_off(self) -> bool:
-        """The object left the table at some time (a lift-off), maybe falling back."""
-        return not math.isnan(self.lift_off_time_s)
+    off_table_at_end: bool | None = None
 
 
 def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
@@ -211,7 +211,8 @@ def read_rows(data: SweepData) -> list[TrialRow]:
             csm_lift=_flag(table, line, row, 'csm_lift'),
             csm_margin_n=values['csm_margin_n'], lift_off_known=data.lift_off_recorded,
             lift_off_time_s=t.lift_off_time_s, rolling_up_end_s=values['rolling_up_end_s'],
-            estimated_rise_mm=values['estimated_rise_mm']))
+            estimated_rise_mm=values['estimated_rise_mm'],
+            off_table_at_end=t.off_table_at_end))
     return out
 
 
@@ -247,31 +248,39 @@ def lifted_late(trial: TrialRow, lift_height_mm: float) -> bool:
     if not trial.lift_off_known:
         return (math.isfinite(trial.rise_rolling_end_mm)
                 and trial.rise_rolling_end_mm < lift_height_mm)
-    return (math.isfinite(trial.rolling_up_end_s) and trial.lifted_off
+    return (math.isfinite(trial.rolling_up_end_s) and trial.lifted
             and trial.lift_off_time_s >= trial.rolling_up_end_s)
 
 
-def rise_class(trial: TrialRow, lift_height_mm: float) -> str:
-    """What the object did, by lift-off, the rise columns and the lift height ``h`` [mm].
+#: What the object did (:func:`rise_class`), in a table that records lift-off.
+RISE_CLASSES = ('lifted and held off the table',
+                'lifted, then fell back or an end came to rest on the table',
+                'rose on the table', 'never rose')
 
-    Lifted: ``'lifted after the rolling-up phase'`` (:func:`lifted_late`), else ``'lifted'``.
-    Not lifted: ``'left the table, then fell back'`` (a lift-off, on the table at the end),
-    ``'rose on the table'`` (no lift-off; ``rise_max >= NEVER_ROSE_FRACTION h``: it rolled or
-    tipped while touching, as a polygon turning on a vertex does) or ``'never rose'``. In a
-    table of format 1 (no lift-off recorded), not lifted: ``'rose then fell back'``
-    (``rise_max >= h > rise_final``), ``'rose partly'`` (``NEVER_ROSE_FRACTION h <= rise_max
-    < h``) or ``'never rose'``.
+
+def rise_class(trial: TrialRow, lift_height_mm: float) -> str:
+    """What the object did, by lift-off, ``off_table_at_end``, the rise columns and the lift
+    height ``h`` [mm] (:data:`RISE_CLASSES`).
+
+    Lifted (a lift-off): ``'lifted and held off the table'`` (off it at the end) or ``'lifted,
+    then fell back or an end came to rest on the table'`` (touching it at the end: it fell
+    back, or a column tipped out of the plane onto one end). Not lifted: ``'rose on the
+    table'`` (``rise_max >= NEVER_ROSE_FRACTION h``: it rolled or tipped while touching, as a
+    polygon turning on a vertex does) or ``'never rose'``. In a table of format 1 (no lift-off
+    recorded), lifted: ``'lifted after the rolling-up phase'`` (:func:`lifted_late`) or
+    ``'lifted'``; not lifted: ``'rose then fell back'`` (``rise_max >= h > rise_final``),
+    ``'rose partly'`` (``NEVER_ROSE_FRACTION h <= rise_max < h``) or ``'never rose'``.
     """
     h = lift_height_mm
+    if not trial.lift_off_known:
+        if trial.lifted:
+            return 'lifted after the rolling-up phase' if lifted_late(trial, h) else 'lifted'
+        if trial.rise_max_mm >= h:
+            return 'rose then fell back'
+        return 'rose partly' if trial.rise_max_mm >= NEVER_ROSE_FRACTION * h else 'never rose'
     if trial.lifted:
-        return 'lifted after the rolling-up phase' if lifted_late(trial, h) else 'lifted'
-    if trial.lift_off_known and trial.lifted_off:
-        return 'left the table, then fell back'
-    if not trial.lift_off_known and trial.rise_max_mm >= h:
-        return 'rose then fell back'
-    if trial.rise_max_mm >= NEVER_ROSE_FRACTION * h:
-        return 'rose on the table' if trial.lift_off_known else 'rose partly'
-    return 'never rose'
+        return RISE_CLASSES[0] if trial.off_table_at_end else RISE_CLASSES[1]
+    return RISE_CLASSES[2] if trial.rise_max_mm >= NEVER_ROSE_FRACTION * h else RISE_CLASSES[3]
 
 
 def trial_label(trial: TrialRow, lift_height_mm: float) -> str:
@@ -338,12 +347,12 @@ CHECKS_NOT_LIFTING = (
     ('servo limit', 'a position joint reached its servo torque limit'),
     ('heavier object', 'the object was heavier than the analysis assumes'),
     ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
-    ('fell back', 'the object left the table (off it for 50 ms), as a positive margin says, '
-                  'and was back on it at the end'),
 )
 CHECKS_LIFTING = (
     ('lifted after rolling-up', 'the object left the table only after ROLLING_UP, the phase '
                                 'the analysis covers'),
+    ('not held', 'the object left the table but was not off it at the end (it fell back, or '
+                 'an end came to rest on the table): a lift that barely held'),
     ('lighter object', 'the object was lighter than the analysis assumes'),
     ('next to the boundary', 'no grid k_theta lies between the cell and the boundary'),
 )
@@ -359,6 +368,7 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
     mass = trial.object_mass_kg
     if sim_lifts:
         found = {'lifted after rolling-up': lifted_late(trial, limits.lift_height_mm),
+                 'not held': trial.off_table_at_end is False,
                  'lighter object': mass < limits.object_mass_kg * (1.0 - 1e-9),
                  'next to the boundary': near}
         names = CHECKS_LIFTING
@@ -370,8 +380,7 @@ def checks(trial: TrialRow, k_star: float, k_grid: Sequence[float], sim_lifts: b
                  'servo limit': (trial.peak_position_nm
                                  >= LIMIT_FRACTION * limits.servo_torque_nm),
                  'heavier object': mass > limits.object_mass_kg * (1.0 + 1e-9),
-                 'next to the boundary': near,
-                 'fell back': trial.lift_off_known and trial.lifted_off}
+                 'next to the boundary': near}
         names = CHECKS_NOT_LIFTING
     return [name for name, _ in names if found[name]]
 
@@ -386,8 +395,8 @@ CLASSED_LIFTED = ('SUCCESS', 'LIFTED_DAM_FAILED')
 @dataclass(frozen=True)
 class ControllerVerdicts:
     """At one friction angle, the trials by ground truth (``lifted``: the object left the
-    table) and by the controller's class (``outcome``: lifted for :data:`CLASSED_LIFTED`, else
-    FAILURE)."""
+    table during the grasp) and by the controller's class (``outcome``: lifted for
+    :data:`CLASSED_LIFTED`, else FAILURE)."""
 
     friction_angle_deg: float
     lifted_classed_lifted: int

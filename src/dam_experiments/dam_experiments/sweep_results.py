@@ -3,14 +3,17 @@
 What :mod:`dam_experiments.sweep_plot` draws: :func:`read_sweep` checks the files ``sweep``
 (:mod:`dam_experiments.sweep_table`) writes and returns the trials as :class:`Trial` (the cell,
 the controller's classification ``outcome`` and the ground truth ``lifted``: the object left the
-table), grouped per friction angle and per cell on demand (:class:`SweepData`);
-:func:`k_axis_is_log` tells whether the sweep's ``k_theta`` axis was a log range. A sweep still
-running or interrupted is read as far as it got (a row cut short is left out and counted).
+table during the grasp, and ``off_table_at_end``), grouped per friction angle and per cell on
+demand (:class:`SweepData`); :func:`k_axis_is_log` tells whether the sweep's ``k_theta``
+axis was a log range. A sweep still running or interrupted is read as far as it got (a row
+cut short is left out and counted).
 
-A table written before ``lifted`` meant lift-off (no column ``lift_off_time_s``: format 1) is
-read all the same; its ``lifted`` is the old rule, the object centre at least
-``classification.lift_height_m`` up at the end, and :attr:`SweepData.lifted_note` says so in
-one line that the commands print.
+Older tables are read all the same, and :attr:`SweepData.lifted_note` says how in one line
+that the commands print. Format 2 (no column ``off_table_at_end``): its ``lifted`` meant off
+the table over the last 0.1 s; it is read as ``off_table_at_end``, and ``lifted`` from its
+``lift_off_time_s`` (a lift-off time: a lift-off), which is exact. Format 1 (no column
+``lift_off_time_s`` either): its ``lifted`` is the old rule, the object centre at least
+``classification.lift_height_m`` up at the end; ``off_table_at_end`` is not known.
 """
 
 from __future__ import annotations
@@ -37,8 +40,10 @@ OUTCOMES = ('FAILURE', 'LIFTED_DAM_FAILED', 'SUCCESS')
 #: Columns of ``trials.csv`` the picture needs.
 REQUIRED_COLUMNS = ('trial', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
                     'repeat', 'outcome', 'lifted')
-#: The column whose presence says that ``lifted`` means lift-off (format 2 on).
+#: The column whose presence says that the table records lift-off (format 2 on).
 LIFT_OFF_COLUMN = 'lift_off_time_s'
+#: The column whose presence says that ``lifted`` means a lift-off (format 3 on).
+AT_END_COLUMN = 'off_table_at_end'
 
 
 @dataclass(frozen=True)
@@ -60,7 +65,7 @@ class Trial:
     outcome
         The controller's classification: ``FAILURE``, ``LIFTED_DAM_FAILED`` or ``SUCCESS``.
     lifted
-        Ground truth: the object left the table and was off it at the end (in a table of
+        Ground truth: the object left the table during the grasp, a lift-off (in a table of
         format 1: the object centre ended at least ``classification.lift_height_m`` up).
     object_name
         The object of the configuration's library (column ``object``; '' in a table from
@@ -71,6 +76,9 @@ class Trial:
     lift_off_time_s
         Ground truth: when the object was first off the table for 50 ms, from the goal [s]
         (column ``lift_off_time_s``; NaN when it never was, or in a table of format 1).
+    off_table_at_end
+        Ground truth: the object was off the table over the last 0.1 s of the grasp (column
+        ``off_table_at_end``; format 2: its ``lifted``); None in a table of format 1.
     """
 
     index: int
@@ -83,6 +91,7 @@ class Trial:
     object_name: str = ''
     object_mass_kg: float = math.nan
     lift_off_time_s: float = math.nan
+    off_table_at_end: bool | None = None
 
     @property
     def disagrees(self) -> bool:
@@ -132,9 +141,10 @@ class SweepData:
         The complete rows of ``trials.csv``, in file order.
     skipped
         Rows cut short (a sweep still writing its table) that were left out.
-    lift_off_recorded
-        Whether the table has the column ``lift_off_time_s``, so that ``lifted`` means that
-        the object left the table; False for a table of format 1 (the old 5 mm rule).
+    table_format
+        3: ``lifted`` is a lift-off and ``off_table_at_end`` is a column; 2: no column
+        ``off_table_at_end``, read from the old ``lifted`` (``lifted`` from
+        ``lift_off_time_s``); 1: no column ``lift_off_time_s`` either (the old 5 mm rule).
     """
 
     directory: Path
@@ -142,18 +152,29 @@ class SweepData:
     parameters: Mapping[str, Any]
     trials: tuple[Trial, ...]
     skipped: int = 0
-    lift_off_recorded: bool = True
+    table_format: int = 3
+
+    @property
+    def lift_off_recorded(self) -> bool:
+        """``lifted`` means that the object left the table (format 2 on; format 1: the old
+        5 mm rule)."""
+        return self.table_format >= 2
 
     @property
     def lifted_note(self) -> str | None:
-        """One line for a table of format 1 (None otherwise): its ``lifted`` is the old
-        rule."""
-        if self.lift_off_recorded:
-            return None
-        return (f'{self.directory / TABLE_FILE} has no column {LIFT_OFF_COLUMN!r} (written '
-                f'before format 2): its lifted is the old rule, the object centre at least '
-                f'classification.lift_height_m up at the end, not that it left the table; '
-                f'run the sweep again for lift-off')
+        """One line for a table of format 1 or 2 (None otherwise): how its ``lifted`` was
+        read."""
+        table = self.directory / TABLE_FILE
+        if self.table_format == 2:
+            return (f'{table} has no column {AT_END_COLUMN!r} (written before format 3): its '
+                    f'lifted meant off the table over the last 0.1 s, read as '
+                    f'{AT_END_COLUMN}; lifted (a lift-off) is read from {LIFT_OFF_COLUMN}')
+        if self.table_format == 1:
+            return (f'{table} has no column {LIFT_OFF_COLUMN!r} (written before format 2): '
+                    f'its lifted is the old rule, the object centre at least '
+                    f'classification.lift_height_m up at the end, not that it left the table; '
+                    f'run the sweep again for lift-off')
+        return None
 
     @property
     def objects(self) -> tuple[str, ...]:
@@ -281,8 +302,8 @@ def _number(table: Path, line: int, row: Mapping[str, str], column: str, low: fl
     return value
 
 
-def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
-    """One row of the table, checked."""
+def _trial(table: Path, line: int, row: Mapping[str, str], table_format: int) -> Trial:
+    """One row of a table of format ``table_format``, checked."""
     try:
         index = int(row['trial'])
         repeat = int(row['repeat'])
@@ -293,22 +314,34 @@ def _trial(table: Path, line: int, row: Mapping[str, str]) -> Trial:
     if row['outcome'] not in OUTCOMES:
         raise _fail_row(table, line, row['trial'], f'outcome {row["outcome"]!r} is not one of '
                                                    f'{", ".join(OUTCOMES)}')
-    if row['lifted'] not in ('0', '1'):
-        raise _fail_row(table, line, row['trial'], f'lifted {row["lifted"]!r} is not 0 or 1')
+    for column in ('lifted', AT_END_COLUMN) if table_format >= 3 else ('lifted',):
+        if row[column] not in ('0', '1'):
+            raise _fail_row(table, line, row['trial'], f'{column} {row[column]!r} is not 0 or 1')
+    lift_off = _lift_off_time(table, line, row, table_format)
+    lifted, at_end = row['lifted'] == '1', None
+    if table_format == 2:  # its lifted: off the table at the end, after a lift-off
+        lifted, at_end = not math.isnan(lift_off), lifted
+    elif table_format >= 3:
+        at_end = row[AT_END_COLUMN] == '1'
+        if at_end and not lifted:
+            raise _fail_row(table, line, row['trial'], f'{AT_END_COLUMN} 1 with lifted 0 (an '
+                                                       f'object off the table lifted off)')
     return Trial(index=index,
                  friction_angle_deg=_number(table, line, row, 'friction_angle_deg', 0.0, 90.0,
                                             low_open=False),
                  k_theta=_number(table, line, row, 'k_theta_nm_per_rad', 0.0),
                  delta_theta_p_deg=_number(table, line, row, 'delta_theta_p_deg', 0.0),
-                 repeat=repeat, outcome=row['outcome'], lifted=row['lifted'] == '1',
+                 repeat=repeat, outcome=row['outcome'], lifted=lifted,
                  object_name=row.get('object') or '',
                  object_mass_kg=_optional_mass(row.get('object_mass_kg')),
-                 lift_off_time_s=_lift_off_time(table, line, row))
+                 lift_off_time_s=lift_off, off_table_at_end=at_end)
 
 
-def _lift_off_time(table: Path, line: int, row: Mapping[str, str]) -> float:
+def _lift_off_time(table: Path, line: int, row: Mapping[str, str], table_format: int
+                   ) -> float:
     """The row's ``lift_off_time_s`` [s]: NaN when absent (format 1) or empty (no lift-off,
-    which a lifted trial cannot be), else a finite number."""
+    which a lifted trial cannot be, nor in format 2 one off the table at the end), else a
+    finite number; in format 3 a trial with a lift-off time is lifted."""
     if LIFT_OFF_COLUMN not in row:
         return math.nan
     text = row[LIFT_OFF_COLUMN]
@@ -317,6 +350,9 @@ def _lift_off_time(table: Path, line: int, row: Mapping[str, str]) -> float:
             raise _fail_row(table, line, row['trial'], f'lifted 1 without a {LIFT_OFF_COLUMN} '
                                                        f'(a lifted object lifted off)')
         return math.nan
+    if table_format >= 3 and row['lifted'] != '1':
+        raise _fail_row(table, line, row['trial'], f'{LIFT_OFF_COLUMN} {text!r} with lifted '
+                                                   f'{row["lifted"]!r} (a lift-off is a lift)')
     try:
         value = float(text)
     except ValueError:
@@ -393,11 +429,13 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
         if missing:
             raise SweepPlotError(f'{table}: no column {missing[0]!r} (its columns: '
                                  f'{", ".join(header)})')
+        table_format = (3 if AT_END_COLUMN in header else 2 if LIFT_OFF_COLUMN in header
+                        else 1)
         for row in reader:
             if None in row.values() or None in row:  # cut short or too long
                 skipped += 1
                 continue
-            trial = _trial(table, reader.line_num, row)
+            trial = _trial(table, reader.line_num, row, table_format)
             if trial.index in seen:
                 raise _fail_row(table, reader.line_num, row['trial'],
                                 f'trial {trial.index} is in the table twice (first on line '
@@ -409,8 +447,7 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
     if not trials:
         raise SweepPlotError(f'{table} holds no trials (only its header)' if not skipped else
                              f'{table} holds no complete trial ({skipped} row(s) cut short)')
-    return SweepData(root, spec, parameters, tuple(trials), skipped,
-                     lift_off_recorded=LIFT_OFF_COLUMN in header)
+    return SweepData(root, spec, parameters, tuple(trials), skipped, table_format)
 
 
 def k_axis_is_log(parameters: Mapping[str, Any]) -> bool:

@@ -8,7 +8,8 @@ An output directory holds
 * ``sweep.json``: the sweep's parameters (:meth:`SweepSpec.to_dict`), the SHA-256 of the
   configuration's values, the columns and their units, written when the sweep starts;
 * ``cells.csv``: per cell the number of trials, how many lifted (ground truth: the object left
-  the table) and succeeded and the analysis answer, written when the sweep is complete.
+  the table during the grasp), how many were off the table at the end, how many succeeded and
+  the analysis answer, written when the sweep is complete.
 
 :meth:`TrialTable.open` on a directory that already holds a sweep resumes it: it refuses a
 different sweep (naming the parameter that differs), keeps every complete row whose inputs
@@ -44,17 +45,19 @@ _OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')
 TABLE_FILE = 'trials.csv'
 PARAMS_FILE = 'sweep.json'
 CELLS_FILE = 'cells.csv'
-#: Version of the directory layout and of ``sweep.json``: 2 since ``lifted`` means that the
-#: object left the table (with ``lift_off_time_s``, ``rolling_up_end_s`` and
-#: ``estimated_rise_mm``); in format 1 it meant a rise of ``classification.lift_height_m``.
-FORMAT_VERSION = 2
+#: Version of the directory layout and of ``sweep.json``: 3 since ``lifted`` means that a
+#: lift-off happened during the grasp (with ``off_table_at_end``, the object off the table over
+#: the last 0.1 s); in format 2 ``lifted`` meant off the table over the last 0.1 s (with
+#: ``lift_off_time_s``, ``rolling_up_end_s`` and ``estimated_rise_mm``), in format 1 a rise of
+#: ``classification.lift_height_m`` at the end.
+FORMAT_VERSION = 3
 #: Keys of ``sweep.json`` that must match to resume (the others are information).
 _MATCHING_KEYS = ('format', 'sweep', 'config_sha256', 'columns')
 
-CELL_COLUMNS = ['object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg', 'trials',
-                'lifted', 'p_lift', 'success', 'lifted_dam_failed', 'failure', 'p_success',
-                'rise_final_mm_mean', 'check_lift_guaranteed', 'worst_case_margin_n',
-                'csm_lift', 'csm_margin_n']
+CELL_COLUMNS = ['object', 'friction_angle_deg', 'k_theta_nm_per_rad', 'delta_theta_p_deg',
+                'trials', 'lifted', 'p_lift', 'off_table_at_end', 'success', 'lifted_dam_failed',
+                'failure', 'p_success', 'rise_final_mm_mean', 'check_lift_guaranteed',
+                'worst_case_margin_n', 'csm_lift', 'csm_margin_n']
 
 _UNITS = {
     'object': 'the object grasped: its name in the configuration\'s object.library',
@@ -71,10 +74,12 @@ _UNITS = {
     'phase': 'phase the controller ended in',
     'outcome': 'paper Fig. 7 class from joint signals: SUCCESS (o), LIFTED_DAM_FAILED (t), '
                'FAILURE (x)',
-    'lifted': 'ground truth: the object left the table and was off it over the last 0.1 s '
-              '(dam_sim_bridge.lift_off: no object-table contact point within 0.1 mm)',
+    'lifted': 'ground truth: the object left the table during the grasp, off it for at least '
+              '50 ms (dam_sim_bridge.lift_off: no object-table contact point within 0.1 mm)',
     'lift_off_time_s': 'ground truth: first time the object was off the table for 50 ms, '
                        'from the goal [s]; empty when it never was',
+    'off_table_at_end': 'ground truth: the object was off the table over the last 0.1 s of '
+                        'the grasp',
     'rolling_up_end_s': 'when ROLLING_UP ended, from the goal [s]; nan when it did not end',
     'rise_final_mm': 'rise of the object centre at the end [mm]',
     'rise_max_mm': 'largest rise [mm]', 'rise_rolling_end_mm': 'rise at the end of ROLLING_UP [mm]',
@@ -192,7 +197,7 @@ class TrialTable:
             if stored.get('format') != FORMAT_VERSION:
                 raise SweepError(
                     f'{self.directory} holds a sweep of format {stored.get("format")!r}, '
-                    f'written before lifted meant that the object left the table (this is '
+                    f'written before lifted meant a lift-off during the grasp (this is '
                     f'format {FORMAT_VERSION}); it cannot be resumed: use another --out or '
                     f'remove it (sweep_plot and sweep_report still read it)')
             for key in _MATCHING_KEYS:
@@ -234,6 +239,7 @@ class TrialTable:
             if (len(values) != len(self.columns) or index is None or index in self.rows
                     or any(row[k] != v for k, v in input_columns(self.specs[index]).items())
                     or row.get('lifted') not in ('0', '1')
+                    or row.get('off_table_at_end') not in ('0', '1')
                     or row.get('outcome') not in _OUTCOMES):
                 self.dropped += 1
                 continue
@@ -320,9 +326,10 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
     """Per cell of an object (in order of first appearance): trials, lifts, outcomes, the
     analysis.
 
-    ``p_lift`` is the share of trials whose object lifted (ground truth: it left the table),
-    ``p_success`` the share the controller classified SUCCESS; the analysis columns are the
-    cell's (the same for every trial of a cell).
+    ``p_lift`` is the share of trials whose object lifted (ground truth: it left the table
+    during the grasp), ``off_table_at_end`` how many ended off the table, ``p_success`` the
+    share the controller classified SUCCESS; the analysis columns are the cell's (the same for
+    every trial of a cell).
     """
     cells: dict[tuple[str, str, str, str], list[Mapping[str, str]]] = {}
     for row in rows:
@@ -333,6 +340,7 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
     for (name, alpha, k, dp), group in cells.items():
         n = len(group)
         lifted = sum(int(r['lifted']) for r in group)
+        at_end = sum(int(r['off_table_at_end']) for r in group)
         counts = {o: sum(r['outcome'] == o for r in group)
                   for o in ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')}
         rises = [float(r['rise_final_mm']) for r in group]
@@ -341,6 +349,7 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
             'object': name, 'friction_angle_deg': alpha, 'k_theta_nm_per_rad': k,
             'delta_theta_p_deg': dp,
             'trials': str(n), 'lifted': str(lifted), 'p_lift': f'{lifted / n:.6g}',
+            'off_table_at_end': str(at_end),
             'success': str(counts['SUCCESS']),
             'lifted_dam_failed': str(counts['LIFTED_DAM_FAILED']),
             'failure': str(counts['FAILURE']), 'p_success': f'{counts["SUCCESS"] / n:.6g}',
