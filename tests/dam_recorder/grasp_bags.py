@@ -11,7 +11,8 @@ without asking the code under test:
 - ``/sim/object_pose`` at 50 Hz, the object rising from 0.0125 m after 1.2 s;
 - ``/dam_grasp/_action/feedback``, three messages, the last two with the margins;
 - when asked for, ``/sim/object_table_contact`` at 50 Hz beside the pose (a bounce of two
-  messages, then off the table from message ``LIFT_FROM`` on, :func:`contact_state`) and the
+  messages, then off the table from message ``LIFT_FROM`` on, back on it from message
+  ``fall_at`` on when given, :func:`contact_state`) and the
   ENDED event on ``/dam/episode``, with the controller's estimate (``ESTIMATE``) in a
   ``GraspEpisode`` whose definition has its fields, or without;
 - ``custom_data``: the recorder's lost, dropped, paused and trimmed counts, its backlog and
@@ -82,17 +83,21 @@ def pose_z(k: int) -> float:
     return Z0 + max(0.0, t - 1.2) * 0.02
 
 
-def contact_state(k: int) -> tuple[bool, float, bool, bool]:
-    """(on_table, off_table_s, lifted_off, lifted) of contact message ``k`` (the stand-in's
-    rule on its own clock: 50 ms off is a lift-off, 0.1 s lifted)."""
+def contact_state(k: int, fall_at: int | None = None) -> tuple[bool, float, bool, bool]:
+    """(on_table, off_table_s, lifted, off_table_at_end) of contact message ``k``, the object
+    back on the table from message ``fall_at`` on (the stand-in's rule on its own clock: 50 ms
+    off is a lift-off, and lifted stays true from then on; off for 0.1 s now is off the table
+    at the end)."""
     step = POSE_STEP_NS * 1e-9
+    last_off = k if fall_at is None else min(k, fall_at - 1)  # of the lift from LIFT_FROM
+    lifted = (last_off - LIFT_FROM) * step >= 0.05 - 1e-9  # the bounce (40 ms) is none
     if BOUNCE[0] <= k < BOUNCE[1]:
         off = (k - BOUNCE[0]) * step
-    elif k >= LIFT_FROM:
+    elif k >= LIFT_FROM and (fall_at is None or k < fall_at):
         off = (k - LIFT_FROM) * step
     else:
-        return True, 0.0, False, False
-    return False, off, off >= 0.05 - 1e-9, off >= 0.1 - 1e-9
+        return True, 0.0, lifted, False
+    return False, off, lifted, off >= 0.1 - 1e-9
 
 
 def summary(**changes: Any) -> dict[str, Any]:
@@ -135,9 +140,11 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                                                '/dam_grasp/_action/feedback'),
                     episode: dict[str, Any] | None = None,
                     custom: dict[str, str] | None = None, storage: str = 'mcap',
-                    estimate: dict[str, Any] | None = None) -> GraspBag:
+                    estimate: dict[str, Any] | None = None,
+                    fall_at: int | None = None) -> GraspBag:
     """Write the grasp bag described in the module to ``path`` (only ``topics``); the ENDED
-    event's GraspEpisode gets the fields of ``estimate`` (a definition with them) when given."""
+    event's GraspEpisode gets the fields of ``estimate`` (a definition with them) when given;
+    the object falls back on the table at contact message ``fall_at`` when given."""
     t = typestore.types
     data = {'dam_recorder.lost_messages': json.dumps(LOST),
             'dam_recorder.paused_messages': json.dumps(PAUSED),
@@ -216,10 +223,10 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
             pending.append((T0 + offset, '/dam_grasp/_action/feedback', msg))
     if '/sim/object_table_contact' in topics:
         for k in range(POSE_COUNT):
-            on, off, lifted_off, lifted = contact_state(k)
+            on, off, lifted, at_end = contact_state(k, fall_at)
             msg = t['dam_interfaces/msg/ObjectTableContact'](
                 header=_header(t, 300 + k, 0, 'world'), table_contacts=2 if on else 0,
-                on_table=on, off_table_s=off, lifted_off=lifted_off, lifted=lifted)
+                on_table=on, off_table_s=off, lifted=lifted, off_table_at_end=at_end)
             pending.append((T0 + POSE_OFFSET_NS + k * POSE_STEP_NS, '/sim/object_table_contact',
                             msg))
     if '/dam/episode' in topics:

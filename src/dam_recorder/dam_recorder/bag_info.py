@@ -157,8 +157,8 @@ class BagInfo:
     backlog : dict or None
         The recorder's backlog (``max_s``, ``mean_s``, ``messages``).
     object_truth : ObjectTruth or None
-        The stand-in's ground truth of the object (rise, left the table, lifted at the end of
-        the grasp: :mod:`dam_recorder.object_record`); None when the bag has neither
+        The stand-in's ground truth of the object (rise, left the table during the grasp, off
+        the table at its end: :mod:`dam_recorder.object_record`); None when the bag has neither
         ``/sim/object_pose`` nor ``/sim/object_table_contact``.
     object_estimate : ObjectEstimate or None
         The controller's estimate of the object from its ENDED event, where recorded.

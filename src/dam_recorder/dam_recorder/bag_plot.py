@@ -167,8 +167,8 @@ class GraspData:
     missing : list of str
         What the picture lacks, one phrase each.
     object_truth : ObjectTruth or None
-        The stand-in's ground truth of the object in the window shown (rise, left the table,
-        lifted at the end of the grasp).
+        The stand-in's ground truth of the object in the window shown (rise, left the table
+        during the grasp, off the table at its end).
     object_estimate : ObjectEstimate or None
         The controller's estimate from its ENDED event, where recorded.
     """

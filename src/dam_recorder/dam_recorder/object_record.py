@@ -5,12 +5,16 @@ What ``bag info`` and ``bag plot`` say about the object, from three topics:
 ``/sim/object_pose`` (``geometry_msgs/PoseStamped``, the stand-in only)
     The rise: ``position.z`` above the first pose read [mm], at the end and its largest.
 ``/sim/object_table_contact`` (``dam_interfaces/ObjectTableContact``, the stand-in only)
-    Whether the object **left the table (stand-in)**, by the stand-in's lift-off rule
-    (``dam_sim_bridge.lift_off``: off the table for 50 ms; a bounce does not count): some
-    message says ``lifted_off``. The lift-off is placed at the receive time of the first
-    message of that off-table stretch (to one message period, 10 ms at the default 100 Hz).
-    **Lifted at the end**: the last message at or before the end of the grasp (the episode's
-    end, else the last message read) says ``lifted``: off the table for the last 0.1 s.
+    Whether the object **left the table (stand-in)** during the grasp, by the stand-in's
+    lift-off rule (``dam_sim_bridge.lift_off``: off the table for 50 ms; a bounce does not
+    count): a message at or before the end of the grasp (the episode's end, else the last
+    message read) says ``lifted``, which the stand-in keeps from the lift-off to the world's
+    next reset. The lift-off is placed at the receive time of the first message of the
+    off-table stretch that first says ``lifted`` (when the stretch fell between two messages,
+    at the message before), to one message period (10 ms at the default 100 Hz); when the
+    first message read already says ``lifted``, the lift-off came before it and has no
+    time. **Off the table at the end**: the last message at or before the end of the grasp
+    says ``off_table_at_end``: off the table for the last 0.1 s.
 ``/dam/episode`` (``dam_interfaces/GraspEpisode``)
     The **controller's estimate**, from its joints alone, in the ENDED event: the fields
     ``object_rise`` [m], ``object_left_table`` and ``object_orientation`` where the recorded
@@ -46,12 +50,12 @@ class ObjectTruth:
         None without poses.
     contact_recorded
         Whether ``/sim/object_table_contact`` messages were read.
-    left_table
-        A lift-off (None: not recorded).
+    lifted
+        The object left the table by the end of the grasp, a lift-off (None: not recorded).
     lift_off_s
-        When the object left the table [s from the bag's first message] (None: no lift-off
-        or not recorded).
-    lifted_at_end
+        When the object left the table [s from the bag's first message] (None: no lift-off,
+        one before the first message read, or not recorded).
+    off_table_at_end
         Off the table for the last 0.1 s at the end of the grasp (None: not recorded).
     off_table_s
         Stretches off the table, ``(start, end)`` [s from the bag's first message], from the
@@ -61,9 +65,9 @@ class ObjectTruth:
     rise_final_mm: float | None
     rise_max_mm: float | None
     contact_recorded: bool
-    left_table: bool | None
+    lifted: bool | None
     lift_off_s: float | None
-    lifted_at_end: bool | None
+    off_table_at_end: bool | None
     off_table_s: tuple[tuple[float, float], ...] = ()
 
 
@@ -120,7 +124,8 @@ class ObjectCollector:
     def __init__(self, start_ns: int) -> None:
         self.start_ns = int(start_ns)
         self._heights: list[float] = []
-        self._contacts: list[tuple[int, bool, bool, bool]] = []  # t, on, lifted_off, lifted
+        # receive time, on_table, lifted, off_table_at_end
+        self._contacts: list[tuple[int, bool, bool, bool]] = []
         self._ended: Any = None
 
     def add(self, topic: str, time_ns: int, message: Any) -> None:
@@ -128,8 +133,11 @@ class ObjectCollector:
         if topic == OBJECT_POSE_TOPIC:
             self._heights.append(float(message.pose.position.z))
         elif topic == TABLE_CONTACT_TOPIC:
-            self._contacts.append((int(time_ns), bool(message.on_table),
-                                   bool(message.lifted_off), bool(message.lifted)))
+            if hasattr(message, 'off_table_at_end'):
+                lifted, at_end = bool(message.lifted), bool(message.off_table_at_end)
+            else:  # the message's first form: lifted_off (off 50 ms now), lifted (0.1 s)
+                lifted, at_end = bool(message.lifted_off), bool(message.lifted)
+            self._contacts.append((int(time_ns), bool(message.on_table), lifted, at_end))
         elif topic == EPISODE_TOPIC and int(message.event) == _EVENT_ENDED:
             self._ended = message
 
@@ -137,8 +145,9 @@ class ObjectCollector:
         return (time_ns - self.start_ns) * 1e-9
 
     def truth(self, end_ns: int | None = None) -> ObjectTruth:
-        """The ground truth, ``lifted_at_end`` read at ``end_ns`` [ns since the epoch] (None:
-        at the last message)."""
+        """The ground truth at the end of the grasp ``end_ns`` [ns since the epoch] (None:
+        the last message): ``lifted`` and ``off_table_at_end`` from the messages up to it, the
+        off-table stretches from all."""
         rise_final = rise_max = None
         if self._heights:
             z0 = self._heights[0]
@@ -148,21 +157,28 @@ class ObjectCollector:
         if not contacts:
             return ObjectTruth(rise_final, rise_max, False, None, None, None)
         spans: list[tuple[float, float]] = []
-        lift_off: float | None = None
-        run_start: int | None = None
-        for time_ns, on_table, lifted_off, _lifted in contacts:
+        starts: list[int] = []  # per message: the start of its off-table stretch, or its time
+        for time_ns, on_table, _lifted, _at_end in contacts:
             if on_table:
-                run_start = None
+                starts.append(time_ns)
                 continue
-            if run_start is None:
-                run_start = time_ns
+            if not starts or contacts[len(starts) - 1][1]:  # the first off the table
                 spans.append((self._seconds(time_ns), self._seconds(time_ns)))
+                starts.append(time_ns)
+            else:
+                starts.append(starts[-1])
             spans[-1] = (spans[-1][0], self._seconds(time_ns))
-            if lifted_off and lift_off is None:
-                lift_off = self._seconds(run_start)
         before = [c for c in contacts if end_ns is None or c[0] <= end_ns]
-        return ObjectTruth(rise_final, rise_max, True, lift_off is not None, lift_off,
-                           before[-1][3] if before else None, tuple(spans))
+        if not before:
+            return ObjectTruth(rise_final, rise_max, True, None, None, None, tuple(spans))
+        first = next((i for i, c in enumerate(before) if c[2]), None)
+        lift_off: float | None = None
+        if first is not None and first > 0:
+            # in the stretch of the first message saying lifted, else just before it
+            at = first if not before[first][1] else first - 1
+            lift_off = self._seconds(starts[at])
+        return ObjectTruth(rise_final, rise_max, True, first is not None, lift_off,
+                           before[-1][3], tuple(spans))
 
     def estimate(self) -> ObjectEstimate | None:
         """The controller's estimate of the last ENDED event; None without an ENDED event or
@@ -189,14 +205,13 @@ def object_lines(truth: ObjectTruth, estimate: ObjectEstimate | None) -> list[st
         lines = [f'object rise ({source}, from the first pose): at the end '
                  f'{truth.rise_final_mm:.2f} mm, highest {truth.rise_max_mm:.2f} mm']
     where = f'left the table (stand-in ground truth, {TABLE_CONTACT_TOPIC})'
-    if not truth.contact_recorded:
+    if not truth.contact_recorded or truth.lifted is None:
         lines.append(f'{where}: not recorded')
-    elif truth.left_table:
-        lines.append(f'{where}: yes, lift-off at {truth.lift_off_s:.2f} s; '
-                     + ('off it at the end (lifted)' if truth.lifted_at_end else
-                        'back on the table at the end (not lifted)'))
     else:
-        lines.append(f'{where}: no')
+        when = ('' if not truth.lifted else ', before the first message read'
+                if truth.lift_off_s is None else f', at {truth.lift_off_s:.2f} s')
+        lines.append(f'{where}: {"yes" if truth.lifted else "no"}{when}; off the table at the '
+                     f'grasp\'s end: {"yes" if truth.off_table_at_end else "no"}')
     label = 'controller\'s estimate (from the joints, /dam/episode)'
     if estimate is None:
         lines.append(f'{label}: none recorded')

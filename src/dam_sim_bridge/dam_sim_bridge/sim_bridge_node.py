@@ -20,8 +20,9 @@ Topics
 /sim/object_table_contact : dam_interfaces/ObjectTableContact
     Ground truth of lift-off beside the pose (the same stamp): the object's table contacts and
     the world's lift-off rule (:mod:`dam_sim_bridge.lift_off`): on the table, how long off it,
-    lifted off (50 ms off), lifted (0.1 s off). The rule is sampled every device cycle; a reset
-    of the world starts it again.
+    lifted (a lift-off, 50 ms off, happened since the reset), off the table at the end (off it
+    for the last 0.1 s). The rule is sampled every device cycle; a reset of the world starts it
+    again.
 /clock : rosgraph_msgs/Clock
     Simulated time, at ``pose_rate_hz`` of wall time, with ``use_sim_time`` or
     ``publish_clock``.
@@ -98,6 +99,7 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
@@ -121,6 +123,7 @@ from dam_interfaces.srv import SetFrictionAngle
 from dam_sim_bridge.dynamixel_bus import WATCHDOG_FEED_ADDRESSED, WATCHDOG_FEEDS
 from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
 from dam_sim_bridge.errors import SimBridgeError
+from dam_sim_bridge.lift_off import LiftOffState
 from dam_sim_bridge.sim_device import SimDevice
 from dam_sim_bridge.world import HandWorld, WorldOptions
 
@@ -136,6 +139,19 @@ _HARDWARE_ERROR_BITS = 0b111101  # the bits an X series servo has
 def _sim_stamp(seconds: float) -> Time:
     ns = int(round(seconds * 1e9))
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def table_contact_message(ground: LiftOffState, header: Header) -> ObjectTableContact:
+    """The ``/sim/object_table_contact`` message of the lift-off rule's verdict ``ground``
+    (the world's since its last reset), stamped with ``header``: its contacts, whether it lies
+    on the table, how long it has been off it [s], ``lifted`` (a lift-off happened) and
+    ``off_table_at_end`` (off it for the last 0.1 s)."""
+    contact = ObjectTableContact(
+        table_contacts=int(ground.table_contacts), on_table=bool(ground.on_table),
+        off_table_s=float(ground.off_table_s), lifted=bool(ground.lifted),
+        off_table_at_end=bool(ground.off_table_at_end))
+    contact.header = header
+    return contact
 
 
 class SimBridgeNode(Node):
@@ -381,12 +397,7 @@ class SimBridgeNode(Node):
         (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
          msg.pose.orientation.w) = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         self._pose_pub.publish(msg)
-        contact = ObjectTableContact(
-            table_contacts=int(ground.table_contacts), on_table=bool(ground.on_table),
-            off_table_s=float(ground.off_table_s), lifted_off=bool(ground.off_now),
-            lifted=bool(ground.lifted))
-        contact.header = msg.header
-        self._contact_pub.publish(contact)
+        self._contact_pub.publish(table_contact_message(ground, msg.header))
         if self._clock_pub is not None:
             self._clock_pub.publish(Clock(clock=stamp))
 
