@@ -104,7 +104,10 @@ def synthetic_row(spec: Any, columns: list[str]) -> dict[str, str]:
                estimated_rise_mm='8.0' if lifted else '0.1',
                check_lift_guaranteed=str(int((alpha, dp, k) in GUARANTEED)),
                worst_case_margin_n='0.1' if (alpha, dp, k) in GUARANTEED else '-0.1',
-               csm_lift=str(int(k >= CSM_FROM[alpha])), csm_margin_n='0.2', sim_time_s='4',
+               csm_lift=str(int(k >= CSM_FROM[alpha])), csm_margin_n='0.2',
+               # the path verdict placed one k step below the end verdict's boundary
+               csm_path_lift=str(int(k >= CSM_FROM[alpha] / 2)), csm_path_margin_n='0.3',
+               sim_time_s='4',
                reason='lifted and enveloped' if lifted else 'object raised only 0.1 mm')
     row.update(SPECIAL.get((alpha, dp, k), {}))
     row.update(SPECIAL.get((alpha, dp, k, spec.repeat), {}))
@@ -172,6 +175,11 @@ def test_the_synthetic_numbers_are_the_placed_ones(synthetic_report: SweepReport
     # section 2a: csm_lift against the ground truth
     assert (a5.n_agree, a30.n_agree) == (17, 13)
     assert a5.agreement == pytest.approx(17 / 21) and a30.agreement == pytest.approx(13 / 21)
+    # and csm_path_lift, placed from k >= CSM_FROM / 2
+    for a in (a5, a30):
+        cells = [c for c in r.cells if c.friction_angle_deg == a.friction_angle_deg]
+        placed = sum((c.k_theta >= CSM_FROM[a.friction_angle_deg] / 2) == c.lifts for c in cells)
+        assert a.n_path_agree == placed and a.path_agreement == pytest.approx(placed / 21)
     # section 2b: the columns
     status5 = [(c.status, c.transitions) for c in a5.columns]
     status30 = [(c.status, c.transitions) for c in a30.columns]
@@ -247,10 +255,11 @@ def test_the_synthetic_document_states_them(synthetic_report: SweepReport) -> No
     rows = _summary_rows(text)
     assert rows['5'][:4] == ['42', '21', '8', '2'] and rows['30'][:4] == ['42', '21', '13', '1']
     assert _share(rows['5'][4]) == (17, 21, 81.0) and _share(rows['30'][4]) == (13, 21, 61.9)
-    assert rows['5'][5] == (f'{synthetic_report.angles[0].median_distance_dec:.3f} '
+    assert _share(rows['5'][5])[:2] == (synthetic_report.angles[0].n_path_agree, 21)
+    assert rows['5'][6] == (f'{synthetic_report.angles[0].median_distance_dec:.3f} '
                             '(2 of 3 columns; no CSM boundary in 1)')
-    assert _share(rows['5'][6]) == (1, 2, 50.0) and _share(rows['30'][6]) == (1, 1, 100.0)
-    assert _share(rows['5'][7]) == (5, 8, 62.5) and _share(rows['30'][7]) == (13, 13, 100.0)
+    assert _share(rows['5'][7]) == (1, 2, 50.0) and _share(rows['30'][7]) == (1, 1, 100.0)
+    assert _share(rows['5'][8]) == (5, 8, 62.5) and _share(rows['30'][8]) == (13, 13, 100.0)
     assert '**3 false guarantee(s)**' in text
     assert text.count('never rose; controller failure in rolling_up') == 2
     assert 'eq. 18 has no solution at this friction angle' in text
@@ -317,6 +326,7 @@ def independent_numbers(table: Path, analyzer: LiftAnalyzer) -> dict[str, dict[s
         lifts = {k: sum(r['lifted'] == '1' for r in v) / len(v) >= 0.5 for k, v in mine.items()}
         guaranteed = {k: v[0]['check_lift_guaranteed'] == '1' for k, v in mine.items()}
         csm = {k: v[0]['csm_lift'] == '1' for k, v in mine.items()}
+        path = {k: v[0]['csm_path_lift'] == '1' for k, v in mine.items()}
         dps = sorted({k[1] for k in mine})
         [b] = compute_boundaries(analyzer, [alpha], np.radians(dps), progress=False)
         distances, within = [], 0
@@ -336,6 +346,7 @@ def independent_numbers(table: Path, analyzer: LiftAnalyzer) -> dict[str, dict[s
             'lifting': n_lift,
             'false': sum(guaranteed[k] and not lifts[k] for k in mine),
             'agree': sum(csm[k] == lifts[k] for k in mine),
+            'path_agree': sum(path[k] == lifts[k] for k in mine),
             'median': statistics.median(distances) if distances else None,
             'compared': len(distances), 'within': within,
             'missed': sum(lifts[k] and not guaranteed[k] for k in mine),
@@ -358,15 +369,16 @@ def test_the_documents_numbers_agree_with_an_independent_count(
         n, whole, pct = _share(r[4])
         assert (n, whole) == (e['agree'], e['cells'])
         assert pct == pytest.approx(100.0 * e['agree'] / e['cells'], abs=0.05)
+        assert _share(r[5])[:2] == (e['path_agree'], e['cells'])
         median, compared, _all, _no_csm = re.fullmatch(
-            r'(\S+) \((\d+) of (\d+) columns; no CSM boundary in (\d+)\)', r[5]).groups()
+            r'(\S+) \((\d+) of (\d+) columns; no CSM boundary in (\d+)\)', r[6]).groups()
         assert int(compared) == e['compared']
         if e['median'] is None:
             assert median == 'n/a'
         else:
             assert float(median) == pytest.approx(e['median'], abs=5e-4)
-        assert _share(r[6])[:2] == (e['within'], e['compared'])
-        n, whole, pct = _share(r[7])
+        assert _share(r[7])[:2] == (e['within'], e['compared'])
+        n, whole, pct = _share(r[8])
         assert (n, whole) == (e['missed'], e['lifting'])
         if whole:
             assert pct == pytest.approx(100.0 * n / whole, abs=0.05)

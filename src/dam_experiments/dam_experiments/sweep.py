@@ -476,7 +476,7 @@ def table_columns(config: Any) -> list[str]:
             'lift_off_time_s', 'off_table_at_end', 'rolling_up_end_s', 'rise_final_mm',
             'rise_max_mm', 'rise_rolling_end_mm', 'estimated_rise_mm', *peaks,
             'check_lift_guaranteed', 'worst_case_margin_n', 'csm_lift', 'csm_margin_n',
-            'sim_time_s', 'reason']
+            'csm_path_lift', 'csm_path_margin_n', 'sim_time_s', 'reason']
 
 
 @dataclass(frozen=True)
@@ -546,9 +546,9 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
         a = analyzer.check_lift([spec.k_theta], [dp],
                                 friction_angle=math.radians(spec.friction_angle_deg))
         analysis = (int(a.lift_guaranteed), float(a.worst_case_margin), int(a.csm_lift),
-                    float(a.csm_margin))
+                    float(a.csm_margin), int(a.csm_path_lift), float(a.csm_path_margin))
     except DamAnalysisError as exc:
-        analysis = (0, math.nan, 0, math.nan)
+        analysis = (0, math.nan, 0, math.nan, 0, math.nan)
         reason = f'{reason}; analysis: {exc}'
     names = list(config.hand.joint_names)
     peaks = {}
@@ -574,6 +574,7 @@ def run_trial(spec: TrialSpec, sweep: SweepSpec, config: Any) -> TrialResult:
         **peaks,
         'check_lift_guaranteed': str(analysis[0]), 'worst_case_margin_n': _fmt(analysis[1]),
         'csm_lift': str(analysis[2]), 'csm_margin_n': _fmt(analysis[3]),
+        'csm_path_lift': str(analysis[4]), 'csm_path_margin_n': _fmt(analysis[5]),
         'sim_time_s': _fmt(r.sim_time), 'reason': ' '.join(reason.split()),
     }
     return TrialResult(row, time.monotonic() - wall0, time.process_time() - cpu0)

@@ -107,6 +107,11 @@ class CellRow:
         return self.trials[0].csm_lift
 
     @property
+    def csm_path_lift(self) -> bool | None:
+        """The CSM's path verdict (None: the table does not record it)."""
+        return self.trials[0].csm_path_lift
+
+    @property
     def worst_case_margin_n(self) -> float:
         return self.trials[0].worst_case_margin_n
 
@@ -215,6 +220,8 @@ class AngleNumbers:
         Cells guaranteed and not lifting.
     n_agree, agreement
         Cells where ``csm_lift`` equals the ground truth, and their share of the cells [-].
+    n_path_agree, path_agreement
+        The same for the CSM's path verdict ``csm_path_lift`` (None: not recorded).
     columns
         One :class:`ColumnBoundary` per ``delta_theta_p`` column.
     median_distance_dec, median_signed_dec
@@ -237,6 +244,8 @@ class AngleNumbers:
     n_false_guarantees: int
     n_agree: int
     agreement: float | None
+    n_path_agree: int | None
+    path_agreement: float | None
     columns: tuple[ColumnBoundary, ...]
     median_distance_dec: float | None
     median_signed_dec: float | None
@@ -436,6 +445,8 @@ def _angle(alpha: float, cells: list[CellRow], sufficient_exists: bool) -> Angle
     compared = [c for c in columns if c.status == 'compared']
     lifting = [c for c in cells if c.lifts]
     agree = sum(c.csm_lift == c.lifts for c in cells)
+    recorded = all(c.csm_path_lift is not None for c in cells)
+    path_agree = sum(c.csm_path_lift == c.lifts for c in cells) if recorded else None
     within = sum(c.within_step for c in compared)
     missed = sum(not c.guaranteed for c in lifting)
     return AngleNumbers(
@@ -444,7 +455,9 @@ def _angle(alpha: float, cells: list[CellRow], sufficient_exists: bool) -> Angle
         n_guaranteed=sum(c.guaranteed for c in cells),
         n_csm_lift=sum(c.csm_lift for c in cells),
         n_false_guarantees=sum(c.guaranteed and not c.lifts for c in cells),
-        n_agree=agree, agreement=_share(agree, len(cells)), columns=columns,
+        n_agree=agree, agreement=_share(agree, len(cells)), n_path_agree=path_agree,
+        path_agreement=None if path_agree is None else _share(path_agree, len(cells)),
+        columns=columns,
         median_distance_dec=_median([abs(c.distance_dec) for c in compared]),
         median_signed_dec=_median([c.distance_dec for c in compared]),
         n_within_step=within, within_step_share=_share(within, len(compared)),

@@ -191,7 +191,10 @@ def summary_lines(report: SweepReport) -> list[str]:
         lines.append(
             f'  alpha {a.friction_angle_deg:g} deg: {a.n_cells} cells, {a.n_lifting} lifting; '
             f'false guarantees {a.n_false_guarantees}; CSM agreement '
-            f'{share(a.n_agree, a.n_cells)}; boundary distance median '
+            f'{share(a.n_agree, a.n_cells)}'
+            + ('' if a.n_path_agree is None else
+               f', path verdict {share(a.n_path_agree, a.n_cells)}')
+            + f'; boundary distance median '
             f'{decades(a.median_distance_dec)} decades over {a.n_compared} column(s), within '
             f'one k step {a.n_within_step}; lifting without a guarantee '
             f'{share(a.n_missed, a.n_lifting)}'

@@ -28,7 +28,8 @@ from dam_experiments.sweep_report_rows import (
 MAX_LISTED_CELLS = 40
 #: Headers of the summary table (one row per friction angle).
 SUMMARY_HEADER = ('alpha [deg]', 'trials', 'cells', 'lifting cells', 'false guarantees',
-                  'CSM agreement', 'median boundary distance [decades] (compared columns of all)',
+                  'CSM agreement (end verdict)', 'CSM agreement (path verdict)',
+                  'median boundary distance [decades] (compared columns of all)',
                   'columns within one k step', 'lifting cells without a guarantee')
 #: Default values of the sweep's options (left out of the reconstructed command).
 _SWEEP_DEFAULTS = {'repeats': 1, 'seed': 0, 'max_time_s': 8.0, 'latency_cycles': 2,
@@ -223,8 +224,10 @@ def _definitions(report: SweepReport) -> list[str]:
         'ground truth says; then how it ended: "done" (`phase` DONE), "controller '
         'failure in <phase>" (FAILED, the phase named in `reason`), "still running at the '
         'time limit (<phase>)" (an active phase).',
-        '* **2a. CSM agreement.** The share of the cells whose `csm_lift` equals the ground '
-        'truth.',
+        '* **2a. CSM agreement.** The share of the cells whose `csm_lift` (the end verdict) '
+        'equals the ground truth, and of those whose `csm_path_lift` (the path verdict: the '
+        'largest CSM margin on the way to `delta_theta_p`) does; "not recorded" in a table '
+        'written before `/check_lift` answered the path verdict.',
         '* **2b. Boundary distance.** Per `delta_theta_p` column, the cells in ascending '
         '`k_theta`: `k_lift` is the lowest lifting `k_theta`, `k_below` the grid value just '
         'below it (which does not lift), and the simulated boundary is their geometric mean '
@@ -268,6 +271,8 @@ def _summary(report: SweepReport) -> list[str]:
         rows.append((f'{a.friction_angle_deg:g}', str(a.n_trials), str(a.n_cells),
                      str(a.n_lifting), str(a.n_false_guarantees),
                      share(a.n_agree, a.n_cells),
+                     ('not recorded' if a.n_path_agree is None
+                      else share(a.n_path_agree, a.n_cells)),
                      f'{decades(a.median_distance_dec)} ({a.n_compared} of '
                      f'{len(a.columns)} columns; no CSM boundary in '
                      f'{a.n_status("no CSM boundary")})',
@@ -354,7 +359,10 @@ def _boundary_distance(report: SweepReport, figures: Mapping[str, str]) -> list[
     for a in report.angles:
         lines.append(
             f'* alpha {a.friction_angle_deg:g} deg: CSM agreement '
-            f'{share(a.n_agree, a.n_cells)} cells; {a.n_compared} column(s) compared, median '
+            f'{share(a.n_agree, a.n_cells)} cells'
+            + ('' if a.n_path_agree is None else
+               f' (path verdict {share(a.n_path_agree, a.n_cells)})')
+            + f'; {a.n_compared} column(s) compared, median '
             f'|d| {decades(a.median_distance_dec)} decades, median d '
             f'{decades(a.median_signed_dec)} decades, within one k step '
             f'{share(a.n_within_step, a.n_compared)}; censored: no lift '

@@ -83,6 +83,9 @@ class TrialRow:
     estimated_rise_mm
         The controller's estimate of the rise from the joints [mm] (NaN: not classified, or
         not recorded).
+    csm_path_lift, csm_path_margin_n
+        The CSM's path verdict of ``/check_lift`` and its margin [N] (None, NaN: a table
+        written before ``/check_lift`` answered it).
     """
 
     index: int
@@ -109,6 +112,8 @@ class TrialRow:
     rolling_up_end_s: float = math.nan
     estimated_rise_mm: float = math.nan
     off_table_at_end: bool | None = None
+    csm_path_lift: bool | None = None
+    csm_path_margin_n: float = math.nan
 
 
 def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]]:
@@ -131,7 +136,7 @@ def _table_rows(table: Any) -> tuple[list[str], list[tuple[int, dict[str, str]]]
 
 #: Columns that may hold ``-inf``: the worst case of eq. 18 is unbounded (the friction cone
 #: admits an arbitrarily low vertical force; ``LiftResult.worst_case_margin``).
-_MAY_BE_MINUS_INF = ('worst_case_margin_n', 'csm_margin_n')
+_MAY_BE_MINUS_INF = ('worst_case_margin_n', 'csm_margin_n', 'csm_path_margin_n')
 
 
 def _float(table: Any, line: int, row: Mapping[str, str], column: str) -> float:
@@ -212,7 +217,11 @@ def read_rows(data: SweepData) -> list[TrialRow]:
             csm_margin_n=values['csm_margin_n'], lift_off_known=data.lift_off_recorded,
             lift_off_time_s=t.lift_off_time_s, rolling_up_end_s=values['rolling_up_end_s'],
             estimated_rise_mm=values['estimated_rise_mm'],
-            off_table_at_end=t.off_table_at_end))
+            off_table_at_end=t.off_table_at_end,
+            csm_path_lift=(_flag(table, line, row, 'csm_path_lift')
+                           if 'csm_path_lift' in header else None),
+            csm_path_margin_n=(_float(table, line, row, 'csm_path_margin_n')
+                               if 'csm_path_margin_n' in header else math.nan)))
     return out
 
 
