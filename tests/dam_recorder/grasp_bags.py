@@ -265,11 +265,15 @@ def _with_fields(definition: str, fields: dict[str, Any]) -> tuple[str, Any]:
 def _ended_event(store: Any, fields: dict[str, Any]) -> Any:
     """The goal's ENDED event, every field a plain value, with ``fields`` added."""
     t = store.types
-    answer = t['dam_interfaces/msg/LiftAnswer'](
+    known = dict(
         ok=True, message='', lift_guaranteed=True, worst_case_margin=0.04, csm_lift=True,
         csm_margin=1.3, delta_theta_s=np.zeros(3), compliant_torque=np.zeros(3),
         friction_angle=0.087, torque_limit=0.6, within_torque_limit=True,
         csm_penetration=np.zeros(3), csm_in_domain=True, object='cylinder')
+    for name, (_, (base, _)) in store.fielddefs['dam_interfaces/msg/LiftAnswer'][1]:
+        if name not in known:  # a field added since: false, or NaN (not answered)
+            known[name] = False if base == 'bool' else math.nan
+    answer = t['dam_interfaces/msg/LiftAnswer'](**known)
     values = {name: None for name, _ in store.fielddefs['dam_interfaces/msg/GraspEpisode'][1]}
     values.update(
         header=_header(t, 400, 0, ''), event=1, goal_id=GOAL_ID,

@@ -33,22 +33,14 @@ def goal_id_hex(goal_id: Sequence[int] | bytes) -> str:
 
 
 def lift_answer(response: CheckLift.Response) -> LiftAnswer:
-    """A ``/check_lift`` response as a :class:`LiftAnswer` message."""
+    """A ``/check_lift`` response as a :class:`LiftAnswer` message: every field of the
+    message, copied from the response's field of the same name."""
     answer = LiftAnswer()
-    answer.ok = bool(response.ok)
-    answer.message = response.message
-    answer.lift_guaranteed = bool(response.lift_guaranteed)
-    answer.worst_case_margin = float(response.worst_case_margin)
-    answer.csm_lift = bool(response.csm_lift)
-    answer.csm_margin = float(response.csm_margin)
-    answer.delta_theta_s = [float(v) for v in response.delta_theta_s]
-    answer.compliant_torque = [float(v) for v in response.compliant_torque]
-    answer.friction_angle = float(response.friction_angle)
-    answer.torque_limit = float(response.torque_limit)
-    answer.within_torque_limit = bool(response.within_torque_limit)
-    answer.csm_penetration = [float(v) for v in response.csm_penetration]
-    answer.csm_in_domain = bool(response.csm_in_domain)
-    answer.object = response.object
+    for name, kind in LiftAnswer.get_fields_and_field_types().items():
+        value = getattr(response, name)
+        if kind.startswith('sequence<'):
+            value = [float(v) for v in value]
+        setattr(answer, name, value)
     return answer
 
 
@@ -128,10 +120,10 @@ class EpisodeEvents:
             msg.lift_checked = True
             msg.check_lift = lift_answer(state.check_lift)
         else:
-            msg.check_lift.worst_case_margin = math.nan
-            msg.check_lift.csm_margin = math.nan
-            msg.check_lift.friction_angle = math.nan
-            msg.check_lift.torque_limit = math.nan
+            for name in ('worst_case_margin', 'csm_margin', 'friction_angle', 'torque_limit',
+                         'rolling_margin', 'rolling_turn', 'rolling_slide', 'csm_path_margin',
+                         'csm_path_delta_theta_p'):
+                setattr(msg.check_lift, name, math.nan)
         msg.outcome = int(result.outcome)
         msg.outcome_name = result.outcome_name
         msg.message = result.message
