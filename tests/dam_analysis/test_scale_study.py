@@ -144,7 +144,7 @@ def test_the_command_writes_the_table_the_picture_and_the_summary(
         (r, d) for r in ('2', '6', '10', '14') for d in ('10', '20')]  # no float noise
     assert rows[0]['k_theta_sufficient'] == '' and 'does not reach' in rows[0]['no_first_contact']
     assert float(rows[4]['mass_kg']) == pytest.approx(0.04)  # 10 mm: the configured object
-    assert 'delta_theta_p 10 deg: within 0.6 N*m, guaranteed (eq. 18) at' in printed
+    assert 'delta_theta_p 10 deg: within 0.6 N*m, guaranteed (sufficient condition) at' in printed
     assert 'no first contact at radius 2 mm: the distal link does not reach' in printed
 
 
@@ -222,7 +222,7 @@ def test_the_command_scales_a_named_object(tmp_path: Path,
     assert [float(r['half_height_mm']) for r in rows] == [3.0, 6.0, 9.0]
     # eq. 18 holds at rest at 9 mm (the hex_bar's size), but the bar can rest turned on the
     # table there (dam_analysis.rolling): no half height is guaranteed; the CSM lifts at 9 mm
-    assert 'guaranteed (eq. 18) at no half height' in printed, printed
+    assert 'guaranteed (sufficient condition) at no half height' in printed, printed
     assert 'CSM lift at 9 mm' in printed, printed
     assert main(['--object', 'pencil', '--radius-range', '3mm:9mm:3', '--delta-theta-p',
                  '10deg', '--out', str(out)]) == 2

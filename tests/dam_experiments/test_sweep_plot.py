@@ -177,7 +177,7 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
         assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), off the '
                 f'table at the end 2, success 3, lifted but DAM failed 2, failure 3; '
                 ) in summary
-    assert 'eq. 18: no k_theta lifts' in result.summary[2]
+    assert 'sufficient condition: no k_theta is guaranteed' in result.summary[2]
     assert '4 trial(s) where the ground truth' in summary
 
 

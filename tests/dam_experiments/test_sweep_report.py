@@ -262,8 +262,8 @@ def test_the_synthetic_document_states_them(synthetic_report: SweepReport) -> No
     assert _share(rows['5'][8]) == (5, 8, 62.5) and _share(rows['30'][8]) == (13, 13, 100.0)
     assert '**3 false guarantee(s)**' in text
     assert text.count('never rose; controller failure in rolling_up') == 2
-    assert 'eq. 18 has no solution at this friction angle' in text
-    assert text.count('eq. 18 has no solution at this friction angle') == 1  # alpha 30 only
+    assert 'The sufficient condition has no solution at this friction angle' in text
+    assert text.count('has no solution at this friction angle') == 1  # alpha 30 only
     assert '1 trial(s) of guaranteed cells that lift' in text
     assert _category_counts(text) == {
         'CSM lifts, simulation does not': [4, 5, 9],
@@ -555,7 +555,7 @@ def test_installed_executable(synthetic: Path, tmp_path: Path) -> None:
     assert lines[0] == f'sweep_report: {synthetic}: 84 of 84 trials, 2 per cell'
     assert lines[1].startswith('  alpha 5 deg: 21 cells, 8 lifting; false guarantees 2; CSM '
                                'agreement 17 of 21 (81.0 %)')
-    assert lines[2].endswith('eq. 18 has no solution')
+    assert lines[2].endswith('no stiffness is guaranteed')
     assert lines[-1].startswith('sweep_report: wrote ') and str(out) in lines[-1]
     # bad input: exit 2, one line
     proc = _run(str(tmp_path / 'nowhere'))

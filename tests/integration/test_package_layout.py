@@ -100,7 +100,10 @@ def test_interfaces_are_generated_for_python() -> None:
         'worst_case_margin': 'double', 'csm_lift': 'boolean', 'csm_margin': 'double',
         'delta_theta_s': 'sequence<double>', 'compliant_torque': 'sequence<double>',
         'friction_angle': 'double', 'torque_limit': 'double', 'within_torque_limit': 'boolean',
-        'csm_penetration': 'sequence<double>', 'csm_in_domain': 'boolean', 'object': 'string'}
+        'csm_penetration': 'sequence<double>', 'csm_in_domain': 'boolean', 'object': 'string',
+        'rolling_checked': 'boolean', 'rolling_margin': 'double', 'rolling_turn': 'double',
+        'rolling_slide': 'double', 'csm_path_lift': 'boolean', 'csm_path_margin': 'double',
+        'csm_path_delta_theta_p': 'double'}
     from dam_interfaces.srv import PlanLift
 
     assert PlanLift.Request.get_fields_and_field_types() == {

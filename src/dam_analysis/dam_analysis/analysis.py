@@ -429,8 +429,9 @@ class LiftAnalyzer:
 
         For a section that can roll (not a circle) every cell where eq. (18) holds at rest is
         checked as :meth:`check_lift` checks it (:mod:`dam_analysis.rolling`); where the
-        object can rest in a rolled or slid pose, ``sufficient_margin`` is that pose's margin
-        (NaN: not decided), so the sufficient region is the guarantee ``check_lift`` gives.
+        object can rest in a turned pose, ``sufficient_margin`` is the margin of the first such
+        pose found (not necessarily the least; NaN: not decided), so the sufficient region is
+        the guarantee ``check_lift`` gives.
         """
         result = lift_map(self.table, np.asarray(friction_angles, dtype=np.float64),
                           np.asarray(delta_theta_p, dtype=np.float64),
@@ -445,7 +446,7 @@ class LiftAnalyzer:
                 [k1 * r / ratios[0] for r in ratios],
                 [float(result.delta_theta_p[d_idx])] * self.n_fingers,
                 float(result.friction_angle[a_idx]), self.model.object_weight,
-                self._cos_phi_list)
+                self._cos_phi_list, complete=False)
             if not verdict.holds:
                 margin[a_idx, d_idx, k_idx] = verdict.margin
         return LiftMap(friction_angle=result.friction_angle,
@@ -474,7 +475,8 @@ class LiftAnalyzer:
                 k1 = float(k_star) * factor
                 verdict = self.rolling.verdict([k1 * r / ratios[0] for r in ratios], dp,
                                                float(friction_angle),
-                                               self.model.object_weight, self._cos_phi_list)
+                                               self.model.object_weight, self._cos_phi_list,
+                                               complete=False)
                 if not verdict.holds:
                     suff[d_idx] = np.nan
                     break

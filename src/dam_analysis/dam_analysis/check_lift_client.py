@@ -82,8 +82,8 @@ def format_response(request: CheckLift.Request, response: CheckLift.Response) ->
         f'object                   : {response.object}',
         f'k_theta         [N*m/rad]: {k_text}',
         f'delta_theta_p   [deg]    : {dp_text}',
-        f'lift guaranteed (eq. 18) : {yes_no[bool(response.lift_guaranteed)]}'
-        f'   worst-case margin {_newtons(response.worst_case_margin)}',
+        f'lift guaranteed          : {yes_no[bool(response.lift_guaranteed)]}'
+        f'   worst-case margin (eq. 18 at rest) {_newtons(response.worst_case_margin)}',
         f'contact stiffness model  : {yes_no[bool(response.csm_lift)]}'
         f'   margin {_newtons(response.csm_margin)}'
         f'   {"inside" if response.csm_in_domain else "OUTSIDE"} its domain',

@@ -385,7 +385,9 @@ class LiftPlanner:
         weights = (ranges.mass[0] * g, ranges.mass[1] * g)
         kept = feasible.copy()
         first = ''
-        for d in np.flatnonzero(feasible):
+        # in the order the plan takes them (smallest stiffness first): the reason names the
+        # pair it would have proposed
+        for d in sorted(np.flatnonzero(feasible), key=lambda i: float(k_needed[i])):
             k1 = float(k_needed[d])
             for analyzer in analyzers:
                 check_stop()

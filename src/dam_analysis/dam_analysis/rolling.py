@@ -7,8 +7,8 @@ paper's cylinder that is lift-off. A polygon can: it turns onto an edge of the f
 on, its centroid rises by up to circumradius minus apothem, and it still touches the table; an
 ellipse does the same as it turns off its flat side. Fingers that squeeze opposite vertices
 turn it. Measured in the stand-in: a hexagonal bar guaranteed by eq. 18 at rest (alpha 5 deg,
-k_theta 7 N*m/rad, delta_theta_p 5 deg, margin +0.81 N) turned +25 deg on the table, its
-centroid 1.35 mm higher and 0.11 mm to the side, and never left it.
+k_theta 7 N*m/rad, delta_theta_p 5 deg, margin +0.81 N) turned +25 deg and came to rest on
+the table, its centroid 1.35 mm higher and 0.11 mm to the side.
 
 The condition added here (docs/analysis.md section 11): the object leaves the table if
 eq. 18 holds at rest **and no admissible contact force lets it rest in any pose it can turn
@@ -377,7 +377,7 @@ class RollingCheck:
 
     def verdict(self, k_theta: list[float], delta_theta_p: list[float],
                 friction_angle: float, weight: float | tuple[float, float],
-                cos_phi: list[float], complete: bool = False) -> RollingVerdict:
+                cos_phi: list[float], complete: bool = True) -> RollingVerdict:
         """Whether the object can rest in any rolled or slid pose, for one request.
 
         Parameters
@@ -385,9 +385,10 @@ class RollingCheck:
         k_theta : per finger [N m/rad]; delta_theta_p : per finger [rad];
         friction_angle : alpha [rad]; weight : m_B g [N], or its range (the object rests
         for some weight in it); cos_phi : the cone's ``cos(2 pi k / L)``.
-        complete : evaluate every pose (the smallest margin); False stops at the first pose
-            where the object can rest (the verdict is the same, the margin an upper bound of
-            the smallest), trying the pose that failed last first.
+        complete : evaluate every pose: the smallest margin and its pose, the same answer
+            for the same request (default); False stops at the first pose where the object
+            can rest, trying the pose that failed last first (the same verdict, the margin and
+            pose of that pose: for maps, which need the verdict only).
 
         Raises
         ------
@@ -476,8 +477,14 @@ def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: 
         moment_row.extend(block_m)
         n_cols += len(cos_phi)
     low, high = (weight, weight) if isinstance(weight, float | int) else weight
-    if n_cols == 0:  # no finger touches: the weight alone, balanced only on the pivot's line
-        return -high if not balance_moment or abs(gravity_arm) < 1e-12 else math.inf
+    if n_cols == 0:
+        # no finger touches: on a face the object rests under its weight alone; on a pivot
+        # only where its weight's line runs through the pivot (a balance, unstable, that the
+        # analysis cannot rule out: whether the fingers could have brought it there is not
+        # asked; in the stand-in the hexagonal bar rests turned where the model's fingers
+        # no longer touch it, at displacements of 1 deg)
+        balanced = not balance_moment or abs(gravity_arm) < 1e-9
+        return -high if balanced else math.inf
     # the last column is the weight W in [low, high]: minimise c_z^T f_o - W
     cost.append(-1.0)
     for start, block_h, tau in blocks:

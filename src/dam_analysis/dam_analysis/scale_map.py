@@ -186,8 +186,8 @@ def summary_lines(study: ScaleStudy) -> list[str]:
     for d, (suf, csm) in enumerate(zip(working_ranges(study, 'sufficient'),
                                        working_ranges(study, 'csm'), strict=True)):
         lines.append(f'delta_theta_p {math.degrees(study.delta_theta_p[d]):g} deg: within '
-                     f'{study.torque_limit:g} N*m, guaranteed (eq. 18) at {runs_text(suf)}; '
-                     f'CSM lift at {runs_text(csm)}')
+                     f'{study.torque_limit:g} N*m, guaranteed (sufficient condition) at '
+                     f'{runs_text(suf)}; CSM lift at {runs_text(csm)}')
     reasons: dict[str, list[str]] = {}
     for radius, why in zip(study.radius, study.no_contact, strict=True):
         if why:

@@ -276,7 +276,7 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
         ax.plot(dp, _finite(b.csm), color='k', linewidth=1.3, linestyle='--', gid='csm',
                 label=CSM_LABEL, zorder=5)
         if _lowest(b, 'sufficient') is None:
-            ax.text(0.03, 0.03, 'eq. 18: no k_theta lifts at this friction angle',
+            ax.text(0.03, 0.03, 'sufficient condition: no k_theta guaranteed here',
                     transform=ax.transAxes, fontsize=7, color='0.3', gid='no_sufficient')
         notes = _outside_notes(b, y_lim)
         if notes:
@@ -328,10 +328,11 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
                 if data.lift_off_recorded else '')
         counts = {o: sum(t.outcome == o for t in trials) for o in OUTCOMES}
         bounds = []
-        for name, field in (('eq. 18', 'sufficient'), ('CSM', 'csm')):
+        for name, field in (('sufficient condition', 'sufficient'), ('CSM', 'csm')):
             low = _lowest(b, field)
+            missing = 'is guaranteed' if field == 'sufficient' else 'lifts'
             bounds.append(f'{name} lowest k_theta* {low[0]:.3g} N*m/rad at {low[1]:.3g} deg'
-                          if low else f'{name}: no k_theta lifts')
+                          if low else f'{name}: no k_theta {missing}')
         lines.append(f'  alpha {alpha:g} deg: {len(trials)} trials, {word} {lifted} '
                      f'({100.0 * lifted / len(trials):.0f} %){held}, success {counts["SUCCESS"]}, '
                      f'lifted but DAM failed {counts["LIFTED_DAM_FAILED"]}, failure '

@@ -198,7 +198,7 @@ def summary_lines(report: SweepReport) -> list[str]:
             f'{decades(a.median_distance_dec)} decades over {a.n_compared} column(s), within '
             f'one k step {a.n_within_step}; lifting without a guarantee '
             f'{share(a.n_missed, a.n_lifting)}'
-            + ('' if a.sufficient_exists else '; eq. 18 has no solution'))
+            + ('' if a.sufficient_exists else '; no stiffness is guaranteed'))
     return lines
 
 

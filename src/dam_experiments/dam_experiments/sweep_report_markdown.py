@@ -243,8 +243,10 @@ def _definitions(report: SweepReport) -> list[str]:
         'over the compared columns, and the share of them **within one k step**: `|d| <= '
         'log10(k_lift / k_below)`.',
         '* **3. Lift without a guarantee.** The share of the lifting cells whose '
-        '`check_lift_guaranteed` is 0. "eq. 18 has no solution" at a friction angle when the '
-        f'sufficient boundary is finite at none of {n_points} points of `delta_theta_p` in '
+        '`check_lift_guaranteed` is 0. "no stiffness is guaranteed" at a friction angle when '
+        'the sufficient boundary (eq. 18; for a section that can turn on the table, with the '
+        '`/check_lift` rolling check) '
+        f'is finite at none of {n_points} points of `delta_theta_p` in '
         f'[0, {report.dense_right_deg:g}] deg.',
         '* **4. Disagreement categories.** Cells where `csm_lift` differs from the ground '
         'truth (CSM lifts and the simulation does not, or the reverse), and the false '
@@ -392,8 +394,9 @@ def _missed(report: SweepReport) -> list[str]:
              'The sufficient condition is strict by design; this is how much it misses.', '']
     for a in report.angles:
         note = ('' if a.sufficient_exists else
-                ' eq. 18 has no solution at this friction angle: no stiffness is guaranteed '
-                f'to lift at any delta_theta_p in [0, {report.dense_right_deg:g}] deg.')
+                ' The sufficient condition has no solution at this friction angle: no '
+                'stiffness is guaranteed to lift at any delta_theta_p in '
+                f'[0, {report.dense_right_deg:g}] deg.')
         lines.append(f'* alpha {a.friction_angle_deg:g} deg: {a.n_lifting} lifting cell(s) '
                      f'of {a.n_cells}; without a guarantee {share(a.n_missed, a.n_lifting)}; '
                      f'guaranteed cells {a.n_guaranteed}.{note}')
