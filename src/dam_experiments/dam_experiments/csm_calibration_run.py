@@ -264,8 +264,8 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
                  f'{calibration.end_agreement_overlay} with the fitted values'
                  + ('.' if helps else ': no better, so none is written.'))
     if calibration.verdict == 'path':
-        lines.append('# The values were fitted to the path verdict (--verdict end fits the '
-                     'one /check_lift answers).')
+        lines.append('# The values were fitted to the path verdict (/check_lift: csm_path_lift; '
+                     '--verdict end fits csm_lift, the end verdict the overlay is judged by).')
     if contact:
         document['contact'] = contact
     body = yaml.safe_dump(document, sort_keys=False) if document else '{}\n'
