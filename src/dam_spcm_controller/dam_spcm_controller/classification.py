@@ -7,7 +7,7 @@ The paper marks each trial as one of three outcomes:
 * ``FAILURE``            -- x: failure.
 
 A real hand only measures joint angles (encoders) and joint torques (torque sensors), so
-:func:`classify_from_joints` infers the object from the final, settled posture:
+:func:`classify_from_joints` infers the object from them:
 
 1. **Object estimate.** All fingers turn about axes parallel to the object axis, so the
    problem is planar in the plane normal to that axis (coordinates ``u`` horizontal, ``z`` up).
@@ -16,28 +16,30 @@ A real hand only measures joint angles (encoders) and joint torques (torque sens
    least-squares fit of ``min_k dist(c, link_ik) = rho`` over all fingers ``i``, restricted to
    physically admissible centres: no finger penetrates the object, the object is above the
    table, and every finger touches the object on the *inner* (flexion) side of its nearest
-   link -- under a positive (flexing) torque a finger that is at rest must be pushing against
-   the object, not resting on its outer side. An object of another cross-section (a polygon,
-   an ellipse) may have turned as it rolled: its centre *and* its orientation ``psi`` are
-   fitted, with ``d_i`` the distance from the finger's links to the turned section
-   (:mod:`dam_spcm_controller.object_estimate`).
+   link (:mod:`dam_spcm_controller.object_estimate`). An object of another cross-section (a
+   polygon, an ellipse) may have turned as it rolled, and the final joints leave a family of
+   poses: its pose is followed through the grasp's joint history
+   (:mod:`dam_spcm_controller.pose_tracking`: on the table the table contact fixes it; off
+   the table the balance of the contact forces the compliant-joint torques give). Without a
+   history the lowest pose the final joints allow is taken.
 2. **In contact** (``contact``): every finger's distance residual is at most
    ``contact_tolerance``.
 3. **Load held** (``load_held``): every compliant-joint torque is at least
    ``load_torque_threshold`` (flexion), and no compliant or position joint is within
    ``limit_margin`` of a joint limit (a finger closing on empty space ends at its limit).
-4. **Lifted** (``lifted``): the estimated centre is at least ``lift_height`` above its
-   initial height (object resting on the table); for a turned section, its lowest point is
-   at least ``lift_height`` above the table (a section that only tipped over onto another
-   face, its centre higher, is not lifted).
+4. **Lifted** (``lifted``): the object left the table: the estimated lowest point of its
+   section is more than ``table_clearance`` above the table, the fingers touching it and
+   holding the load (without the load the fit has no evidence of an object between them).
+   ``lift_m`` is the rise of its centroid above its resting height and ``orientation`` its
+   turn from the resting pose (0 for a cylinder).
 5. **Enveloped** (``enveloped``): the object is caged by the fingers -- every fingertip lies
    at least ``cage_depth_ratio * r`` below the object's centre (``r`` the inradius), and the
    free gap between the innermost fingertips of the two opposing sides is smaller than the
-   object's narrowest width (a cylinder's diameter), so
-   it cannot drop out without the fingers opening (paper Fig. 6(d)).
+   object's narrowest width (a cylinder's diameter), so it cannot drop out without the fingers
+   opening (paper Fig. 6(d)).
 
-``SUCCESS`` = contact and load held and lifted and enveloped; ``LIFTED_DAM_FAILED`` = contact
-and load held and lifted, not enveloped; ``FAILURE`` otherwise.
+``SUCCESS`` = lifted and enveloped; ``LIFTED_DAM_FAILED`` = lifted, not enveloped;
+``FAILURE`` = not lifted.
 
 :func:`classify_with_object_height` replaces step 4 by a ground-truth object height (e.g. from
 the simulator) to cross-check the joint-only result.
@@ -63,6 +65,7 @@ from dam_spcm_controller.object_estimate import (
     finger_points,
     section_clearance,
 )
+from dam_spcm_controller.pose_tracking import JointHistory, TrackerSettings, track_pose
 
 if TYPE_CHECKING:  # pragma: no cover
     from dam_common.config import DamConfig
@@ -87,12 +90,16 @@ class ClassifierSettings:
     load_torque_threshold
         Smallest compliant-joint torque that shows a held load [N*m].
     lift_height
-        Smallest rise of the object centre that counts as lifted [m].
+        Smallest rise of the object centre that counts as lifted for
+        :func:`classify_with_object_height` (a ground-truth height) [m].
     limit_margin
         A joint this close to a limit counts as at its limit [rad].
     cage_depth_ratio
         Enveloped needs every fingertip this many object radii below the object centre [-]
         (a fingertip pinch at the object's equator is not an enveloping grasp).
+    table_clearance
+        The object left the table when its estimated lowest point is more than this above the
+        table [m].
     """
 
     contact_tolerance: float = 2e-3
@@ -100,6 +107,7 @@ class ClassifierSettings:
     lift_height: float = 5e-3
     limit_margin: float = math.radians(1.0)
     cage_depth_ratio: float = 0.5
+    table_clearance: float = 3e-4
 
     @classmethod
     def from_config(cls, config: DamConfig, **overrides: float) -> ClassifierSettings:
@@ -121,14 +129,29 @@ class ClassifierSettings:
 
     def __post_init__(self) -> None:
         for name in ('contact_tolerance', 'load_torque_threshold', 'lift_height',
-                     'limit_margin', 'cage_depth_ratio'):
+                     'limit_margin', 'cage_depth_ratio', 'table_clearance'):
             object.__setattr__(self, name, finite_scalar(name, getattr(self, name),
                                                          positive=True))
 
 
 @dataclass(frozen=True)
 class Classification:
-    """Outcome and the criteria it was derived from (see the module docstring)."""
+    """Outcome and the criteria it was derived from (see the module docstring).
+
+    Attributes
+    ----------
+    lifted
+        The object left the table (estimated).
+    lift_m
+        Estimated rise of the object's centroid above its resting height [m] (NaN if no
+        estimate).
+    orientation
+        Estimated turn of the section from its resting pose [rad] (0 for a cylinder, NaN if
+        no estimate).
+    clearance
+        Estimated height of the object's lowest point above the table [m] (NaN if no
+        estimate).
+    """
 
     outcome: Outcome
     contact: bool
@@ -136,8 +159,10 @@ class Classification:
     lifted: bool
     enveloped: bool
     estimate: ObjectEstimate
-    lift_m: float  # estimated rise of the object centre [m] (NaN if no estimate)
+    lift_m: float
     reason: str
+    orientation: float = math.nan
+    clearance: float = math.nan
 
 
 def _enveloped(geometry: HandGeometry, pts: np.ndarray, centre: np.ndarray,
@@ -157,7 +182,9 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
                          positions: np.ndarray, efforts: np.ndarray,
                          settings: ClassifierSettings | None = None,
                          joint_names: Sequence[str] | None = None,
-                         stop: Callable[[], bool] | None = None) -> Classification:
+                         stop: Callable[[], bool] | None = None,
+                         history: JointHistory | None = None,
+                         tracker: TrackerSettings | None = None) -> Classification:
     """Classify the settled final state of a grasp from joint angles and torques.
 
     Parameters
@@ -175,10 +202,21 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     joint_names
         (3n,) names used in :attr:`Classification.reason`; indices if ``None``.
     stop
-        Passed to :func:`estimate_section` (a non-circular section only).
+        Polled by the pose fit of a non-circular section; when it returns true the fit ends.
+    history
+        The grasp's joint samples from before the first contact
+        (:attr:`DamSequence.history <dam_spcm_controller.sequence.DamSequence.history>`):
+        the pose of a non-circular section is followed through them
+        (:func:`~dam_spcm_controller.pose_tracking.track_pose`, the final state appended).
+        Without it (or empty) the lowest pose the final joints allow is taken, which may be
+        on the table for an object that left it. A cylinder needs none.
+    tracker
+        Tuning of the pose tracking; its defaults if ``None``.
 
     Raises
     ------
+    InputError
+        An array of the wrong length or with NaN/inf, or joint names of the wrong count.
     FitInterrupted
         ``stop()`` returned true during the fit of a non-circular section.
     """
@@ -192,8 +230,22 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     tau = finite_vector('efforts', efforts, 3 * n)
     lo = finite_vector('lower', lower, 3 * n)
     hi = finite_vector('upper', upper, 3 * n)
-    est = estimate_object(geometry, q) if geometry.section is None else \
-        estimate_section(geometry, q, contact_tolerance=s.contact_tolerance, stop=stop)
+    if geometry.section is None:
+        est = estimate_object(geometry, q)
+        orientation = 0.0 if est.found else math.nan
+        clearance = float(est.centre[1]) - geometry.inradius - geometry.table_z \
+            if est.found else math.nan
+    elif history is not None and len(history) > 0:
+        tracked = track_pose(geometry, history, final_positions=q, final_efforts=tau,
+                             settings=tracker, stop=stop)
+        est = ObjectEstimate(tracked.centre, tracked.residuals, tracked.orientation)
+        orientation = tracked.orientation
+        clearance = 0.0 if tracked.on_table else tracked.clearance
+    else:
+        est = estimate_section(geometry, q, contact_tolerance=s.contact_tolerance, stop=stop)
+        orientation = est.orientation
+        clearance = section_clearance(geometry, est.centre, est.orientation) \
+            if est.found else math.nan
     pts = finger_points(geometry, q)
     contact = est.found and est.max_residual <= s.contact_tolerance
     moving = np.zeros(3 * n, dtype=bool)
@@ -202,24 +254,27 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
     at_limit = moving & ((q <= lo + s.limit_margin) | (q >= hi - s.limit_margin))
     loaded = tau[0::3] >= s.load_torque_threshold
     load_held = bool(loaded.all() and not at_limit.any())
-    if not est.found:
-        lift = math.nan
-    elif geometry.section is None:
-        lift = float(est.centre[1] - geometry.object_z0)
-    else:  # a turned section: how far its lowest point is off the table
-        lift = section_clearance(geometry, est.centre, est.orientation)
-    lifted = bool(est.found and lift >= s.lift_height)
-    enveloped = bool(contact and _enveloped(geometry, pts, est.centre,
-                                            s.cage_depth_ratio * geometry.inradius))
-    if contact and load_held and lifted:
+    lift = float(est.centre[1] - geometry.object_z0) if est.found else math.nan
+    # an object held off the table presses on every finger: without that load the fit has
+    # no evidence of an object between the fingers (they may have closed on empty space)
+    lifted = bool(contact and load_held and clearance > s.table_clearance)
+    enveloped = bool(contact and _enveloped(
+        geometry, pts, est.centre, s.cage_depth_ratio * geometry.inradius))
+    if lifted:
         outcome = Outcome.SUCCESS if enveloped else Outcome.LIFTED_DAM_FAILED
     else:
         outcome = Outcome.FAILURE
     reasons = []
     if not est.found:
         reasons.append('no admissible object centre fits the finger posture')
-    elif not contact:
-        reasons.append(f'fingers off the object by up to {est.max_residual * 1e3:.3g} mm')
+    else:
+        where = 'object left the table' if lifted else 'object on the table'
+        turned = '' if geometry.section is None else \
+            f', turned {math.degrees(orientation):.3g} deg'
+        reasons.append(f'{where}: rise {lift * 1e3:.3g} mm{turned} (estimated from the '
+                       f'joints)')
+        if not contact:
+            reasons.append(f'fingers off the object by up to {est.max_residual * 1e3:.3g} mm')
     if at_limit.any():
         j = int(np.flatnonzero(at_limit)[0])
         reasons.append(f'{names[j]} at {math.degrees(q[j]):.4g} deg is at its limit')
@@ -228,13 +283,14 @@ def classify_from_joints(geometry: HandGeometry, lower: np.ndarray, upper: np.nd
         pulling = ' (it pulls away from the object)' if tau[j] < 0.0 else ''
         reasons.append(f'{names[j]} torque {tau[j]:.3g} N*m{pulling} shows no load (a held '
                        f'object needs at least +{s.load_torque_threshold:g} N*m of flexion)')
-    if est.found and not lifted:
-        reasons.append(f'object raised only {lift * 1e3:.3g} mm (estimated from the joints)')
-    if contact and lifted and not enveloped:
+    if lifted and not enveloped:
         reasons.append('object not caged by the fingertips')
+    if outcome is Outcome.SUCCESS:
+        reasons.append('enveloped')
     return Classification(outcome=outcome, contact=bool(contact), load_held=load_held,
                           lifted=lifted, enveloped=enveloped, estimate=est, lift_m=lift,
-                          reason='; '.join(reasons) or 'lifted and enveloped')
+                          reason='; '.join(reasons), orientation=orientation,
+                          clearance=clearance)
 
 
 def classify_with_object_height(joint_result: Classification, object_z: float,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,6 +58,18 @@ class HandGeometry:
     section
         The cross-section in the plane (``u``, ``z``; its own frame in the pose it rests in),
         None for a cylinder (the closed forms of a disc apply).
+    object_u0
+        ``u`` of the object's centroid resting on the table before the grasp [m].
+    object_mass
+        Mass of the object [kg] (the statics of the pose tracker).
+    gravity
+        Gravitational acceleration [m/s^2].
+    link_masses
+        (3,) link masses base to tip [kg], centres of mass at the link midpoints: their
+        weight is taken out of the compliant-joint torques.
+    contact_stiffness
+        Normal stiffness of a finger-object contact [N/m]: a pressed contact sinks in by
+        force / stiffness (inf: rigid).
     """
 
     link_lengths: np.ndarray
@@ -70,6 +82,11 @@ class HandGeometry:
     radius_spread: float = 0.0
     object_width: float = math.nan
     section: CrossSection | None = None
+    object_u0: float = 0.0
+    object_mass: float = 0.04
+    gravity: float = 9.81
+    link_masses: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contact_stiffness: float = math.inf
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'link_lengths',
@@ -98,6 +115,17 @@ class HandGeometry:
         width = 2.0 * self.object_radius if math.isnan(self.object_width) else \
             finite_scalar('object_width', self.object_width, positive=True)
         object.__setattr__(self, 'object_width', width)
+        object.__setattr__(self, 'object_u0', finite_scalar('object_u0', self.object_u0))
+        object.__setattr__(self, 'object_mass',
+                           finite_scalar('object_mass', self.object_mass, positive=True))
+        object.__setattr__(self, 'gravity', finite_scalar('gravity', self.gravity,
+                                                          positive=True))
+        object.__setattr__(self, 'link_masses',
+                           finite_vector('link_masses', self.link_masses, 3, nonnegative=True))
+        stiffness = float(self.contact_stiffness)
+        if not stiffness > 0.0:  # inf allowed: a rigid contact
+            raise InputError(f'contact_stiffness must be positive, got {self.contact_stiffness!r}')
+        object.__setattr__(self, 'contact_stiffness', stiffness)
 
     @classmethod
     def from_config(cls, config: DamConfig) -> HandGeometry:
@@ -128,7 +156,12 @@ class HandGeometry:
                    object_z0=float(config.object.position_m[2]),
                    radius_spread=0.5 * (section.circumradius - section.inradius),
                    object_width=section.min_width,
-                   section=None if isinstance(section, Circle) else section)
+                   section=None if isinstance(section, Circle) else section,
+                   object_u0=float(np.dot(config.object.position_m, e_u)),
+                   object_mass=float(config.object.mass_kg),
+                   gravity=float(config.task.gravity_m_per_s2),
+                   link_masses=np.asarray(config.hand.link_masses_kg, dtype=np.float64),
+                   contact_stiffness=float(config.contact.contact_stiffness_n_per_m[0]))
 
     @property
     def n_fingers(self) -> int:

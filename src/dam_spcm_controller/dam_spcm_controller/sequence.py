@@ -70,6 +70,7 @@ from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
 from dam_spcm_controller.errors import InputError, StateError
 from dam_spcm_controller.impedance import _impedance_unchecked, finger_stiffness
+from dam_spcm_controller.pose_tracking import JointHistory
 from dam_spcm_controller.trajectory import MinimumJerkTrajectory
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -284,10 +285,13 @@ class DamSequence:
         self._damp = np.zeros(self._nj)  # [N*m*s/rad]
         self._phase = Phase.IDLE
         self._t_last: float | None = None
+        #: Joint samples of the current run, for the object's pose (pose_tracking).
+        self._history = JointHistory(self._nj)
         self._reset_run()
 
     def _reset_run(self) -> None:
         n = self._n
+        self._history.clear()
         self._hold: np.ndarray | None = None  # IDLE hold posture, latched at the first step
         self._pending_start = False
         self._relax_latch_measured = False
@@ -337,6 +341,14 @@ class DamSequence:
         """Overall progress in [0, 1]: 0.2 at the end of APPROACH, 0.9 at the end of
         ROLLING_UP, 1 at DONE; frozen on abort or failure. Never decreases within a run."""
         return self._progress
+
+    @property
+    def history(self) -> JointHistory:
+        """The joint samples of the current run, from its first step to the step that ended
+        it (DONE, FAILED, ABORTED): what the classifier follows the object's pose through
+        (:func:`~dam_spcm_controller.classification.classify_from_joints`). Cleared by
+        :meth:`start` and :meth:`reset`; read it, do not change it."""
+        return self._history
 
     @property
     def failure_reason(self) -> str | None:
@@ -512,6 +524,8 @@ class DamSequence:
         eff = finite_vector('efforts', efforts, self._nj)
         self._t_last = t
         self._last_theta_c = pos[self._c].copy()
+        if self._pending_start or self._phase.active:
+            self._history.append(t, pos, eff)
 
         if self._pending_start:
             self._pending_start = False
