@@ -255,7 +255,10 @@ def _with_fields(definition: str, fields: dict[str, Any]) -> tuple[str, Any]:
 
     separator = '\n' + '=' * 80 + '\n'
     own, _, nested = definition.partition(separator)
-    lines = ''.join(f'{_FIELD_TYPES[type(v)]} {name}\n' for name, v in fields.items())
+    have = {line.split()[1] for line in own.splitlines()
+            if line.strip() and not line.lstrip().startswith('#') and len(line.split()) > 1}
+    lines = ''.join(f'{_FIELD_TYPES[type(v)]} {name}\n' for name, v in fields.items()
+                    if name not in have)
     text = own.rstrip('\n') + '\n' + lines + (separator + nested if nested else '')
     store = get_typestore(Stores.ROS2_JAZZY)
     store.register(get_types_from_msg(text, 'dam_interfaces/msg/GraspEpisode'))
@@ -274,7 +277,8 @@ def _ended_event(store: Any, fields: dict[str, Any]) -> Any:
         if name not in known:  # a field added since: false, or NaN (not answered)
             known[name] = False if base == 'bool' else math.nan
     answer = t['dam_interfaces/msg/LiftAnswer'](**known)
-    values = {name: None for name, _ in store.fielddefs['dam_interfaces/msg/GraspEpisode'][1]}
+    values = {name: {'bool': False, 'float64': math.nan}.get(desc[1][0]) if desc[0] == 1
+              else None for name, desc in store.fielddefs['dam_interfaces/msg/GraspEpisode'][1]}
     values.update(
         header=_header(t, 400, 0, ''), event=1, goal_id=GOAL_ID,
         goal_k_theta=np.array([10.0]), goal_delta_theta_p=np.zeros(0), object='cylinder',

@@ -298,7 +298,7 @@ def run_experiment(config, k_theta: float, delta_theta_p: float, *,
         if seq.phase is Phase.DONE:
             c = classify_from_joints(geometry, params.layout.lower, params.layout.upper,
                                      js.positions, js.torques, settings,
-                                     params.layout.joint_names)
+                                     params.layout.joint_names, history=seq.history)
             outcome, reason = c.outcome, c.reason
             estimated_rise = float(c.lift_m)
         else:

@@ -99,6 +99,7 @@ from dam_interfaces.action import DamGrasp
 from dam_interfaces.msg import DamStatus, HandCommand
 from dam_interfaces.srv import CheckLift
 from dam_spcm_controller.classification import (
+    Classification,
     ClassifierSettings,
     HandGeometry,
     Outcome,
@@ -108,6 +109,7 @@ from dam_spcm_controller.commands import JointCommand, JointMode
 from dam_spcm_controller.episode import EpisodeEvents
 from dam_spcm_controller.errors import InputError, StateError
 from dam_spcm_controller.object_estimate import FitInterrupted
+from dam_spcm_controller.pose_tracking import JointHistory
 from dam_spcm_controller.release import ReleaseMotion
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 
@@ -771,14 +773,17 @@ class SpcmControllerNode(Node):
             self.destroy_timer(timer)
 
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
-                t0: float, owns_run: bool = True, object_rise: float = math.nan
+                t0: float, owns_run: bool = True, estimate: Classification | None = None
                 ) -> DamGrasp.Result:
         result = DamGrasp.Result()
         result.outcome = outcome
         result.outcome_name = _OUTCOME_NAME[outcome]
         result.message = message
         result.duration = time.monotonic() - t0
-        result.object_rise = float(object_rise)
+        result.object_rise = math.nan if estimate is None else float(estimate.lift_m)
+        result.object_left_table = estimate is not None and bool(estimate.lifted)
+        result.object_orientation = math.nan if estimate is None else \
+            float(estimate.orientation)
         last_feedback = None
         with self._lock:
             self._status_message = message
@@ -935,10 +940,11 @@ class SpcmControllerNode(Node):
             self._run_done = None
             pos = self._last_pos.copy()
             eff = self._last_eff.copy()
+            history = self._seq.history  # recording ended with DONE: nothing appends now
             reason = self._seq.failure_reason
             timed_out = self._state_timed_out or self._shutting_down
         if phase is Phase.DONE:
-            return self._classify_and_finish(goal_handle, pos, eff, t0)
+            return self._classify_and_finish(goal_handle, pos, eff, history, t0)
         if phase is Phase.ABORTED:
             return self._finish(goal_handle, 'canceled' if goal_handle.is_cancel_requested
                                 else 'abort', aborted, 'cancelled: torque ramped to zero', t0)
@@ -946,11 +952,12 @@ class SpcmControllerNode(Node):
         return self._finish(goal_handle, 'abort', outcome, f'failed: {reason}', t0)
 
     def _classify_and_finish(self, goal_handle: ServerGoalHandle, pos: np.ndarray,
-                             eff: np.ndarray, t0: float) -> DamGrasp.Result:
+                             eff: np.ndarray, history: JointHistory, t0: float
+                             ) -> DamGrasp.Result:
         try:
             c = classify_from_joints(self._geometry, self._layout.lower, self._layout.upper,
                                      pos, eff, self._classifier, self._layout.joint_names,
-                                     stop=lambda: SHUTDOWN.requested)
+                                     stop=lambda: SHUTDOWN.requested, history=history)
         except FitInterrupted:
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
                                 'grasp done, not classified: the controller is stopping', t0)
@@ -958,19 +965,10 @@ class SpcmControllerNode(Node):
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_UNKNOWN,
                                 f'grasp done, classification failed: {brief_repr(exc)}', t0)
         outcome = _OUTCOME[c.outcome]
-        lift_height = self._classifier.lift_height
-        if outcome == DamGrasp.Result.OUTCOME_SUCCESS and not c.lift_m >= lift_height:
-            # A SUCCESS is a measured rise (classification already requires one: this keeps
-            # it so whatever the classifier becomes).
-            outcome = DamGrasp.Result.OUTCOME_FAILURE
-            return self._finish(goal_handle, 'abort', outcome,
-                                f'grasp done, no rise measured ({c.lift_m * 1e3:.3g} mm, '
-                                f'{lift_height * 1e3:g} mm needed): {c.reason}', t0,
-                                object_rise=c.lift_m)
         # Goal status SUCCEEDED means the outcome SUCCESS, for every generic action client.
         status = 'succeed' if outcome == DamGrasp.Result.OUTCOME_SUCCESS else 'abort'
         return self._finish(goal_handle, status, outcome, f'grasp done: {c.reason}', t0,
-                            object_rise=c.lift_m)
+                            estimate=c)
 
 
 def main(args: list[str] | None = None) -> None:

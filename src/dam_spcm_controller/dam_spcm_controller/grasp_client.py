@@ -183,8 +183,12 @@ def run(args: argparse.Namespace) -> int:
               f'{_STATUS.get(wrapped.status, wrapped.status)}; duration '
               f'{result.duration:.2f} s', flush=True)
         if math.isfinite(result.object_rise):
-            print(f'object rise: {result.object_rise * 1e3:.1f} mm (estimated from the joint '
-                  'angles)', flush=True)
+            where = 'left the table' if result.object_left_table else 'on the table'
+            turned = (f', turned {math.degrees(result.object_orientation):.1f} deg'
+                      if math.isfinite(result.object_orientation)
+                      and result.object_orientation != 0.0 else '')
+            print(f'object rise: {result.object_rise * 1e3:.1f} mm, {where}{turned} '
+                  '(estimated from the joint angles)', flush=True)
         ok = result.outcome == DamGrasp.Result.OUTCOME_SUCCESS
         return EXIT_SUCCESS if ok else EXIT_OTHER_OUTCOME
     finally:

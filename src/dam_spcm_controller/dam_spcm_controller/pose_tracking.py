@@ -20,9 +20,9 @@ resting pose, sample by sample of the recorded joint angles and compliant-joint 
   free equilibrium is followed continuously from where it first appears (below the table
   while the table still carries the object).
 
-The object is off the table while its free equilibrium is above the table, having risen
-through it, and on the table (the table pose) otherwise: the table can push, never pull. A
-pressed contact sinks in by the normal force over ``HandGeometry.contact_stiffness``.
+The object is off the table while its free equilibrium is above the table, and on the table
+(the table pose) otherwise: the table can push, never pull. A pressed contact sinks in by
+the normal force over ``HandGeometry.contact_stiffness``.
 
 Pure numpy; no rclpy.
 """
@@ -169,6 +169,9 @@ class TrackerSettings:
         ... or a compliant-joint torque has changed this much [N*m] ...
     max_gap
         ... or this many samples have passed.
+    max_samples
+        At most this many samples are processed (the two steps above are widened until they
+        select no more): the cost of a grasp's end.
     root_window
         The free equilibrium is looked for this far on either side of the last one (or of
         where its contacts would roll it) [rad].
@@ -202,6 +205,7 @@ class TrackerSettings:
     angle_step: float = math.radians(0.1)
     torque_step: float = 0.004
     max_gap: int = 50
+    max_samples: int = 220
     root_window: float = math.radians(2.5)
     init_window: float = math.radians(30.0)
     grid_step: float = math.radians(0.5)
@@ -222,7 +226,7 @@ class TrackerSettings:
                                                          positive=True))
         if not isinstance(self.roll_prediction, bool):
             raise InputError(f'roll_prediction must be a bool, got {self.roll_prediction!r}')
-        for name in ('max_gap', 'bisections'):
+        for name in ('max_gap', 'bisections', 'max_samples'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise InputError(f'{name} must be a positive integer, got {value!r}')
@@ -385,6 +389,27 @@ class _Contact:
     start: np.ndarray  # (n, 2) start of that link's axis [m]
     direction: np.ndarray  # (n, 2) that link's axis (not unit) [m]
     loaded: np.ndarray  # (n,) bool
+
+
+def _select(q: np.ndarray, tau_c: np.ndarray, s: TrackerSettings) -> list[int]:
+    """Indices of the samples to process: where a joint has turned by ``angle_step`` or a
+    compliant torque changed by ``torque_step`` since the last one taken, at least every
+    ``max_gap`` samples, and the last; the steps widened until at most ``max_samples``."""
+    count = q.shape[0]
+    scale = 1.0
+    while True:
+        picked, ref = [0], 0
+        da, dt = s.angle_step * scale, s.torque_step * scale
+        for k in range(1, count - 1):
+            if (k - ref >= s.max_gap or np.abs(q[k] - q[ref]).max() >= da
+                    or np.abs(tau_c[k] - tau_c[ref]).max() >= dt):
+                picked.append(k)
+                ref = k
+        if count > 1:
+            picked.append(count - 1)
+        if len(picked) <= s.max_samples or scale > 64.0:
+            return picked
+        scale *= 1.5
 
 
 def _contact_of(pts: np.ndarray, pose: np.ndarray, con, loaded: np.ndarray) -> _Contact:
@@ -597,25 +622,16 @@ def track_pose(geometry: HandGeometry, history: JointHistory, *,
     free_x: np.ndarray | None = None
     free_low = -math.inf
     lost_low = math.nan  # clearance of the free equilibrium when it was lost [m]
-    # the free equilibrium has been below the table since it appeared: lifting off is its
-    # rising through the table (one found above it at once is no evidence of a lift)
-    grounded = False
     on_table = True
     last: _Contact | None = None  # contacts of the pose taken at the last sample
     last_free: _Contact | None = None  # ... and of the free equilibrium
     sink = np.zeros(n)
-    used, last_k = 0, -1
-    q_ref = tau_ref = None
+    used = 0
     count = q_all.shape[0]
-    for k in range(count):
+    for k in _select(q_all, tau_all[:, 0::3], s):
         q, tau_c = q_all[k], tau_all[k, 0::3]
-        if q_ref is not None and k != count - 1 and k - last_k < s.max_gap \
-                and np.abs(q - q_ref).max() < s.angle_step \
-                and np.abs(tau_c - tau_ref).max() < s.torque_step:
-            continue
         if stop is not None and stop():
             raise FitInterrupted('the object fit was interrupted')
-        q_ref, tau_ref, last_k = q, tau_c, k
         used += 1
         pts = finger_points(geometry, q)
         axes = LinkAxes.from_points(pts)
@@ -657,13 +673,10 @@ def track_pose(geometry: HandGeometry, history: JointHistory, *,
                 free_low = float(con.lowest[0])
         else:
             free_x, free_low, found, lost_low = None, -math.inf, None, math.nan
-            grounded = False
         # off the table while an equilibrium off it is found; one that was lost keeps the
         # object off only if it was well above the table (near it, the object has more likely
         # come down onto the table)
-        if free_x is not None and free_low <= model.table:
-            grounded = True  # the equilibrium was below the table: the object rested on it
-        on_table = not (free_x is not None and grounded and free_low > model.table
+        on_table = not (free_x is not None and free_low > model.table
                         and (found is not None or lost_low > model.table + s.hold_height))
         x = table_x if on_table else free_x
         con = model.contacts(axes, x[None])

@@ -27,7 +27,7 @@ from dam_common.cross_section import CrossSection
 from dam_spcm_controller.errors import InputError
 
 #: Faces of the tangent polygon of a circle or an ellipse [-].
-CURVE_FACES = 32
+CURVE_FACES = 24
 
 
 @dataclass(frozen=True)
