@@ -57,6 +57,7 @@ import numpy as np
 
 from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.errors import InputError
+from dam_spcm_controller.joint_history import JointHistory
 from dam_spcm_controller.object_estimate import (
     HandGeometry,
     ObjectEstimate,
@@ -65,7 +66,7 @@ from dam_spcm_controller.object_estimate import (
     finger_points,
     section_clearance,
 )
-from dam_spcm_controller.pose_tracking import JointHistory, TrackerSettings, track_pose
+from dam_spcm_controller.pose_tracking import TrackerSettings, track_pose
 
 if TYPE_CHECKING:  # pragma: no cover
     from dam_common.config import DamConfig

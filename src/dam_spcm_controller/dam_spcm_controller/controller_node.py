@@ -108,8 +108,8 @@ from dam_spcm_controller.classification import (
 from dam_spcm_controller.commands import JointCommand, JointMode
 from dam_spcm_controller.episode import EpisodeEvents
 from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.joint_history import JointHistory
 from dam_spcm_controller.object_estimate import FitInterrupted
-from dam_spcm_controller.pose_tracking import JointHistory
 from dam_spcm_controller.release import ReleaseMotion
 from dam_spcm_controller.sequence import DamSequence, Phase, SequenceParams
 

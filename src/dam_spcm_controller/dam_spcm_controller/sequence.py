@@ -70,7 +70,7 @@ from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
 from dam_spcm_controller.errors import InputError, StateError
 from dam_spcm_controller.impedance import _impedance_unchecked, finger_stiffness
-from dam_spcm_controller.pose_tracking import JointHistory
+from dam_spcm_controller.joint_history import JointHistory
 from dam_spcm_controller.trajectory import MinimumJerkTrajectory
 
 if TYPE_CHECKING:  # pragma: no cover
