@@ -119,9 +119,11 @@ def test_the_estimate_is_taken_where_the_message_has_it() -> None:
     assert collector.estimate() is None
     collector.add(EPISODE_TOPIC, 2, SimpleNamespace(event=1))  # an older message: no fields
     assert collector.estimate() is None
-    collector.add(EPISODE_TOPIC, 3, SimpleNamespace(event=1, object_rise=math.nan))
-    estimate = collector.estimate()
-    assert estimate is not None and estimate.rise_mm is None and estimate.left_table is None
+    # a grasp that was not classified: NaN rise, placeholders in the other fields
+    collector.add(EPISODE_TOPIC, 3, SimpleNamespace(event=1, object_rise=math.nan,
+                                                    object_left_table=False,
+                                                    object_orientation=math.nan))
+    assert collector.estimate() is None
     collector.add(EPISODE_TOPIC, 4, SimpleNamespace(
         event=1, object_rise=0.0042, object_left_table=False,
         object_orientation=SimpleNamespace(x=0.0, y=0.1, z=0.0, w=0.995)))

@@ -181,17 +181,18 @@ class ObjectCollector:
                            before[-1][3], tuple(spans))
 
     def estimate(self) -> ObjectEstimate | None:
-        """The controller's estimate of the last ENDED event; None without an ENDED event or
-        when its message has none of the estimate's fields."""
+        """The controller's estimate of the last ENDED event; None without an ENDED event,
+        when its message has no ``object_rise``, or when that is NaN (the grasp was not
+        classified: the message's other estimate fields are then placeholders)."""
         msg = self._ended
         if msg is None:
             return None
         rise = getattr(msg, 'object_rise', None)
-        rise_mm = float(rise) * 1e3 if rise is not None and math.isfinite(float(rise)) else None
+        if rise is None or not math.isfinite(float(rise)):
+            return None
         left = getattr(msg, 'object_left_table', None)
-        found = ObjectEstimate(rise_mm, None if left is None else bool(left),
-                               _orientation_text(getattr(msg, 'object_orientation', None)))
-        return None if found.empty and not hasattr(msg, 'object_rise') else found
+        return ObjectEstimate(float(rise) * 1e3, None if left is None else bool(left),
+                              _orientation_text(getattr(msg, 'object_orientation', None)))
 
 
 def object_lines(truth: ObjectTruth, estimate: ObjectEstimate | None) -> list[str]:
