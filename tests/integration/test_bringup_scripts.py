@@ -101,9 +101,17 @@ def _assert_the_graph_is_what_ros2_tools_expect(client: RosClient) -> None:
     from rcl_interfaces.srv import ListParameters
 
     own = client.node.get_name()
-    nodes = [(n, ns) for n, ns in client.node.get_node_names_and_namespaces()
-             if n != own and not n.startswith('_')]
-    assert {'check_lift_server', 'hand_driver', 'spcm_controller'} <= {n for n, _ in nodes}
+    expected = {'check_lift_server', 'hand_driver', 'spcm_controller'}
+
+    def graph() -> list[tuple[str, str]]:
+        return [(n, ns) for n, ns in client.node.get_node_names_and_namespaces()
+                if n != own and not n.startswith('_')]
+
+    # a client that has just joined discovers the nodes one by one (a bounded wait, not a
+    # verdict: the nodes are up, bringup.sh waited for them)
+    client.spin_until(lambda: expected <= {n for n, _ in graph()}, 15.0)
+    nodes = graph()
+    assert expected <= {n for n, _ in nodes}
     for name, namespace in nodes:
         service = f'{namespace.rstrip("/")}/{name}/list_parameters'
         listed = client.call(ListParameters, service, ListParameters.Request(), timeout=5.0,
@@ -128,7 +136,7 @@ def test_bringup_returns_serving_the_object_and_stop_stops_it(
         client = RosClient()
         try:
             answer = client.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=10.0,
-                                 wait=2.0)
+                                 wait=10.0)
             state = _first_driver_state(client)
             if not object_args:
                 _assert_the_graph_is_what_ros2_tools_expect(client)
