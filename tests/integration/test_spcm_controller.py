@@ -683,8 +683,9 @@ def test_a_goal_the_analysis_cannot_answer_is_refused_at_once(tmp_path: Path,
         es.callback(h.close)
         h.wait_ready(check_lift=server)
         # The controller holds the posture it finds with one command at its first joint
-        # state (on a loaded machine after the harness saw its own): that one is not a grasp.
-        assert h.ros.spin_until(lambda: len(h.commands) > 0, 30.0), 'no holding command'
+        # state: that one is not a grasp. It may come before the harness's subscription is
+        # matched (the controller started first), so it is waited for, not required.
+        h.ros.spin_until(lambda: len(h.commands) > 0, 10.0)
         n_commands = len(h.commands)
         handle = h.send([INSIDE[0]], [INSIDE[1]])
         assert handle.accepted
