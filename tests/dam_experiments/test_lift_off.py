@@ -360,6 +360,21 @@ def _to_format_2(rows: list[dict[str, str]]) -> tuple[list[dict[str, str]], list
     return rows, [c for c in rows[0] if c != 'off_table_at_end']
 
 
+
+def _plot_and_report(d: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                     note: str) -> tuple[str, str]:
+    """sweep_plot's standard output and sweep_report's document for ``d``, each tool having
+    printed the table's note as its one line on standard error."""
+    assert plot_main([str(d), '-o', str(tmp_path / 'fig.png'), '--config', str(CONFIG),
+                      '--n-delta-theta-p', '5']) == 0
+    captured = capsys.readouterr()
+    assert captured.err == f'sweep_plot: note: {note}\n'
+    out = tmp_path / 'results.md'
+    assert report_main([str(d), '-o', str(out), '--config', str(CONFIG),
+                        '--n-delta-theta-p', '5']) == 0
+    assert capsys.readouterr().err == f'sweep_report: note: {note}\n'
+    return captured.out, out.read_text(encoding='utf-8')
+
 def test_a_table_of_format_2_is_read_with_a_note(tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """Its lifted meant off the table at the end: read as off_table_at_end, and lifted from
@@ -383,17 +398,9 @@ def test_a_table_of_format_2_is_read_with_a_note(tmp_path: Path,
     h = 1e3 * config.classification.lift_height_m
     assert [rise_class(t, h) for t in read_rows(data)] == [rise_class(t, h)
                                                            for t in read_rows(new)]
-    assert plot_main([str(d), '-o', str(tmp_path / 'fig.png'), '--config', str(CONFIG),
-                      '--n-delta-theta-p', '5']) == 0
-    captured = capsys.readouterr()
-    assert captured.err == f'sweep_plot: note: {note}\n'
-    assert 'lifted (left the table) 3 (60 %), off the table at the end 2,' in captured.out
-    out = tmp_path / 'results.md'
-    assert report_main([str(d), '-o', str(out), '--config', str(CONFIG),
-                        '--n-delta-theta-p', '5']) == 0
-    assert capsys.readouterr().err == f'sweep_report: note: {note}\n'
-    assert '**A table of format 2: its `lifted` meant off the table' in out.read_text(
-        encoding='utf-8')
+    plotted, text = _plot_and_report(d, tmp_path, capsys, note)
+    assert 'lifted (left the table) 3 (60 %), off the table at the end 2,' in plotted
+    assert '**A table of format 2: its `lifted` meant off the table' in text
     from dam_experiments.calibrate_csm import cells_from_sweep, cells_of_sweep
 
     _cells, _config, _label, notes = cells_from_sweep(d, config, None)
@@ -421,16 +428,8 @@ def test_a_table_of_format_1_is_read_with_a_note(tmp_path: Path,
     assert all(t.off_table_at_end is None for t in data.trials)
     note = data.lifted_note
     assert note is not None and 'old rule' in note and "'lift_off_time_s'" in note
-    assert plot_main([str(d), '-o', str(tmp_path / 'fig.png'), '--config', str(CONFIG),
-                      '--n-delta-theta-p', '5']) == 0
-    captured = capsys.readouterr()
-    assert captured.err == f'sweep_plot: note: {note}\n'
-    assert 'lifted (format 1: the old rise rule) 1 (33 %), success' in captured.out
-    out = tmp_path / 'results.md'
-    assert report_main([str(d), '-o', str(out), '--config', str(CONFIG),
-                        '--n-delta-theta-p', '5']) == 0
-    assert capsys.readouterr().err == f'sweep_report: note: {note}\n'
-    text = out.read_text(encoding='utf-8')
+    plotted, text = _plot_and_report(d, tmp_path, capsys, note)
+    assert 'lifted (format 1: the old rise rule) 1 (33 %), success' in plotted
     assert '**A table of format 1: its `lifted` is the old rule**' in text
     assert '| SUCCESS | no | - | - | 1 | - | rose then fell back |' in text
     from dam_experiments.calibrate_csm import cells_from_sweep

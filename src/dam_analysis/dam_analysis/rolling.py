@@ -282,16 +282,6 @@ class RollingCheck:
         """The section can roll: there are poses to check."""
         return bool(self.poses)
 
-    def states(self, delta_theta_p: list[float]) -> list[list[FingerRoll]]:
-        """Finger states ``[pose][finger]`` of every pose at one displacement per finger [rad].
-
-        Raises
-        ------
-        dam_analysis.errors.NoSolutionError
-            A finger has no SPCM state at rest (beyond its branch end).
-        """
-        return [self.pose_states(delta_theta_p, j) for j in range(len(self.poses))]
-
     def pose_states(self, delta_theta_p: list[float], j: int) -> list[FingerRoll]:
         """Finger states of pose ``j`` at one displacement per finger [rad], solved on demand.
 

@@ -89,10 +89,6 @@ class ObjectEstimate:
     left_table: bool | None
     orientation: str | None
 
-    @property
-    def empty(self) -> bool:
-        return self.rise_mm is None and self.left_table is None and self.orientation is None
-
 
 def _orientation_text(value: Any) -> str | None:
     """An orientation as the message holds it: an angle [rad] in degrees, a quaternion, or
