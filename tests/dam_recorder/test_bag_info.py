@@ -4,6 +4,7 @@ written with (tests/dam_recorder/grasp_bags.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -104,6 +105,36 @@ def test_text_names_every_topic_with_its_figures(grasp_bag: gb.GraspBag) -> None
     assert data['episode']['summary']['check_lift']['csm_margin'] == 1.337
 
 
+def test_times_say_their_clock_and_a_simulated_start_is_no_date(
+        grasp_bag: gb.GraspBag) -> None:
+    """A bag on simulated time printed "start: 1970-01-01 ..." and its simulated duration
+    beside the grasp's wall-clock one, unlabelled; now each time says its clock."""
+    wall = bag_info(grasp_bag.path)  # stamped in 2025: the wall clock
+    text = format_bag_info(wall)
+    assert '(wall-clock time)' in text.splitlines()[2], text
+    duration = grasp_bag.end_ns - gb.T0
+    assert f'duration:   {duration * 1e-9:.3f} s wall-clock time' in text
+    # the summary has no wall_duration_s (an older controller): its duration is wall time
+    assert 'grasp 1.550 s wall-clock, pre-roll 0.25 s, post-roll 0.2 s (bag time)' in text
+    # the same bag on the stand-in's clock, 9.5 s after it started
+    shift = gb.T0 - 9_500_000_000
+    assert wall.start_ns is not None and wall.end_ns is not None and wall.episode is not None
+    summary = dataclasses.replace(wall.episode.summary, wall_duration_s=2.25)
+    sim = dataclasses.replace(
+        wall, start_ns=wall.start_ns - shift, end_ns=wall.end_ns - shift,
+        grasps=[dataclasses.replace(g, start_ns=g.start_ns - shift,
+                                    end_ns=None if g.end_ns is None else g.end_ns - shift)
+                for g in wall.grasps],
+        episode=dataclasses.replace(wall.episode, summary=summary))
+    text = format_bag_info(sim)
+    assert '1970' not in text
+    assert text.splitlines()[2] == ('start:      sim 9.500 s (simulated time: the stand-in\'s '
+                                    '/clock counts from 0 at its start, so no date)')
+    assert f'duration:   {duration * 1e-9:.3f} s simulated time' in text
+    assert 'grasp 1.550 s simulated (2.250 s wall-clock)' in text
+    assert '1: 0.305 s to 1.705 s: DONE' in text  # from the bag's start, as before
+
+
 def test_an_incomplete_episode_is_marked_with_what_it_lacks(tmp_path: Path, typestore,
                                                            prefixes) -> None:
     bag = gb.write_grasp_bag(tmp_path / 'cut', typestore, prefixes, topics=('/dam/status',),
@@ -190,7 +221,8 @@ def make_episode_dir(root: Path, typestore, prefixes) -> dict[str, dict]:
         '2026_11_29-18_06_40_failure': gb.summary(
             outcome=3, outcome_name='FAILURE', k_theta=[0.5, 0.25, 0.25], duration_s=4.25,
             check_lift=dict(gb.CHECK_LIFT, lift_guaranteed=False, worst_case_margin='-inf')),
-        '2026_11_29-18_08_02_success': gb.summary(check_lift=None, duration_s=2.5),
+        '2026_11_29-18_08_02_success': gb.summary(check_lift=None, duration_s=2.5,
+                                                  wall_duration_s=3.75),
         '2026_11_29-18_09_30_aborted': None,
     }
     for name, episode in runs.items():
@@ -223,7 +255,8 @@ def test_a_directory_of_ordinary_bags_lists_them_as_bags(tmp_path: Path, typesto
     assert 'UNKNOWN' not in text
     bags = text.split('bags (no episode metadata')[1].splitlines()[1:]
     assert bags[0].split()[:4] == ['bag', 'start', 'duration', '[s]']
-    assert [line.split()[0] for line in bags[1:]] == [r.name for r in info.bags]
+    assert [line.split()[0] for line in bags[1:-1]] == [r.name for r in info.bags]
+    assert bags[-1] == '(start and duration on the bag\'s clock: "sim" is simulated time)'
     data = episodes_json(info)
     assert [b['name'] for b in data['bags']] == [r.name for r in info.bags]
     assert [e['name'] for e in data['episodes']] == ['2026_11_29-18_06_40_failure']
@@ -259,12 +292,17 @@ def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefi
     lines = text.splitlines()
     assert lines[0].endswith(': 5 episodes')
     row = next(x for x in lines if x.startswith('2026_11_29-18_06_40_failure'))
-    assert row.split()[3:] == ['1.900', '4.250', 'FAILURE', 'yes', '[0.5,', '0.25,', '0.25]',
-                               '[10,', '10,', '10]', 'no']
+    # a summary without the wall time: its duration is the wall time (an older controller)
+    assert row.split()[3:] == ['1.900', '-', '4.250', 'FAILURE', 'yes', '[0.5,', '0.25,',
+                               '0.25]', '[10,', '10,', '10]', 'no']
+    row = next(x for x in lines if x.startswith('2026_11_29-18_08_02_success'))
+    assert row.split()[4:6] == ['2.500', '3.750']  # the grasp's clock, then the wall's
+    assert rows['2026_11_29-18_08_02_success'].grasp_wall_s == 3.75
+    assert any(x.startswith('(start, bag [s] and grasp [s] on the bag\'s clock') for x in lines)
     row = next(x for x in lines if x.startswith('2026_11_29-18_10_05_success_incomplete'))
-    assert row.split()[5:7] == ['SUCCESS', 'NO']
+    assert row.split()[6:8] == ['SUCCESS', 'NO']
     row = next(x for x in lines if x.startswith('2026_11_29-18_09_30_aborted'))
-    assert row.split()[5:7] == ['ABORTED', '-']
+    assert row.split()[6:8] == ['ABORTED', '-']
     assert text.split('incomplete (the bag lacks part of the episode):\n')[1].splitlines()[:3] \
         == ['  2026_11_29-18_10_05_success_incomplete:',
             '    /dam/episode: no EVENT_ENDED of the goal in the bag',

@@ -203,7 +203,9 @@ class EpisodeRow:
     bag_duration_s : float or None
         From the first to the last message [s].
     grasp_duration_s : float or None
-        From goal acceptance to the end [s] (the summary's ``duration_s``).
+        From goal acceptance to the end [s] (the summary's ``duration_s``: on the grasp's
+        clock, simulated time with the stand-in, when ``grasp_wall_s`` is there; else on the
+        wall clock).
     outcome : str
         The summary's outcome name; without a summary the directory name's suffix in upper
         case; ``ERROR`` when the bag cannot be read.
@@ -225,6 +227,9 @@ class EpisodeRow:
         (no outcome: ``outcome`` is ``'-'``).
     message_count, topic_count : int or None
         The bag's messages and topics (``None`` when unreadable).
+    grasp_wall_s : float or None
+        From goal acceptance to the end on the wall clock [s] (the summary's
+        ``wall_duration_s``; ``None``: not reported, ``grasp_duration_s`` is that).
     """
 
     name: str
@@ -241,6 +246,7 @@ class EpisodeRow:
     kind: str = 'episode'
     message_count: int | None = None
     topic_count: int | None = None
+    grasp_wall_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -408,7 +414,8 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
                       summary.k_theta if ran else summary.goal_k_theta,
                       summary.delta_theta_p if ran else summary.goal_delta_theta_p,
                       check.lift_guaranteed if check is not None else None,
-                      complete=complete, missing=missing, **sizes)
+                      complete=complete, missing=missing,
+                      grasp_wall_s=summary.wall_duration_s, **sizes)
 
 
 def episodes_info(path: str | os.PathLike[str]) -> EpisodesInfo:

@@ -17,11 +17,40 @@ from dam_recorder.object_record import ObjectTruth, object_lines
 
 # -- text ------------------------------------------------------------------------------------
 
+#: Stamps before 2000-01-01 [ns] are no dates: a simulated clock (``use_sim_time``, the
+#: stand-in's ``/clock``) counts from 0 at its start.
+DATE_FROM_NS = 946_684_800 * 1_000_000_000
+
+
+def simulated(time_ns: int | None) -> bool:
+    """The stamp ``time_ns`` [ns] is on a simulated clock (before 2000: no date)."""
+    return time_ns is not None and time_ns < DATE_FROM_NS
+
+
 def local_time(time_ns: int | None) -> str:
-    """``YYYY-MM-DD HH:MM:SS.mmm`` in local time (``-`` for ``None``)."""
+    """``YYYY-MM-DD HH:MM:SS.mmm`` in local time (``-`` for ``None``); a stamp of a simulated
+    clock (:func:`simulated`) as ``sim 12.345 s``, never a date in 1970."""
     if time_ns is None:
         return '-'
+    if simulated(time_ns):
+        return f'sim {time_ns * 1e-9:.3f} s'
     return datetime.fromtimestamp(time_ns * 1e-9).strftime('%Y-%m-%d %H:%M:%S.%f')[:-3]
+
+
+def clock_name(time_ns: int | None) -> str:
+    """Which clock the bag's times are on, judged by its first stamp ``time_ns`` [ns]."""
+    return 'simulated time' if simulated(time_ns) else 'wall-clock time'
+
+
+def grasp_time(s: Any, bag_start_ns: int | None) -> str:
+    """The grasp's duration with its clock: the summary's ``duration_s`` is on the grasp's
+    clock (simulated time in a bag on simulated time) when the controller also reported
+    ``wall_duration_s``; a controller that did not measured it on the wall clock."""
+    wall = getattr(s, 'wall_duration_s', None)
+    if wall is None or not math.isfinite(wall):
+        return f'{s.duration_s:.3f} s wall-clock'
+    clock = 'simulated' if simulated(bag_start_ns) else 'steady-clock'
+    return f'{s.duration_s:.3f} s {clock} ({wall:.3f} s wall-clock)'
 
 
 def _num(value: float | None, spec: str) -> str:
@@ -46,12 +75,14 @@ def _table(header: list[str], rows: list[list[str]], right: set[int]) -> list[st
     return lines
 
 
-def episode_lines(episode: Episode) -> list[str]:
-    """The episode metadata as text lines."""
+def episode_lines(episode: Episode, bag_start_ns: int | None = None) -> list[str]:
+    """The episode metadata as text lines (``bag_start_ns`` [ns]: the bag's first stamp,
+    which tells its clock)."""
     s = episode.summary
     lines = [f'episode:    {s.outcome_name} ({s.message})',
-             f'  goal id {s.goal_id}, grasp {s.duration_s:.3f} s, pre-roll {s.pre_roll_s:g} s, '
-             f'post-roll {s.post_roll_s:g} s, object {s.object or "not recorded"}',
+             f'  goal id {s.goal_id}, grasp {grasp_time(s, bag_start_ns)}, pre-roll '
+             f'{s.pre_roll_s:g} s, post-roll {s.post_roll_s:g} s (bag time), object '
+             f'{s.object or "not recorded"}',
              f'  k_theta [N*m/rad] {format_floats(s.k_theta)}   delta_theta_p [deg] '
              f'{format_floats(s.delta_theta_p, math.degrees(1.0))}   friction angle '
              f'{math.degrees(s.friction_angle):.4g} deg',
@@ -84,11 +115,16 @@ def completeness_lines(completeness: Completeness | None) -> list[str]:
 def format_bag_info(info: BagInfo) -> str:
     """``info`` as the text ``bag info`` prints."""
     start = info.start_ns
+    if simulated(start):
+        started = (f'{local_time(start)} (simulated time: the stand-in\'s /clock counts from '
+                   '0 at its start, so no date)')
+    else:
+        started = local_time(start) + ('' if start is None else ' (wall-clock time)')
     lines = [f'bag:        {info.path}',
              f'storage:    {info.storage} ({len(info.files)} file'
              f'{"" if len(info.files) == 1 else "s"}: {", ".join(info.files)})',
-             f'start:      {local_time(start)}',
-             f'duration:   {info.duration_ns * 1e-9:.3f} s',
+             f'start:      {started}',
+             f'duration:   {info.duration_ns * 1e-9:.3f} s {clock_name(start)}',
              f'messages:   {info.message_count}']
     rows = []
     for t in info.topics:
@@ -110,10 +146,10 @@ def format_bag_info(info: BagInfo) -> str:
                      f'{info.backlog["mean_s"]:.3f} s over {info.backlog["messages"]} messages '
                      '(from receipt to the bag)')
     lines.append('')
-    lines += episode_lines(info.episode) if info.episode else ['episode:    none']
+    lines += episode_lines(info.episode, start) if info.episode else ['episode:    none']
     lines += completeness_lines(info.completeness)
     if info.grasps:
-        lines.append(f'grasps on {STATUS_TOPIC}:')
+        lines.append(f'grasps on {STATUS_TOPIC} (bag time from the start):')
         for i, g in enumerate(info.grasps, 1):
             t0 = (g.start_ns - start) * 1e-9 if start is not None else 0.0
             t1 = '-' if g.end_ns is None or start is None else f'{(g.end_ns - start) * 1e-9:.3f}'
@@ -138,15 +174,19 @@ def format_episodes(info: EpisodesInfo) -> str:
     if episodes:
         rows = []
         for r in episodes:
+            # a grasp without its wall time reported was timed on the wall clock
+            grasp, wall = ((r.grasp_duration_s, r.grasp_wall_s) if r.grasp_wall_s is not None
+                           else (None, r.grasp_duration_s))
             rows.append([r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
-                         _num(r.grasp_duration_s, '.3f'), r.outcome,
+                         _num(grasp, '.3f'), _num(wall, '.3f'), r.outcome,
                          '-' if r.complete is None else ('yes' if r.complete else 'NO'),
                          format_floats(r.k_theta),
                          format_floats(r.delta_theta_p, math.degrees(1.0)),
                          _yes(r.lift_guaranteed)])
-        header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'outcome', 'complete',
-                  'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
-        lines += ['', *_table(header, rows, {2, 3})]
+        header = ['episode', 'start', 'bag [s]', 'grasp [s]', 'grasp wall [s]', 'outcome',
+                  'complete', 'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'lift guaranteed']
+        lines += ['', *_table(header, rows, {2, 3, 4})]
+        lines.append(_TIMES_NOTE)
         incomplete = [r for r in episodes if r.complete is False]
         if incomplete:
             lines += ['', 'incomplete (the bag lacks part of the episode):']
@@ -161,8 +201,14 @@ def format_episodes(info: EpisodesInfo) -> str:
         lines += ['', 'bags (no episode metadata: bag info BAG describes one, its grasps '
                       'included):',
                   *_table(['bag', 'start', 'duration [s]', 'messages', 'topics'], rows,
-                          {2, 3, 4})]
+                          {2, 3, 4}),
+                  '(start and duration on the bag\'s clock: "sim" is simulated time)']
     return '\n'.join(lines)
+
+
+#: What the episode table's times are.
+_TIMES_NOTE = ('(start, bag [s] and grasp [s] on the bag\'s clock, "sim": simulated time, '
+               'the stand-in\'s; grasp wall [s] on the wall clock)')
 
 
 # -- JSON ------------------------------------------------------------------------------------

@@ -112,12 +112,17 @@ class EpisodeSummary:
     message : str
         Why the grasp ended this way.
     duration_s : float
-        From goal acceptance to the end [s].
+        From goal acceptance to the end [s], on the grasp's clock when ``wall_duration_s`` is
+        there (simulated time with ``use_sim_time``), else on the wall clock (a controller
+        that reported only that).
     pre_roll_s, post_roll_s : float
         Recorded before acceptance and after the end [s].
     object : str
         The column object of the configuration's library the grasp was for (empty in a bag
         of a version that did not record it).
+    wall_duration_s : float or None
+        From goal acceptance to the end on the wall (steady) clock [s]; ``None`` in a bag of
+        a controller that did not report it (its ``duration_s`` is that).
     """
 
     goal_id: str
@@ -136,6 +141,7 @@ class EpisodeSummary:
     pre_roll_s: float
     post_roll_s: float
     object: str = ''
+    wall_duration_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -312,6 +318,8 @@ def parse_summary(text: str) -> EpisodeSummary:
         pre_roll_s=_float(*key('pre_roll_s')),
         post_roll_s=_float(*key('post_roll_s')),
         object=_str(data['object'], f'{where}.object') if 'object' in data else '',
+        wall_duration_s=(_float(data['wall_duration_s'], f'{where}.wall_duration_s')
+                         if 'wall_duration_s' in data else None),
     )
 
 

@@ -51,4 +51,7 @@ def summary_from_event(msg: Any) -> dict[str, Any]:
         'friction_angle': check_lift['friction_angle'] if check_lift else math.nan,
         'check_lift': check_lift, 'outcome': int(msg.outcome),
         'outcome_name': msg.outcome_name or 'UNKNOWN', 'message': msg.message,
-        'duration_s': float(msg.duration)}
+        'duration_s': float(msg.duration),
+        # (a controller's message without the field: its duration is on the wall clock)
+        **({'wall_duration_s': float(msg.wall_duration)}
+           if hasattr(msg, 'wall_duration') else {})}
