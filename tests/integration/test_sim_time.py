@@ -72,8 +72,10 @@ def _standin_pid(grasper: Grasper) -> int:
     return children[0]
 
 
-def _diagnostics(client: RosClient, key: str = 'real_time_factor') -> dict[str, str]:
-    """The driver's newest /diagnostics values (waits for one that has ``key``)."""
+def _diagnostics(client: RosClient, key: str = 'real_time_factor', name: str = ''
+                 ) -> dict[str, str]:
+    """The newest /diagnostics values that have ``key`` (the driver's by default), of the
+    status named ``name`` if given."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     got: list[dict[str, str]] = []
@@ -81,7 +83,7 @@ def _diagnostics(client: RosClient, key: str = 'real_time_factor') -> dict[str, 
     def take(msg: DiagnosticArray) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
-            if key in values:
+            if key in values and (not name or status.name == name):
                 got.append(values)
 
     sub = client.node.create_subscription(DiagnosticArray, '/diagnostics', take, 10)
@@ -183,9 +185,31 @@ def test_the_driver_reports_the_real_time_factor(stack: Grasper) -> None:
     assert 0.05 < rtf < 1.05, values
 
 
-def test_a_stall_of_the_stand_in_changes_nothing(stack: Grasper, config_file: Path) -> None:
-    """SIGSTOP for 0.5 s in the middle of ROLLING_UP (five times the device's state timeout):
-    the driver stays ACTIVE and the grasp ends as in lockstep."""
+def _jump_clock(client: RosClient, seconds: float, for_s: float) -> None:
+    """A second /clock publisher in ``client`` sends ``seconds`` onwards at about 100 Hz for
+    ``for_s`` [s] of wall time (the clock jumps between the two time lines), then goes."""
+    from builtin_interfaces.msg import Time
+    from rosgraph_msgs.msg import Clock
+
+    pub = client.node.create_publisher(Clock, '/clock', 10)
+    try:
+        client.spin_until(lambda: pub.get_subscription_count() >= 3, 5.0)
+        t0 = time.monotonic()
+        while (elapsed := time.monotonic() - t0) < for_s:
+            pub.publish(Clock(clock=Time(sec=int(seconds),
+                                         nanosec=int(elapsed * 1e9) % 1_000_000_000)))
+            client.spin_until(lambda: False, 0.01)
+    finally:
+        client.node.destroy_publisher(pub)
+
+
+def test_a_stall_of_the_stand_in_and_a_clock_jump_change_nothing(stack: Grasper,
+                                                                 config_file: Path) -> None:
+    """SIGSTOP for 0.5 s in the middle of ROLLING_UP (five times the device's state timeout),
+    then a second /clock publisher at 1e5 s for 0.5 s (the clock jumps between the two time
+    lines, five times the state timeout at 100 Hz): the driver stays
+    ACTIVE, the grasp ends as in lockstep (the jump is no joint-state silence), and the
+    controller names the jump in its log and on /diagnostics."""
     expected = lockstep_reference(config_file, 10.0, DELTA_THETA_P)
     stack.reset_world()
     z_before = stack.z()
@@ -199,11 +223,19 @@ def test_a_stall_of_the_stand_in_changes_nothing(stack: Grasper, config_file: Pa
         time.sleep(0.5)
     finally:
         os.kill(standin, signal.SIGCONT)
+    _jump_clock(stack.client, 1e5, 0.5)
     result = stack.result(handle, timeout=90.0).result
     stack.client.spin_until(lambda: False, 0.2)
-    assert_as_in_lockstep(result, stack.z() - z_before, expected, 'stalled for 0.5 s')
+    assert_as_in_lockstep(result, stack.z() - z_before, expected,
+                          'stalled for 0.5 s, /clock jumped')
     assert _diagnostics(stack.client)['state'] == 'ACTIVE'
     assert 'ERROR' not in stack.driver.output(), stack.driver.output()[-2000:]
+    log = stack.controller.output()
+    assert 'to 100000.000 s' in log and '/clock jumped' in log, log[-3000:]
+    clock = _diagnostics(stack.client, 'clock_jumps', 'dam_spcm_controller: clock')
+    assert int(clock['clock_jumps']) >= 2, clock  # there and back
+    assert 's to 100000.' in clock['clock_last_jump'] or \
+        clock['clock_last_jump'].startswith('from 100000.'), clock
 
 
 def test_use_sim_time_cannot_be_changed_at_run_time(stack: Grasper) -> None:

@@ -348,6 +348,13 @@ def test_cancel_mid_grasp_ramps_torque_to_zero(stack) -> None:
     h.ros.spin_until(lambda: False, 0.3)
     last = h.commands[-1][1]
     assert _torques(last) and all(t == 0.0 for t in _torques(last)), list(last.setpoint)
+    # The status tells the joints' measured effort (zero: the plant applies the zero torque)
+    # from the estimate -K dtheta_s (the old compliant_torque), which the zero torque leaves
+    # where the deflection stands.
+    h.ros.spin_until(lambda: False, 0.2)
+    status = h.statuses[-1]
+    assert list(status.compliant_effort_measured) == [0.0, 0.0, 0.0], status
+    assert list(status.compliant_torque_estimate) == list(status.compliant_torque), status
 
 
 @pytest.mark.skipif(not os.path.isdir('/proc'), reason='reads /proc')
@@ -530,6 +537,21 @@ def test_release_lets_go_and_stops_commanding(stack) -> None:
     h.ros.spin_until(lambda: False, 0.3)
     held = h.commands[-1][1]
     assert any(m == HandCommand.MODE_IMPEDANCE for m, *_ in _compliant(held))  # still holding
+    # The result's duration is on the grasp's clock (steady here), its wall time beside it.
+    assert 1.0 < res.result.duration <= res.result.wall_duration + 1e-3, res.result
+    # A goal while the hand holds this grasp is refused with the reason, and the hand keeps
+    # holding (it would start closed around the object and report its rise as its own).
+    n_held = len(h.commands)
+    again = h.send([INSIDE[0]], [INSIDE[1]])
+    refused = h.result(again, 5.0)
+    assert refused.status == GoalStatus.STATUS_ABORTED
+    assert refused.result.outcome_name == 'REJECTED', refused.result.message
+    assert 'still holds the previous grasp' in refused.result.message and \
+        '/spcm_controller/release' in refused.result.message, refused.result.message
+    h.ros.spin_until(lambda: False, 0.2)
+    assert len(h.commands) > n_held and all(
+        any(mode == HandCommand.MODE_IMPEDANCE for mode, *_ in _compliant(m))
+        for _t, m in h.commands[n_held:]), 'the hand stopped holding'
     t_release = time.monotonic()
     answer = h.ros.call(Trigger, '/spcm_controller/release', Trigger.Request(), timeout=30.0)
     assert answer.success, answer.message

@@ -73,7 +73,9 @@ use_sim_time : bool, fixed at start-up
     ``sim.command_wait_s`` of wall time) for the command that answers the previous joint state
     while a commander streams; the state timeout becomes ``sim.stall_timeout_s`` of wall time,
     and a stand-in child that exits is an ERROR at once. Refused with ``backend:=hardware``
-    and when a real hand answers.
+    and when a real hand answers. Clock faults (a ``/clock`` jump, two ``/clock``
+    publishers, this node on wall time while ``/clock`` is published) are logged and shown in
+    ``/diagnostics`` as the status ``dam_hand_driver: clock`` (``dam_common.clock_watch``).
 
 States
 ------
@@ -112,6 +114,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
+from dam_common.clock_watch import ClockWatch
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.device_protocol import JointMode
@@ -378,6 +381,10 @@ class HandDriverNode(Node):
         self._js_msg = JointState()
         self._js_msg.name = list(self.joint_names)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # /clock jumps, two /clock publishers, wall time beside a simulated clock: logged and
+        # in /diagnostics beside the driver's status (dam_common.clock_watch)
+        self._clock_watch = ClockWatch(self, 'dam_hand_driver: clock',
+                                       float(self.config.sim.stall_timeout_s))
         # /hand/command (500 Hz during a grasp) has a thread and a wait set of its own
         # (dam_common.intake): through the executor each message would cost about a
         # millisecond of interpreter time.
@@ -942,7 +949,7 @@ class HandDriverNode(Node):
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [status]
+        msg.status = [status, self._clock_watch.status()]
         self._diag_pub.publish(msg)
 
     def destroy_node(self) -> None:

@@ -17,9 +17,14 @@ Topics and services
     hold-measured command at the first valid joint state after start-up. The header stamp is
     that of the joint state the command answers.
 /dam/status : dam_interfaces/DamStatus, published at ``status_rate`` and on phase change.
+    ``compliant_torque`` (the old name) and ``compliant_torque_estimate`` are the estimate
+    ``-k_theta_i delta_theta_s`` from the joint angles; ``compliant_effort_measured`` is the
+    compliant joints' effort in the newest ``/joint_states``. The feedback carries the same.
 /dam_grasp : dam_interfaces/action/DamGrasp, action server.
-    Goals follow the ``/check_lift`` conventions; invalid goals and goals arriving while a
-    grasp runs are rejected (the reason is logged and published in ``/dam/status``).
+    Goals follow the ``/check_lift`` conventions. Every goal is accepted and answered at once;
+    one that cannot run (invalid; a grasp or a release running; the hand still holding the
+    previous grasp's DONE, which ``~/release`` lets go) ends ABORTED at once with
+    OUTCOME_REJECTED and the reason (also logged). Goals are not queued.
 /check_lift : dam_interfaces/srv/CheckLift, called before each grasp.
 
 Parameters
@@ -45,16 +50,22 @@ With ``use_sim_time:=false`` the grasp's timing (trajectory, phase timeouts, ram
 ``state_timeout``) runs on the steady clock. With ``use_sim_time:=true`` (the stand-in's
 simulated time, fixed at start-up) it runs on the stamps of ``/joint_states`` (the stand-in's
 simulated time): a machine that holds the suite up slows the grasp down and changes nothing
-else. ``state_timeout`` is then simulated time (``/clock`` against the newest joint state's
-stamp), and a silence of ``sim.stall_timeout_s`` of wall time (a stand-in or driver that
-died stops the simulated clock) fails the grasp all the same.
+else. ``state_timeout`` is then simulated time (``/clock``, its jumps taken out, against the
+newest joint state's stamp: a ``/clock`` jump is no silence), and a silence of
+``sim.stall_timeout_s`` of wall time (a stand-in or driver that died stops the simulated
+clock) fails the grasp all the same. The result's ``duration`` is on the grasp's clock (the
+same simulated time, or steady), ``wall_duration`` on the steady clock.
 
 Diagnostics
 -----------
 /diagnostics : diagnostic_msgs/DiagnosticArray, 1 Hz: status ``dam_spcm_controller: commands``
 with ``hand_commands_published`` (commands published since start) and
 ``hand_commands_last_stamp_ns`` (the header stamp of the last one [ns]), so that a recording
-can be checked for completeness.
+can be checked for completeness; status ``dam_spcm_controller: clock``
+(:class:`dam_common.clock_watch.ClockWatch`, jump bound ``sim.stall_timeout_s``): WARN while
+``/clock`` has two publishers, this node is on wall time while ``/clock`` is published, or
+``/joint_states`` are stamped on another clock, and for 10 s after a ``/clock`` jump; each is
+logged too, and a joint-state silence that fails a grasp names them.
 """
 
 from __future__ import annotations
@@ -84,6 +95,7 @@ from dam_analysis.analysis import (
 )
 from dam_analysis.errors import DamAnalysisError, NoSolutionError
 from dam_common.clock import create_steady_timer
+from dam_common.clock_watch import ClockWatch
 from dam_common.config import load_config
 from dam_common.echo import brief_repr, brief_text
 from dam_common.intake import SubscriptionThread
@@ -156,6 +168,10 @@ _BOOL_PARAMETERS = ('require_lift_guarantee', 'impedance_on_device', 'envelope_c
 def _phase_name(phase: Phase) -> str:
     return phase.name
 
+
+#: (steady clock, the grasp's clock) at a goal's arrival [s]: its result's wall_duration and
+#: duration are counted from them.
+_Start = tuple[float, float]
 
 #: How long a new goal waits for a fresh joint state before it is refused [s].
 _START_STATE_WAIT_S = 1.0
@@ -250,6 +266,10 @@ class SpcmControllerNode(Node):
         self._status_pub = self.create_publisher(DamStatus, '/dam/status', 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._diag_timer = create_steady_timer(self, 1.0, self._publish_diagnostics)
+        # /clock jumps, a second /clock publisher, joint states on another clock: logged and
+        # on /diagnostics; a jump is no silence of the joint states (see _silence).
+        self._clock_watch = ClockWatch(self, 'dam_spcm_controller: clock',
+                                       self._stall_timeout_s)
         self._pre_phase = ''  # CHECK_LIFT while a goal waits for its /check_lift answer
         self._episodes = EpisodeEvents(self, str(self._config.source), self._config.object.name)
         # /joint_states (500 Hz) has a thread and a wait set of its own: through this node's
@@ -356,12 +376,15 @@ class SpcmControllerNode(Node):
             return (wall, 's') if wall > timeout else None
         if wall > self._stall_timeout_s:
             return wall, f's of wall time (sim.stall_timeout_s {self._stall_timeout_s:g} s)'
-        sim = self.get_clock().now().nanoseconds * 1e-9 - self._last_control_time
+        # the clock without its jumps: a /clock jump is named as one, not taken for a silence
+        sim = self._clock_watch.steady_now_s() - self._last_control_time
         return (sim, 's of simulated time') if sim > timeout else None
 
     def _on_joint_state(self, msg: JointState) -> None:
         wall = time.monotonic()
         now = self._control_time(msg, wall)
+        stamp = msg.header.stamp
+        self._clock_watch.stamp_seen('/joint_states', stamp.sec * 1_000_000_000 + stamp.nanosec)
         try:
             index = self._layout.index_of(list(msg.name))
             n = len(msg.name)
@@ -554,7 +577,7 @@ class SpcmControllerNode(Node):
                                   value=str(self._intake.incompatible_type))]
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        msg.status = [status]
+        msg.status = [status, self._clock_watch.status()]
         self._diag_pub.publish(msg)
 
     def _on_watchdog(self) -> None:
@@ -573,7 +596,8 @@ class SpcmControllerNode(Node):
                 self._silence_suspected = True
                 return
             reason = (f'/joint_states silent for {silent:.3f} {unit} (state_timeout '
-                      f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}')
+                      f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}'
+                      f'{self._clock_faults()}')
             self._seq.fail(reason)
             self._state_timed_out = True
             zero = self._zero_torque_command()
@@ -583,6 +607,15 @@ class SpcmControllerNode(Node):
         self._publish_command(zero)
         self._publish_status()
         self._advance(feedback=True)
+
+    def _clock_faults(self) -> str:
+        """'; clock: ...' naming the clock faults that hold or a jump of the last
+        ``sim.stall_timeout_s`` [s] (they may explain a silence), else ''."""
+        faults = self._clock_watch.conditions
+        jump = self._clock_watch.last_jump(self._stall_timeout_s)
+        if jump:
+            faults.append(f'/clock jumped {jump}')
+        return f'; clock: {"; ".join(faults)}' if faults else ''
 
     def _zero_torque_command(self) -> JointCommand:
         """Torque and impedance joints at zero torque, moving position joints held at their
@@ -621,6 +654,9 @@ class SpcmControllerNode(Node):
             fb.phase = self._shown_phase()
             fb.progress = float(seq.progress)
             fb.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
+            fb.compliant_torque_estimate = fb.compliant_torque
+            fb.compliant_effort_measured = [
+                float(v) for v in self._last_eff[self._layout.compliant]]
             ended = phase is Phase.DONE or (
                 phase in (Phase.ABORTED, Phase.FAILED) and (seq.relaxed or self._state_timed_out))
         if feedback:
@@ -638,6 +674,9 @@ class SpcmControllerNode(Node):
             msg.finger_names = [self._layout.finger_name(i)
                                 for i in range(self._layout.n_fingers)]
             msg.compliant_torque = [float(v) for v in np.nan_to_num(seq.tau_s)]
+            msg.compliant_torque_estimate = msg.compliant_torque
+            msg.compliant_effort_measured = [
+                float(v) for v in self._last_eff[self._layout.compliant]]
             msg.delta_theta_s = [float(v) for v in np.nan_to_num(seq.delta_theta_s)]
             msg.outcome = self._outcome
             msg.outcome_name = _OUTCOME_NAME[self._outcome]
@@ -703,7 +742,7 @@ class SpcmControllerNode(Node):
         # (a rejection carries no reason in ROS 2 actions).
         return GoalResponse.ACCEPT
 
-    def _refuse(self, goal_handle: ServerGoalHandle, reason: str, t0: float
+    def _refuse(self, goal_handle: ServerGoalHandle, reason: str, t0: _Start
                 ) -> DamGrasp.Result:
         """End a goal that cannot run: ABORTED, OUTCOME_REJECTED, ``reason`` in the result."""
         self.get_logger().warning(f'goal refused: {reason}')
@@ -773,13 +812,15 @@ class SpcmControllerNode(Node):
             self.destroy_timer(timer)
 
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
-                t0: float, owns_run: bool = True, estimate: Classification | None = None
+                t0: _Start, owns_run: bool = True, estimate: Classification | None = None
                 ) -> DamGrasp.Result:
         result = DamGrasp.Result()
         result.outcome = outcome
         result.outcome_name = _OUTCOME_NAME[outcome]
         result.message = message
-        result.duration = time.monotonic() - t0
+        wall0, grasp0 = t0
+        result.duration = self._grasp_now() - grasp0
+        result.wall_duration = time.monotonic() - wall0
         result.object_rise = math.nan if estimate is None else float(estimate.lift_m)
         result.object_left_table = estimate is not None and bool(estimate.lifted)
         result.object_orientation = math.nan if estimate is None else \
@@ -817,8 +858,13 @@ class SpcmControllerNode(Node):
             self.get_logger().warning(text)
         return result
 
+    def _grasp_now(self) -> float:
+        """Now on the grasp's clock [s]: simulated time without the /clock jumps, or the
+        steady clock."""
+        return self._clock_watch.steady_now_s() if self._sim_time else time.monotonic()
+
     async def _execute(self, goal_handle: ServerGoalHandle) -> DamGrasp.Result:
-        t0 = time.monotonic()
+        t0 = (time.monotonic(), self._grasp_now())
         self._episodes.started(goal_handle.goal_id.uuid, goal_handle.request)
         try:
             k, dp = self._validate_goal(goal_handle.request)
@@ -830,7 +876,16 @@ class SpcmControllerNode(Node):
                 activity = ('the hand is being released' if self._release is not None
                             else f'a grasp is already running (phase '
                                  f'{_phase_name(self._seq.phase)})')
-            self._busy = True
+            elif self._seq.phase is Phase.DONE and self._publishing:
+                # A grasp from a hand that holds the last one's object would start closed
+                # around it and report that object's rise as its own.
+                busy = True
+                activity = (f'the hand still holds the previous grasp (DONE, outcome '
+                            f'{_OUTCOME_NAME[self._outcome]}): let go first with '
+                            f'ros2 service call {self.get_fully_qualified_name()}/release '
+                            'std_srvs/srv/Trigger')
+            else:
+                self._busy = True
         if busy:
             return self._refuse(goal_handle, activity, t0)
         ratios = self._layout.stiffness_ratios
@@ -847,7 +902,7 @@ class SpcmControllerNode(Node):
             return self._finish(goal_handle, 'abort', DamGrasp.Result.OUTCOME_ABORTED,
                                 f'internal error: {brief_repr(exc)}', t0)
 
-    async def _run_goal(self, goal_handle: ServerGoalHandle, k: float, dp: float, t0: float
+    async def _run_goal(self, goal_handle: ServerGoalHandle, k: float, dp: float, t0: _Start
                         ) -> DamGrasp.Result:
         aborted = DamGrasp.Result.OUTCOME_ABORTED
         with self._lock:
@@ -952,7 +1007,7 @@ class SpcmControllerNode(Node):
         return self._finish(goal_handle, 'abort', outcome, f'failed: {reason}', t0)
 
     def _classify_and_finish(self, goal_handle: ServerGoalHandle, pos: np.ndarray,
-                             eff: np.ndarray, history: JointHistory, t0: float
+                             eff: np.ndarray, history: JointHistory, t0: _Start
                              ) -> DamGrasp.Result:
         try:
             c = classify_from_joints(self._geometry, self._layout.lower, self._layout.upper,

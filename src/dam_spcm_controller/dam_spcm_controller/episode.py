@@ -128,6 +128,7 @@ class EpisodeEvents:
         msg.outcome_name = result.outcome_name
         msg.message = result.message
         msg.duration = float(result.duration)
+        msg.wall_duration = float(result.wall_duration)
         msg.object_rise = float(result.object_rise)
         msg.object_left_table = bool(result.object_left_table)
         msg.object_orientation = float(result.object_orientation)

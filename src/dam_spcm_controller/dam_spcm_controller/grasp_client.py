@@ -10,8 +10,10 @@ enveloped, aborted, cancelled, or stopped by SIGINT/SIGTERM); 2 the goal was ref
 reason is printed) or bad arguments; 1 no action server.
 
 SIGINT (Ctrl-C) or SIGTERM while the goal runs cancels it: the client waits up to
-``--cancel-timeout`` seconds for the controller to confirm, prints how the goal ended, and
-exits with 3.
+``--cancel-timeout`` seconds in all (the cancel's answer and the end of the goal: the torque
+ramp, ``torque_ramp_time`` on the grasp's clock) and exits with 3, printing how the goal ended
+or, past the timeout, whether the controller accepted the cancel. The exit follows the signal
+within ``--cancel-timeout`` plus the client's own shutdown (tenths of a second).
 """
 
 from __future__ import annotations
@@ -105,16 +107,29 @@ def run(args: argparse.Namespace) -> int:
         return future.done()
 
     def cancel_on_signal(handle, result_future) -> int:
+        """Cancel the goal; wait for its result at most ``--cancel-timeout`` in all (the
+        cancel's answer and the torque ramp); say what is known."""
         print(f'[{time.monotonic() - t0:7.2f} s] {shutdown.signal_name or "stop"}: cancelling '
               f'the goal', flush=True)
-        spin_until(handle.cancel_goal_async(), args.cancel_timeout, interruptible=False)
-        if spin_until(result_future, args.cancel_timeout, interruptible=False):
+        give_up = time.monotonic() + args.cancel_timeout
+        cancel = handle.cancel_goal_async()
+        spin_until(cancel, args.cancel_timeout, interruptible=False)
+        if spin_until(result_future, max(give_up - time.monotonic(), 0.0),
+                      interruptible=False):
             wrapped = result_future.result()
             print(f'result: {_STATUS.get(wrapped.status, wrapped.status)}, '
                   f'{wrapped.result.outcome_name} ({wrapped.result.message})', flush=True)
+        elif cancel.done() and cancel.result().goals_canceling:
+            print(f'dam_grasp: the controller accepted the cancel but the goal had not ended '
+                  f'within --cancel-timeout {args.cancel_timeout:g} s (its torque ramp runs on '
+                  'the grasp\'s clock: slower than wall time on a loaded simulation); it ends '
+                  'it without this client (see /dam/status)', file=sys.stderr)
+        elif cancel.done():
+            print('dam_grasp: the controller refused the cancel (the goal had ended?); no '
+                  f'result within --cancel-timeout {args.cancel_timeout:g} s', file=sys.stderr)
         else:
-            print(f'dam_grasp: the cancel was not confirmed within {args.cancel_timeout:g} s',
-                  file=sys.stderr)
+            print(f'dam_grasp: the controller did not answer the cancel within '
+                  f'--cancel-timeout {args.cancel_timeout:g} s', file=sys.stderr)
         return EXIT_OTHER_OUTCOME
 
     last = {'phase': None}
@@ -181,7 +196,8 @@ def run(args: argparse.Namespace) -> int:
             return EXIT_REJECTED
         print(f'result: {result.outcome_name} ({result.message}); status '
               f'{_STATUS.get(wrapped.status, wrapped.status)}; duration '
-              f'{result.duration:.2f} s', flush=True)
+              f'{result.duration:.2f} s on the grasp\'s clock ({result.wall_duration:.2f} s '
+              'wall)', flush=True)
         if math.isfinite(result.object_rise):
             where = 'left the table' if result.object_left_table else 'on the table'
             turned = (f', turned {math.degrees(result.object_orientation):.1f} deg'
