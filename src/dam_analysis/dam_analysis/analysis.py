@@ -157,8 +157,10 @@ def check_friction_angle(friction_angle: float, configured: float) -> float:
 class LiftAnalyzer:
     """Lift analysis of the configured hand and object (sections 3.1-3.3 of the paper).
 
-    Building it solves the first contact and caches the SPCM branch of every finger (a few
-    tenths of a second); :meth:`check_lift` then costs a few Newton steps and closed forms.
+    Building it solves the first contact (it raises :class:`NoSolutionError` when the fingers
+    make none); the SPCM branch of every finger is cached on first use (:attr:`table`, a few
+    tenths of a second, or :meth:`build` at once); :meth:`check_lift` then costs a few Newton
+    steps and closed forms.
 
     Parameters
     ----------
@@ -170,7 +172,8 @@ class LiftAnalyzer:
                  path_step: float = PATH_STEP_RAD) -> None:
         self.config = config if config is not None else load_config()
         self.model: HandModel = build_hand_model(self.config)
-        self.table = PathTable(self.model, build_paths(self.model, path_step))
+        self._path_step = path_step
+        self._table: PathTable | None = None
         self._phi = 2.0 * np.pi * np.arange(self.model.cone_faces) / self.model.cone_faces
         self._cos_phi = np.cos(self._phi)  # the axial parts add no torque, no lift
         self._cache: dict[float, list] = {}
@@ -183,11 +186,37 @@ class LiftAnalyzer:
         self._frames = [(g.base_position.tolist(), g.inward_direction.tolist())
                         for g in self.model.fingers]
         self._csm_data: tuple | None = None
-        self._branch_ends = [path.valid_until for path in self.table.paths]
         self.limits = HandLimits.from_config(self.config)
         self._k_n = float(self.model.contact_stiffness[0])
         self._rolling: RollingCheck | None = None
-        self._csm_path = CsmPathVerdict(self.table, self._ratios, self._k_t)
+        self._branch_ends: list[float] = []
+        self._csm_path_verdict: CsmPathVerdict | None = None
+
+    @property
+    def table(self) -> PathTable:
+        """The SPCM branch of every finger cached on a grid, built on first use (a few tenths
+        of a second: a node that only needs to know the object is reachable never pays it)."""
+        if self._table is None:
+            table = PathTable(self.model, build_paths(self.model, self._path_step))
+            self._branch_ends = [path.valid_until for path in table.paths]
+            self._csm_path_verdict = CsmPathVerdict(table, self._ratios, self._k_t)
+            self._table = table
+        return self._table
+
+    def build(self) -> LiftAnalyzer:
+        """Build the cached branches now (:attr:`table`), so that the first request is fast;
+        returns ``self``."""
+        _ = self.table
+        return self
+
+    @property
+    def _csm_path(self) -> CsmPathVerdict:
+        verdict = self._csm_path_verdict
+        if verdict is None:
+            self.build()
+            verdict = self._csm_path_verdict
+            assert verdict is not None
+        return verdict
 
     @property
     def rolling_cos_phi(self) -> list[float]:

@@ -27,8 +27,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from scipy.optimize import brentq
-
 from dam_analysis.model import FingerGeometry, distal_gap_partials, segment_contact
 
 #: End kinds (:attr:`BranchEnd.kind`).
@@ -158,6 +156,9 @@ def locate_fold(geometry: FingerGeometry, theta_l: float, theta_p0: float,
                 if px is None:
                     raise ArithmeticError('the SPCM closure has no solution on the trace')
                 return distal_gap_partials(geometry, x, theta_l, px)[1]
+
+            # scipy here, not at the top: importing it is a quarter of a node's start-up
+            from scipy.optimize import brentq  # noqa: PLC0415
 
             try:
                 s_fold = brentq(slope, s_prev, s, xtol=1e-15, rtol=1e-15, maxiter=200)

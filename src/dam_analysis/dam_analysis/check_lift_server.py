@@ -84,7 +84,7 @@ class CheckLiftServer(Node):
         #: one analysis per object, built on its first request (each executor thread keeps
         #: its own: /check_lift's analyzers and /plan_lift's planners share nothing)
         self._analyzers: dict[str, LiftAnalyzer | InputError] = {
-            self._config.object.name: LiftAnalyzer(self._config)}
+            self._config.object.name: LiftAnalyzer(self._config).build()}
         self._planners: dict[str, LiftPlanner | InputError] = {}
         self._default_friction_angle = self._config.contact.friction_angle_rad
         self.declare_parameter(

@@ -41,7 +41,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 #: Relative tolerance below which a span vector's joint torque counts as zero.
 TORQUE_ZERO_TOL = 1e-12
@@ -101,11 +100,15 @@ def grasp_matrix_t(contact_points: np.ndarray, object_center: np.ndarray) -> np.
 
 def h_matrix(jacobians: np.ndarray, span: list[np.ndarray]) -> np.ndarray:
     """H (n, L n) of eq. (11): block diagonal with blocks ``J_i^T V_i`` (1, L)."""
+    import scipy.linalg  # noqa: PLC0415 (here: importing scipy is a node's start-up time)
+
     return scipy.linalg.block_diag(*[j @ v for j, v in zip(jacobians, span, strict=True)])
 
 
 def null_space_basis(h: np.ndarray) -> np.ndarray:
     """N (L n, (L-1) n) of eq. (12): orthonormal basis with ``H N = 0``."""
+    import scipy.linalg  # noqa: PLC0415 (here: importing scipy is a node's start-up time)
+
     return scipy.linalg.null_space(h)
 
 
@@ -301,6 +304,8 @@ def enumerate_worst_case(jacobians: np.ndarray, span: list[np.ndarray], tau_s: n
     h = h_matrix(jacobians, span)
     h_pinv = np.linalg.pinv(h)
     null = null_space_basis(h)
+    import scipy.linalg  # noqa: PLC0415 (here: importing scipy is a node's start-up time)
+
     big_v = scipy.linalg.block_diag(*span)  # V (3n, L n)
     e = np.hstack([np.eye(3)] * n)  # E (3, 3n)
     ev = e @ big_v

@@ -96,8 +96,15 @@ def joint_positions(geometry: FingerGeometry, theta_s: float, theta_l: float,
     centre, in plane coordinates ``(u, z)`` relative to the base [m].
     """
     phi = np.cumsum([theta_s, theta_l, theta_p])
-    steps = geometry.link_lengths[:, None] * np.stack([np.sin(phi), -np.cos(phi)], axis=1)
-    return np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    # the same operations as stacking [sin, -cos] and prepending the origin, without the
+    # array building (called for every node of every cached SPCM branch: start-up time)
+    steps = np.empty((3, 2))
+    steps[:, 0] = np.sin(phi)
+    steps[:, 1] = -np.cos(phi)
+    steps *= geometry.link_lengths[:, None]
+    out = np.zeros((4, 2))
+    np.cumsum(steps, axis=0, out=out[1:])
+    return out
 
 
 def closest_point_on_segment(a: np.ndarray, b: np.ndarray, c: np.ndarray

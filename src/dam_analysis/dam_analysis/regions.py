@@ -75,19 +75,22 @@ def finger_table(model: HandModel, index: int, contacts: list[FingerContact | No
     tau_hat = np.full(m, np.nan)
     point = np.full((m, 3), np.nan)
     normal = np.full((m, 3), np.nan)
-    slip_rate = np.full(m, np.nan)
-    a = geometry.joint_axis
+    rate = np.full(m, np.nan)  # d theta_s / d theta_p
+    joint_p = np.full((m, 2), np.nan)  # the position joint in the plane [m]
     for j, fc in enumerate(contacts):
         if fc is None:
             continue
         tau_hat[j] = -fc.delta_theta_s
         point[j] = fc.contact_point
         normal[j] = fc.normal_object
-        p_p = geometry.to_world(fc.joints[2])
-        v_c = (fc.dtheta_s_dtheta_p * np.cross(a, fc.contact_point - geometry.base_position)
-               + np.cross(a, fc.contact_point - p_p))
-        slip_rate[j] = float(v_c @ np.cross(a, fc.normal_object))
-    jac = np.cross(np.broadcast_to(a, point.shape), point - geometry.base_position)
+        rate[j] = fc.dtheta_s_dtheta_p
+        joint_p[j] = fc.joints[2]
+    # every node at once (np.cross per node was half of building the table: start-up time)
+    a = geometry.joint_axis
+    axes = np.broadcast_to(a, point.shape)
+    jac = np.cross(axes, point - geometry.base_position)
+    v_c = rate[:, None] * jac + np.cross(axes, point - geometry.to_world(joint_p))
+    slip_rate = np.einsum('ij,ij->i', v_c, np.cross(axes, normal))
     return FingerTable(delta_theta_p=np.asarray(delta_theta_p, dtype=np.float64),
                        tau_hat=tau_hat, contact_point=point, normal_object=normal,
                        jacobian=jac, slip_rate=slip_rate, axis=a)

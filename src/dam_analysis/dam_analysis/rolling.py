@@ -54,7 +54,6 @@ from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 from dam_analysis.model import FingerGeometry, HandModel, distal_gap, finger_geometries
 from dam_analysis.spcm import SpcmPath, newton_theta_s, plane_contact, posture_problem
@@ -486,6 +485,8 @@ def pose_margin(states: list[FingerRoll], k_theta: list[float], friction_angle: 
         rows.append(moment_row + [gravity_arm])
         rhs.append(0.0)
     bounds = [(0.0, None)] * n_cols + [(float(low), float(high))]
+    from scipy.optimize import linprog  # noqa: PLC0415 (scipy: start-up time)
+
     res = linprog(np.array(cost), A_eq=np.array(rows), b_eq=np.array(rhs), bounds=bounds,
                   method='highs')
     if res.status == 2:
