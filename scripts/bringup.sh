@@ -2,7 +2,8 @@
 # Bring the DAM suite up in the background (plain shell, no launch files):
 #   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers)
 #   and spcm_controller. Returns when every node serves, or fails (non-zero) with the fatal
-#   line of the node that died, after stopping what it started.
+#   line of the node that died, after stopping what it started. No fixed limit decides how
+#   long the nodes may take on a loaded machine: it waits while they progress.
 #
 #   bash scripts/bringup.sh [--backend auto|sim|hardware|dynamixel] [--port DEV] [--gui]
 #                           [--object NAME] [--timeout S] [--params-file FILE]...
@@ -18,7 +19,8 @@
 #   --port      the Dynamixel bus's serial device, e.g. /dev/ttyUSB0 (--backend dynamixel)
 #   --gui       open the stand-in's PyBullet window (needs a display)
 #   --object    an object of config/dam.yaml's object.library (default object.default)
-#   --timeout   how long the nodes may take to become ready [s] (default 60)
+#   --timeout S give up when the nodes are not ready S seconds after their start [s]
+#               (default $DAM_BRINGUP_TIMEOUT, else none: wait while they progress)
 #   --params-file FILE   a ROS 2 parameter file for every node started (keys: the node name,
 #               e.g. spcm_controller: or hand_driver:, or /**: for all nodes); repeatable
 #   --ros-args ARGS [--] ROS arguments for every node started, e.g.
@@ -26,9 +28,20 @@
 #               (node:name:=value sets one node's parameter; name:=value every node's)
 #
 # Ready means: /check_lift answers, the /dam_grasp action server is up, /joint_states is
-# published and the driver reports ACTIVE on /diagnostics. With the stand-in every node gets
-# -p use_sim_time:=true (the stand-in is the clock); with a real hand none does. Parameters
-# given here come after the script's own, so they win.
+# published and the driver reports ACTIVE on /diagnostics. While a node is not ready and its
+# process runs, bring-up waits as long as something progresses (a new log line of a node not
+# ready, CPU time of a node that has printed nothing yet or of the driver's stand-in, one more
+# condition met, a new node, topic or service in the graph) and says every 10 s what each node
+# still waits for ("check_lift_server: up 20 s, CPU 1.2 s: no log line yet"). It gives up
+# when --timeout passes, or when nothing progressed for 120 s (a node that hangs).
+#
+# Exit status: 0 every node serves; 1 a node died while starting (its [FATAL] lines, else its
+# last lines, are printed at once), the device probe refused, or a bring-up still runs;
+# 2 bad arguments; 4 gave up waiting (--timeout, or nothing progressed for 120 s), naming
+# what is still missing. On 1 and 4 what was started is stopped.
+#
+# With the stand-in every node gets -p use_sim_time:=true (the stand-in is the clock); with a
+# real hand none does. Parameters given here come after the script's own, so they win.
 #
 # Logs and PIDs go to $DAM_RUN_DIR (default: .run/ in the repository). Discovery stays on this
 # machine unless ROS_AUTOMATIC_DISCOVERY_RANGE is set; ROS_DOMAIN_ID is taken from the caller.
@@ -42,7 +55,7 @@ backend=auto
 port=""
 gui=false
 object=""
-timeout=60
+timeout=${DAM_BRINGUP_TIMEOUT:-none}
 user_args=()  # --params-file and --ros-args of the caller, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -53,7 +66,7 @@ while [ $# -gt 0 ]; do
     --gui) gui=true; shift ;;
     --object) [ $# -ge 2 ] || usage_error "--object needs a name of object.library"
       object=$2; shift 2 ;;
-    --timeout) [ $# -ge 2 ] || usage_error "--timeout needs a number of seconds"
+    --timeout) [ $# -ge 2 ] || usage_error "--timeout needs a number of seconds or none"
       timeout=$2; shift 2 ;;
     --params-file) [ $# -ge 2 ] || usage_error "--params-file needs a file"
       [ -f "$2" ] || usage_error "--params-file: no such file '$2'"
@@ -71,8 +84,9 @@ esac
 [ -z "$port" ] || [ "$backend" = dynamixel ] ||
   usage_error "--port is for --backend dynamixel (the UDP link's addresses are in device:)"
 [ -z "$port" ] || [ -e "$port" ] || usage_error "--port: no such device '$port'"
-[[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] ||
-  usage_error "--timeout must be a positive number of seconds, got '$timeout'"
+[ "$timeout" = none ] || { [[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] &&
+  [[ "$timeout" =~ [1-9] ]]; } ||
+  usage_error "--timeout must be a positive number of seconds or none, got '$timeout'"
 
 bash "$REPO_ROOT/scripts/setup.sh" >/dev/null
 set +u
@@ -165,8 +179,18 @@ start spcm_controller dam_spcm_controller spcm_controller ${object_args[@]+"${ob
 
 watch=()
 for name in "${NODES[@]}"; do watch+=("$name=$(cat "$RUN_DIR/$name.pid"):$RUN_DIR/$name.log"); done
-echo "==> Waiting until every node serves (up to $timeout s)"
+if [ "$timeout" = none ]; then
+  echo "==> Waiting until every node serves (while they progress; --timeout S sets a limit)"
+else
+  echo "==> Waiting until every node serves (up to $timeout s)"
+fi
+ready=0
 python "$REPO_ROOT/scripts/lib/wait_ready.py" --who bringup.sh --timeout "$timeout" \
-  "${watch[@]}" || exit 1
+  "${watch[@]}" || ready=$?
+case "$ready" in
+  0) ;;
+  2) exit 4 ;;  # gave up waiting
+  *) exit 1 ;;
+esac
 trap - EXIT
 echo "==> Up. Stop with: bash scripts/stop.sh"

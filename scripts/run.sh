@@ -13,6 +13,7 @@
 #   bash scripts/run.sh --backend dynamixel --port /dev/ttyUSB0   # ... or a real one
 #   bash scripts/run.sh --object square_bar               # another object of object.library
 #   bash scripts/run.sh --params-file my_params.yaml      # parameters for the nodes
+#   bash scripts/run.sh --timeout 300                     # give up if not up within 300 s
 #   bash scripts/run.sh --ros-args -p spcm_controller:state_timeout:=0.2 --
 #
 # --params-file FILE (repeatable) and --ros-args ARGS [--] go to every node started here (the
@@ -21,8 +22,23 @@
 # node:name:=value for one node's parameter. --backend hardware with no hand answering fails
 # within device.probe_timeout_s: no recorder, no goal, no bag.
 #
-# Exit status: that of the grasp client (0 success, 3 another outcome, 2 rejected, 1 no answer);
-# 1 when the bring-up failed (nothing is left running).
+# --timeout S (default $DAM_BRINGUP_TIMEOUT, else none) limits the bring-up and the
+# recorder's start as in scripts/bringup.sh, and the clients' waits for their servers (the
+# grasp's result: at least 120 s). Without it the nodes and the recorder are waited for while
+# they progress, with a line every 10 s saying what each still waits for; the clients wait up
+# to 300 s for a server and 1800 s for the grasp's result (a hang, not a slow machine).
+#
+# Exit status (the result line is printed whenever a grasp ran):
+#   0  SUCCESS, and the episode bag is complete
+#   1  the bring-up failed (a node or the recorder died while starting: its fatal line; the
+#      probe refused), or no /dam_grasp action server answered; nothing is left running
+#   2  bad arguments (refused before anything starts), or the controller refused the goal
+#   3  another outcome (not lifted, lifted but not enveloped, aborted, cancelled)
+#   4  gave up waiting for the bring-up or the recorder (--timeout, or nothing progressed
+#      for 120 s)
+#   5  the grasp ran but its episode bag is INCOMPLETE (the recorder's "... is INCOMPLETE"
+#      line, custom data dam_episode.complete: "false"), or the recorder wrote no episode:
+#      the outcome printed is not backed by a complete recording
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
@@ -34,6 +50,7 @@ backend=auto
 port=""
 keep=false
 object=""
+timeout=${DAM_BRINGUP_TIMEOUT:-none}
 params=()    # the caller's --params-file FILE pairs, for every node
 ros_args=()  # the caller's --ros-args, for every node
 while [ $# -gt 0 ]; do
@@ -51,6 +68,7 @@ while [ $# -gt 0 ]; do
     --port) port=${2:?--port needs a serial device (backend dynamixel)}; shift 2 ;;
     --keep) keep=true; shift ;;
     --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
+    --timeout) timeout=${2:?--timeout needs a number of seconds or none}; shift 2 ;;
     -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
     *) echo "run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -94,12 +112,19 @@ for option, parse, text in (
     if option == "--k-theta" and value <= 0.0:
         sys.exit(f"run.sh: --k-theta: {text!r} must be a positive stiffness [N*m/rad]")' || exit 2
 
-bringup_args=(--backend "$backend" ${params[@]+"${params[@]}"})
+[ "$timeout" = none ] || { [[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] &&
+  [[ "$timeout" =~ [1-9] ]]; } || {
+  echo "run.sh: --timeout must be a positive number of seconds or none, got '$timeout'" >&2
+  exit 2; }
+
+bringup_args=(--backend "$backend" --timeout "$timeout" ${params[@]+"${params[@]}"})
 [ -z "$port" ] || bringup_args+=(--port "$port")
 [ -z "$object" ] || bringup_args+=(--object "$object")
 [ ${#ros_args[@]} -eq 0 ] || bringup_args+=(--ros-args "${ros_args[@]}" --)
 # bringup.sh returns when every node serves; when it fails it has stopped what it started.
-bash "$REPO_ROOT/scripts/bringup.sh" "${bringup_args[@]}" || exit 1
+up=0
+bash "$REPO_ROOT/scripts/bringup.sh" "${bringup_args[@]}" || up=$?
+case "$up" in 0) ;; 4) exit 4 ;; *) exit 1 ;; esac
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
 
 # The recorder, in episode mode: this grasp becomes one bag.
@@ -126,12 +151,12 @@ else
   trap 'stop_recorder' EXIT
 fi
 echo "    recorder: PID $recorder_pid, log $recorder_log"
-for _ in $(seq 300); do  # the recorder follows the controller's goals and the hand's topics
-  if grep -q 'recording /dam/episode ' "$recorder_log" \
-      && grep -q 'recording /joint_states ' "$recorder_log"; then break; fi
-  kill -0 "$recorder_pid" 2>/dev/null || { cat "$recorder_log" >&2; exit 1; }
-  sleep 0.1
-done
+# The recorder follows the controller's goals and the hand's topics before the goal is sent:
+# waited for as the nodes are (while it progresses, or up to --timeout).
+ready=0
+python "$REPO_ROOT/scripts/lib/wait_ready.py" --who run.sh --timeout "$timeout" \
+  "recorder=$recorder_pid:$recorder_log" || ready=$?
+case "$ready" in 0) ;; 2) exit 4 ;; *) exit 1 ;; esac
 # A device stream that stalled while everything started (a busy machine) leaves the driver in
 # ERROR; its ~/reset brings it back (it answers 'already ACTIVE' otherwise).
 python - <<'PY' || true
@@ -148,14 +173,19 @@ if client.wait_for_service(timeout_sec=10.0):
 node.destroy_node()
 rclpy.shutdown()
 PY
+# The clients' own waits (discovery, the answer): --timeout when given, else generous ones
+# (a client that starts on a loaded machine discovers the servers slowly; a grasp on the
+# stand-in's clock may take minutes of wall time there).
+if [ "$timeout" = none ]; then client_wait=300; result_wait=1800; else
+  client_wait=$timeout; result_wait=$(awk -v t="$timeout" 'BEGIN { print (t > 120 ? t : 120) }'); fi
 echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_theta_p"
 "$(exe dam_analysis check_lift)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --object "$object" --timeout 30 || true
+  --object "$object" --timeout "$client_wait" || true
 echo "==> DAM grasp"
 grasp_log="$RUN_DIR/dam_grasp.log"
 set +e
 "$(exe dam_spcm_controller dam_grasp)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --server-timeout 30 2>&1 | tee "$grasp_log"
+  --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 | tee "$grasp_log"
 status=${PIPESTATUS[0]}
 set -e
 # The controller's own estimate of the rise (from the joint angles), when its client prints it.
@@ -164,21 +194,37 @@ grep -q 'object rise: .*(estimated from the joint angles)' "$grasp_log" &&
   rise_from_result=true
 
 # The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
+# A recorder behind a busy machine catches up first: waited for while it runs and its episode
+# bags grow, until they have not grown for 60 s.
 episode=""
-for _ in $(seq 600); do  # up to 60 s: a recorder behind a busy machine catches up first
+bags_size=""
+still=0
+looks=0
+while :; do
   episode=$(sed -n 's/.*\] \[recorder\]: episode [A-Z_]*: //p' "$recorder_log" | tail -n 1)
   [ -n "$episode" ] && break
-  sleep 0.1
+  kill -0 "$recorder_pid" 2>/dev/null || break
+  size=$(du -sb "$BAG_DIR/episodes" 2>/dev/null | cut -f1) || size=""
+  if [ "$size" != "$bags_size" ]; then bags_size=$size; still=0; else still=$((still + 1)); fi
+  [ "$still" -lt 120 ] || break
+  looks=$((looks + 1))
+  [ $((looks % 20)) -ne 0 ] ||
+    echo "    waiting $((looks / 2)) s for the recorder to close the episode (post-roll)"
+  sleep 0.5
 done
 stop_recorder
+incomplete=false
 if [ -z "$episode" ]; then
+  incomplete=true
   echo "run.sh: the recorder wrote no episode (log: $recorder_log)" >&2
 else
   mkdir -p "$REPO_ROOT/out"
   picture="$REPO_ROOT/out/$(basename "$episode").png"
   echo "==> Recorded"
   echo "    bag:     $episode"
-  if [ "$(python "$REPO_ROOT/scripts/lib/episode_complete.py" "$episode")" = false ]; then
+  if [ "$(python "$REPO_ROOT/scripts/lib/episode_complete.py" "$episode")" = false ] ||
+      grep -qF "$(basename "$episode") is INCOMPLETE" "$recorder_log"; then
+    incomplete=true
     echo "    INCOMPLETE: the recorder marked this episode bag incomplete (messages of the" \
       "grasp are missing; see $recorder_log)"
   fi
@@ -193,5 +239,11 @@ else
   fi
   [ -z "$plot" ] || sed 's/^/    /' <<<"$plot"
   echo "    picture: $picture"
+fi
+# A grasp that ran (0 or 3) whose recording is not complete has a status of its own.
+if [ "$incomplete" = true ] && { [ "$status" = 0 ] || [ "$status" = 3 ]; }; then
+  echo "run.sh: exit status 5: the episode bag is INCOMPLETE or missing; the outcome above" \
+    "(client status $status) is not backed by a complete recording" >&2
+  status=5
 fi
 exit "$status"

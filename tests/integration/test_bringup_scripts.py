@@ -1,15 +1,18 @@
 """scripts/bringup.sh, scripts/run.sh and scripts/stop.sh as a user runs them: the suite comes
-up (with the default object and with ``--object``) and serves the moment bring-up returns, a
-node that dies while starting fails the bring-up with its fatal line, a hardware backend
-without a hand fails within the probe time, parameters given to the scripts reach the nodes,
-and everything is stopped by PID; a name outside the library is refused before anything
-starts."""
+up and serves the moment bring-up returns, ``run.sh --object`` beside six CPU burners ends
+with its result line (not a bring-up time-out), a node that dies while starting fails the
+bring-up at once with its fatal line, a hardware backend without a hand fails within the probe
+time, parameters given to the scripts reach the nodes, and everything is stopped by PID; a
+name outside the library is refused before anything starts. The waiting itself
+(scripts/lib/wait_ready.py): a node that makes no progress is given up on with what it
+still waits for, a busy one only at ``--timeout``."""
 
 from __future__ import annotations
 
 import os
 import re
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -17,7 +20,7 @@ import pytest
 import yaml
 from grasp_testing import config_with_free_ports
 
-from ros_testing import RosClient, process_gone
+from ros_testing import RosClient, cpu_burners, process_gone
 
 pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 
@@ -37,9 +40,10 @@ def _env(tmp_path: Path, **device: float) -> dict[str, str]:
                 DAM_BAG_DIR=str(tmp_path / 'bags'))
 
 
-def _script(name: str, *args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+def _script(name: str, *args: str, env: dict[str, str],
+            timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(['bash', str(SCRIPTS / name), *args], capture_output=True,
-                          text=True, timeout=120, env=env, stdin=subprocess.DEVNULL)
+                          text=True, timeout=timeout, env=env, stdin=subprocess.DEVNULL)
 
 
 def _started_pids(stdout: str) -> dict[str, int]:
@@ -123,13 +127,11 @@ def _assert_the_graph_is_what_ros2_tools_expect(client: RosClient) -> None:
     assert '/joint_states' in subscribed['spcm_controller'], subscribed
 
 
-@pytest.mark.parametrize('object_args', [(), ('--object', 'hex_bar')])
-def test_bringup_returns_serving_the_object_and_stop_stops_it(
-        tmp_path: Path, object_args: tuple[str, ...]) -> None:
+def test_bringup_returns_serving_and_stop_stops_it(tmp_path: Path) -> None:
     from dam_interfaces.srv import CheckLift
 
     env = _env(tmp_path)
-    up = _script('bringup.sh', '--backend', 'sim', *object_args, env=env)
+    up = _script('bringup.sh', '--backend', 'sim', env=env)
     try:
         assert up.returncode == 0, up.stdout + up.stderr
         # Right after the script returns: the service is there and the driver ACTIVE.
@@ -138,20 +140,114 @@ def test_bringup_returns_serving_the_object_and_stop_stops_it(
             answer = client.call(CheckLift, '/check_lift', CheckLift.Request(), timeout=10.0,
                                  wait=10.0)
             state = _first_driver_state(client)
-            if not object_args:
-                _assert_the_graph_is_what_ros2_tools_expect(client)
+            _assert_the_graph_is_what_ros2_tools_expect(client)
         finally:
             client.close()
         assert answer.ok and answer.object == 'cylinder', answer.message
         assert state == 'ACTIVE', up.stdout
         controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')
-        expected = object_args[1] if object_args else 'cylinder'
-        assert f'object {expected} (' in controller_log, controller_log
+        assert 'object cylinder (' in controller_log, controller_log
     finally:
         down = _script('stop.sh', env=env)
     assert down.returncode == 0, down.stdout + down.stderr
     assert 'stopped 3 process(es)' in down.stdout, down.stdout
     _assert_all_stopped(tmp_path, _started_pids(up.stdout))
+    # every node says when it served and printed its first line (which may come after the
+    # graph shows it serving), from its start, and its CPU time
+    for name in NODES:
+        assert re.search(rf'^    ready: {name} \(PID \d+\) after \d+\.\d s \((first log line '
+                         rf'after \d+\.\d s|no log line yet), CPU \d+\.\d s\): ', up.stdout,
+                         re.M), up.stdout
+
+
+def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path) -> None:
+    """Issue #32: on a loaded machine ``run.sh`` gave up after 60 s ("bringup.sh: not ready
+    after 60 s: /check_lift has not answered") while check_lift_server was still starting.
+    Beside six burners on two cores it waits while the nodes progress and runs the grasp.
+    ``--keep`` leaves the suite up to look at: ``--object``, ``--params-file`` and
+    ``--ros-args`` reached the nodes, and the stand-in is every node's clock."""
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump({
+        '/**': {'ros__parameters': {'check_lift_timeout': 5.0}},
+        'spcm_controller': {'ros__parameters': {'state_timeout': 0.25}},
+    }), encoding='utf-8')
+    env = _env(tmp_path)
+    with cpu_burners(6):
+        # the subprocess limit only stops a hung test; no limit of the scripts decides
+        run = _script('run.sh', '--backend', 'sim', '--object', 'hex_bar', '--keep',
+                      '--params-file', str(params), '--ros-args', '-p',
+                      'hand_driver:thread_priority:=0', '-p', 'recorder:pre_roll:=0.5', '-p',
+                      'recorder:post_roll:=0.5', '--', env=env, timeout=1800.0)
+    pids = _started_pids(run.stdout)
+    try:
+        output = run.stdout + run.stderr
+        assert 'not ready after' not in output and 'nothing progressed' not in output, output
+        assert 'Up. Stop with' in run.stdout, output
+        # the result line, and a status that goes with it (5: the episode bag is incomplete)
+        assert re.search(r'^result: [A-Z_]+ \(', run.stdout, re.M), output
+        assert run.returncode in (0, 3, 5), output
+        assert (run.returncode == 5) == ('exit status 5: the episode bag is INCOMPLETE'
+                                         in run.stderr), output
+        controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')
+        assert 'object hex_bar (' in controller_log, controller_log
+        client = RosClient()
+        try:
+            state_timeout = _parameter(client, 'spcm_controller', 'state_timeout')
+            check_lift_timeout = _parameter(client, 'spcm_controller', 'check_lift_timeout')
+            priority = _parameter(client, 'hand_driver', 'thread_priority')
+            sim_time = {node: _parameter(client, node, 'use_sim_time') for node in NODES}
+        finally:
+            client.close()
+    finally:
+        down = _script('stop.sh', env=env)
+    assert state_timeout == pytest.approx(0.25)  # by node name in the file
+    assert check_lift_timeout == pytest.approx(5.0)  # /** in the file
+    assert priority == 0  # node:name:=value after --ros-args
+    assert sim_time == dict.fromkeys(NODES, True)  # the stand-in is the clock
+    assert 'stopped 3 process(es)' in down.stdout, down.stdout  # run.sh stopped its recorder
+    _assert_all_stopped(tmp_path, pids)
+
+
+def _wait_ready(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(SCRIPTS / 'lib' / 'wait_ready.py'),
+                           '--who', 'test', *args], capture_output=True, text=True,
+                          timeout=600, stdin=subprocess.DEVNULL)
+
+
+def test_waiting_gives_up_on_a_node_that_makes_no_progress_saying_what_it_waits_for(
+        tmp_path: Path) -> None:
+    """A process that neither prints nor uses CPU time (a node that hangs) is given up on
+    after --stall seconds without progress, with what it still waits for; meanwhile every
+    --report seconds a line says so."""
+    log = tmp_path / 'check_lift_server.log'
+    log.touch()
+    with subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)']) as idle:
+        try:
+            got = _wait_ready('--stall', '2', '--report', '0.5',
+                              f'check_lift_server={idle.pid}:{log}')
+        finally:
+            idle.kill()
+    assert got.returncode == 2, got.stdout + got.stderr
+    assert re.search(r'^    check_lift_server: up \d+ s, CPU \d+\.\d s: no log line yet$',
+                     got.stdout, re.M), got.stdout
+    assert got.stderr.startswith('test: nothing progressed for 2 s '), got.stderr
+    assert ': /check_lift has not answered' in got.stderr, got.stderr
+
+
+def test_waiting_goes_on_while_a_node_works_until_the_explicit_timeout(tmp_path: Path) -> None:
+    """A node that still works (CPU time, nothing printed yet: it imports and builds) is
+    progress: with --stall 1 and --timeout 3 it is --timeout that ends the wait."""
+    log = tmp_path / 'spcm_controller.log'
+    log.touch()
+    with subprocess.Popen([sys.executable, '-c', 'while True: pass']) as busy:
+        try:
+            got = _wait_ready('--stall', '1', '--timeout', '3',
+                              f'spcm_controller={busy.pid}:{log}')
+        finally:
+            busy.kill()
+    assert got.returncode == 2, got.stdout + got.stderr
+    assert got.stderr.startswith('test: not ready after 3 s (--timeout): the /dam_grasp '
+                                 'action server is not ready'), got.stderr
 
 
 def test_bringup_fails_with_the_fatal_line_of_a_node_that_dies_while_starting(
@@ -191,34 +287,6 @@ def test_run_sh_with_backend_hardware_and_no_hand_fails_within_the_probe_time(
     assert not (tmp_path / 'bags').exists(), list((tmp_path / 'bags').rglob('*'))
     run_dir = tmp_path / 'run'
     assert not list(run_dir.glob('*.pid')) and not (run_dir / 'recorder.log').exists()
-
-
-def test_params_file_and_ros_args_reach_the_nodes(tmp_path: Path) -> None:
-    params = tmp_path / 'params.yaml'
-    params.write_text(yaml.safe_dump({
-        '/**': {'ros__parameters': {'require_lift_guarantee': True}},
-        'spcm_controller': {'ros__parameters': {'state_timeout': 0.25}},
-    }), encoding='utf-8')
-    env = _env(tmp_path)
-    up = _script('bringup.sh', '--backend', 'sim', '--params-file', str(params),
-                 '--ros-args', '-p', 'hand_driver:thread_priority:=0', '--', env=env)
-    try:
-        assert up.returncode == 0, up.stdout + up.stderr
-        client = RosClient()
-        try:
-            timeout = _parameter(client, 'spcm_controller', 'state_timeout')
-            guarantee = _parameter(client, 'spcm_controller', 'require_lift_guarantee')
-            priority = _parameter(client, 'hand_driver', 'thread_priority')
-            sim_time = {node: _parameter(client, node, 'use_sim_time') for node in NODES}
-        finally:
-            client.close()
-    finally:
-        down = _script('stop.sh', env=env)
-    assert timeout == pytest.approx(0.25)  # by node name in the file
-    assert guarantee is True  # /** in the file
-    assert priority == 0  # node:name:=value after --ros-args
-    assert sim_time == dict.fromkeys(NODES, True)  # the stand-in is the clock
-    assert 'stopped 3 process(es)' in down.stdout, down.stdout
 
 
 def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
