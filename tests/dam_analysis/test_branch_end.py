@@ -154,3 +154,30 @@ def test_a_joint_limit_ends_the_branch_exactly(analyzer, references):
     assert path.end.kind == 'posture' and 'position joint limit' in path.end.reason
     assert path.valid_until == pytest.approx(limit_p - model.theta_p0, abs=1e-11)
     path.solve(path.valid_until)  # the end itself is a valid state
+
+
+@pytest.mark.parametrize(('f', 'a', 'b'), [
+    (lambda x: math.cos(x) - x, 0.0, 1.0),
+    (lambda x: x ** 3 - 2.0 * x - 5.0, 2.0, 3.0),
+    (lambda x: math.exp(x) - 10.0, 0.0, 5.0),
+    (lambda x: math.atan(1e3 * (x - 0.123456)), -1.0, 1.0),  # steep: bisection steps
+    (lambda x: (x - 0.3) ** 5, 0.0, 1.0),  # flat: interpolation creeps
+])
+def test_brent_root_finds_what_scipy_brentq_finds(f, a: float, b: float) -> None:
+    """The branch end's root finder (no scipy at a node's start-up) against scipy's."""
+    from dam_analysis.branch_end import brent_root
+
+    got = brent_root(f, a, b, xtol=1e-15, rtol=1e-15, maxiter=200)
+    expected = brentq(f, a, b, xtol=1e-15, rtol=1e-15, maxiter=200)
+    assert got == pytest.approx(expected, abs=1e-15 + 1e-15 * abs(expected))
+    assert brent_root(f, b, a, xtol=1e-15, rtol=1e-15, maxiter=200) == \
+        pytest.approx(expected, abs=1e-15 + 1e-15 * abs(expected))
+
+
+def test_brent_root_refuses_a_range_without_a_sign_change() -> None:
+    from dam_analysis.branch_end import brent_root
+
+    with pytest.raises(ValueError, match='have the same sign'):
+        brent_root(lambda x: x * x + 1.0, -1.0, 1.0, xtol=1e-15, rtol=1e-15, maxiter=200)
+    with pytest.raises(RuntimeError, match='within 3 steps'):
+        brent_root(lambda x: (x - 0.3) ** 5, 0.0, 1.0, xtol=1e-15, rtol=1e-15, maxiter=3)

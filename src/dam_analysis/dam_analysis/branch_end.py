@@ -24,6 +24,7 @@ Beyond the end no SPCM state exists: the analysis answers "no lift" there.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -119,6 +120,67 @@ def solve_bracketed(geometry: FingerGeometry, theta_l: float, theta_p: float, lo
     return x
 
 
+def brent_root(f: Callable[[float], float], a: float, b: float, xtol: float, rtol: float,
+               maxiter: int) -> float:
+    """A zero of ``f`` in ``[a, b]`` by Brent's method (bisection, secant and inverse
+    quadratic interpolation), to ``xtol + rtol * |x|``; what ``scipy.optimize.brentq`` does,
+    without importing scipy (a quarter of a node's start-up).
+
+    Raises
+    ------
+    ValueError
+        ``f(a)`` and ``f(b)`` have the same sign (no bracket), or ``rtol`` is below 4 eps.
+    RuntimeError
+        No convergence within ``maxiter`` steps.
+    """
+    if rtol < 4.0 * sys.float_info.epsilon:
+        raise ValueError(f'rtol {rtol!r} is below 4 eps')
+    fa, fb = f(a), f(b)
+    if fa == 0.0:
+        return a
+    if fb == 0.0:
+        return b
+    if (fa > 0.0) == (fb > 0.0):
+        raise ValueError(f'f({a!r}) = {fa!r} and f({b!r}) = {fb!r} have the same sign')
+    # b: the best estimate; c: the other end of the bracket; a: the previous b
+    c, fc = a, fa
+    step = last = b - a
+    for _ in range(maxiter):
+        if (fb > 0.0) == (fc > 0.0):
+            c, fc = a, fa
+            step = last = b - a
+        if abs(fc) < abs(fb):
+            a, fa = b, fb
+            b, fb = c, fc
+            c, fc = a, fa
+        tol = 0.5 * (xtol + rtol * abs(b))
+        half = 0.5 * (c - b)
+        if fb == 0.0 or abs(half) <= tol:
+            return b
+        if abs(last) >= tol and abs(fa) > abs(fb):
+            s = fb / fa
+            if a == c:  # secant
+                num, den = 2.0 * half * s, 1.0 - s
+            else:  # inverse quadratic interpolation
+                q, r = fa / fc, fb / fc
+                num = s * (2.0 * half * q * (q - r) - (b - a) * (r - 1.0))
+                den = (q - 1.0) * (r - 1.0) * (s - 1.0)
+            if num > 0.0:
+                den = -den
+            else:
+                num = -num
+            if 2.0 * num < min(3.0 * half * den - abs(tol * den), abs(last * den)):
+                last, step = step, num / den
+            else:
+                step = last = half  # interpolation would leave the bracket or creep: bisect
+        else:
+            step = last = half
+        a, fa = b, fb
+        b += step if abs(step) > tol else math.copysign(tol, half)
+        fb = f(b)
+    raise RuntimeError(f'no zero to {xtol:g} + {rtol:g} |x| within {maxiter} steps')
+
+
 def locate_fold(geometry: FingerGeometry, theta_l: float, theta_p0: float,
                 node: tuple[float, float], dp_limit: float, step_s: float
                 ) -> tuple[float, float] | None:
@@ -157,11 +219,8 @@ def locate_fold(geometry: FingerGeometry, theta_l: float, theta_p0: float,
                     raise ArithmeticError('the SPCM closure has no solution on the trace')
                 return distal_gap_partials(geometry, x, theta_l, px)[1]
 
-            # scipy here, not at the top: importing it is a quarter of a node's start-up
-            from scipy.optimize import brentq  # noqa: PLC0415
-
             try:
-                s_fold = brentq(slope, s_prev, s, xtol=1e-15, rtol=1e-15, maxiter=200)
+                s_fold = brent_root(slope, s_prev, s, xtol=1e-15, rtol=1e-15, maxiter=200)
             except (ArithmeticError, ValueError):
                 return None
             p_fold = theta_p_on_curve(geometry, theta_l, s_fold, p_prev)
