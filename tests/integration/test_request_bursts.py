@@ -13,6 +13,7 @@ wait for /check_lift before a grasp); the analysis server serves the service bur
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 
@@ -26,6 +27,8 @@ BURST = 50
 CANCELS = 40
 #: Longest wait for all answers of a burst [s] (a second or two on a quiet machine).
 ANSWER_WITHIN_S = 30.0
+#: Every goal of a burst accepted or refused with its reason within this [s] (issue #32).
+GOAL_ANSWER_BOUND_S = 2.0
 GOAL = {'k_theta': [7.0], 'delta_theta_p': [math.radians(10.0)]}  # inside the sufficient region
 #: A slow ROLLING_UP (20 s): the grasp that runs still runs when the burst's cancels come.
 CONTROLLER = [str(installed_executable('dam_spcm_controller', 'spcm_controller')), '--ros-args',
@@ -70,17 +73,18 @@ def _action_clients(ros: RosClient, n: int) -> list:
     return clients
 
 
-def _goal_burst(ros: RosClient, n_clients: int) -> None:
+def _goal_burst(ros: RosClient, n_clients: int) -> float:
     """BURST goals at once from ``n_clients`` clients: every goal answered and accepted, one
     runs, the others end at once with OUTCOME_REJECTED and the reason; then CANCELS cancel
     requests at once (the running goal's among them): every one answered, the running goal
-    cancelled."""
+    cancelled. Returns the time from the burst to the last refusal [s]."""
     from action_msgs.msg import GoalStatus
 
     from dam_interfaces.action import DamGrasp
 
     clients = _action_clients(ros, n_clients)
     try:
+        t_burst = time.monotonic()
         sent = [clients[i % n_clients].send_goal_async(DamGrasp.Goal(**GOAL))
                 for i in range(BURST)]
         _wait_all(ros, sent, 'goal requests')
@@ -88,6 +92,7 @@ def _goal_burst(ros: RosClient, n_clients: int) -> None:
         assert all(h.accepted for h in handles), 'a goal was not accepted'
         results = [h.get_result_async() for h in handles]
         ros.spin_until(lambda: _unanswered(results) <= 1, ANSWER_WITHIN_S)
+        refused_within = time.monotonic() - t_burst
         running = [h for h, r in zip(handles, results, strict=True) if not r.done()]
         assert len(running) == 1, f'{len(running)} goals without a result, expected the one ' \
                                   'that runs'
@@ -102,6 +107,7 @@ def _goal_burst(ros: RosClient, n_clients: int) -> None:
         _wait_all(ros, results, 'result requests')
         last = results[handles.index(running[0])].result()
         assert last.status == GoalStatus.STATUS_CANCELED, (last.status, last.result.message)
+        return refused_within
     finally:
         for client in clients:
             client.destroy()
@@ -112,7 +118,12 @@ def test_a_burst_of_goals_and_cancels_from_one_client_is_answered(stack) -> None
 
 
 def test_a_burst_of_goals_and_cancels_from_five_clients_is_answered(stack) -> None:
-    _goal_burst(stack, 5)
+    """Every goal accepted, and refused with its reason within the 2 s of issue #32 (at load 4
+    it took 0.23 to 0.36 s, bursts 2 s apart). The clients keep every reply (README,
+    "Grasping"): with rclpy's default depth of 10, five clients of one node lost replies of
+    such a burst at load 4 (38 of 49 results), and at no load right after another burst."""
+    took = _goal_burst(stack, 5)
+    assert took < GOAL_ANSWER_BOUND_S, f'the refusals took {took:.2f} s'
 
 
 def _service_burst(ros: RosClient, srv_type, name: str, request) -> list:

@@ -607,31 +607,48 @@ def test_release_answers_failure_when_joint_states_go_silent(stack) -> None:
     assert ctl.alive()
 
 
+#: The SIGINT test's torque ramp [s]: longer than the first client's --cancel-timeout.
+_SLOW_RAMP_S = 1.5
+
+
+@pytest.mark.parametrize('stack', [['-p', f'torque_ramp_time:={_SLOW_RAMP_S}']], indirect=True)
 def test_grasp_client_cancels_its_goal_on_sigint(stack) -> None:
-    """Ctrl-C on dam_grasp cancels the goal, waits for the confirmation and exits 3."""
+    """Ctrl-C on dam_grasp cancels the goal and exits 3: with the CANCELED result when it
+    comes within --cancel-timeout; past that (a ramp longer than the timeout) at the timeout,
+    saying that the controller accepted the cancel, which then ends the goal by itself."""
     import signal
     import subprocess
 
     h, ctl, _plant = stack
-    client = subprocess.Popen(
-        [str(installed_executable('dam_spcm_controller', 'dam_grasp')), '--k-theta',
-         str(INSIDE[0]), '--delta-theta-p', f'{INSIDE[1]}rad'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        stdin=subprocess.DEVNULL)
-    try:
-        assert h.ros.spin_until(lambda: any(s.phase == 'ROLLING_UP' for s in h.statuses),
-                                20.0), [s.phase for s in h.statuses]
-        client.send_signal(signal.SIGINT)
-        out, _ = client.communicate(timeout=10.0)
-    finally:
-        if client.poll() is None:
-            client.kill()
-            client.wait()
-    assert client.returncode == 3, out
-    assert 'cancelling' in out and 'CANCELED' in out, out
-    assert 'Traceback' not in out, out
-    assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'ABORTED', 5.0), \
-        [s.phase for s in h.statuses[-5:]]
+
+    def interrupted(*options: str) -> str:
+        """Run dam_grasp, SIGINT it in ROLLING_UP; its output."""
+        seen = len(h.statuses)
+        client = subprocess.Popen(
+            [str(installed_executable('dam_spcm_controller', 'dam_grasp')), '--k-theta',
+             str(INSIDE[0]), '--delta-theta-p', f'{INSIDE[1]}rad', *options],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            stdin=subprocess.DEVNULL)
+        try:
+            assert h.ros.spin_until(
+                lambda: any(s.phase == 'ROLLING_UP' for s in h.statuses[seen:]), 20.0), \
+                [s.phase for s in h.statuses[seen:]]
+            client.send_signal(signal.SIGINT)
+            out, _ = client.communicate(timeout=20.0)
+        finally:
+            if client.poll() is None:
+                client.kill()
+                client.wait()
+        assert client.returncode == 3, out
+        assert 'cancelling' in out and 'Traceback' not in out, out
+        assert h.ros.spin_until(lambda: h.statuses[-1].phase == 'ABORTED', 10.0), \
+            [s.phase for s in h.statuses[-5:]]
+        return out
+
+    out = interrupted('--cancel-timeout', '0.5')
+    assert 'accepted the cancel' in out and 'CANCELED' not in out, out
+    out = interrupted()
+    assert 'result: CANCELED' in out, out
     assert ctl.alive()
 
 
