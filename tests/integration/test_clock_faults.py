@@ -63,3 +63,56 @@ def test_a_controller_on_wall_time_beside_a_simulated_clock_names_it() -> None:
         assert 'clock: this node runs on wall time' in log and \
             'clock: /joint_states is stamped' in log, log[-3000:]
         assert controller.alive()
+
+
+def test_a_clock_that_starts_over_is_a_jump_named_and_the_next_grasp_runs() -> None:
+    """A simulator reset or a bag played in a loop starts the simulated time over: the
+    controller names the backward jump, and since the joint states follow the new time line it
+    takes them as fresh (a clock that only took the jumps out would see them 100 s old)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.action import ActionClient
+    from rosgraph_msgs.msg import Clock
+
+    from dam_interfaces.action import DamGrasp
+    from dam_interfaces.msg import DamStatus
+
+    sim = ['--ros-args', '-p', 'use_sim_time:=true']
+    with ExitStack() as es:
+        es.enter_context(node_process([*fixture_command('spcm_plant_node.py'), *sim]))
+        controller = es.enter_context(node_process(
+            [str(installed_executable('dam_spcm_controller', 'spcm_controller')), *sim,
+             '-p', 'check_lift_timeout:=0.0']))
+        ros = RosClient()
+        es.callback(ros.close)
+        clock = ros.node.create_publisher(Clock, '/clock', 10)
+        phases: list[str] = []
+        ros.node.create_subscription(DamStatus, '/dam/status',
+                                     lambda m: phases.append(m.phase), 10)
+        start = {'wall': time.monotonic(), 'sim': 100.0}
+
+        def tick() -> None:
+            t = start['sim'] + time.monotonic() - start['wall']
+            clock.publish(Clock(clock=Time(sec=int(t), nanosec=int(t % 1.0 * 1e9))))
+
+        def ticking(predicate):
+            def step() -> bool:
+                tick()
+                return predicate()
+            return step
+
+        action = ActionClient(ros.node, DamGrasp, '/dam_grasp')
+        es.callback(action.destroy)
+        assert ros.spin_until(ticking(lambda: action.server_is_ready() and bool(phases)), 30.0)
+        ros.spin_until(ticking(lambda: False), 1.0)
+        start.update(wall=time.monotonic(), sim=1.0)  # the time starts over at 1 s
+        assert ros.spin_until(ticking(lambda: 'to 1.0' in controller.output()), 10.0), \
+            controller.output()[-3000:]
+        assert '/clock jumped from 10' in controller.output(), controller.output()[-3000:]
+        seen = len(phases)
+        sent = action.send_goal_async(DamGrasp.Goal())
+        assert ros.spin_until(ticking(
+            lambda: sent.done() and 'APPROACH' in phases[seen:]), 20.0), \
+            (phases[seen:], controller.output()[-3000:])
+        cancel = sent.result().cancel_goal_async()
+        assert ros.spin_until(ticking(cancel.done), 10.0)
+        assert controller.alive()

@@ -21,7 +21,7 @@ timeout) reads nonsense, and without a word about the clock the fault looks like
 * **a stream stamped on another clock** (:meth:`ClockWatch.stamp_seen`): the stamps of a
   stream the node follows (the controller's ``/joint_states``) lie further than
   ``forward_bound_s`` from the node's clock: its publisher runs with the other
-  ``use_sim_time``.
+  ``use_sim_time`` (not checked within :data:`JUMP_SHOWN_S` of a jump).
 
 Each condition is logged once when it appears (a warning) and once when it clears; the node
 adds :meth:`ClockWatch.status` to its ``/diagnostics``: level WARN while a condition holds or
@@ -145,15 +145,14 @@ class ClockWatch:
 
     def stamp_seen(self, topic: str, stamp_ns: int) -> None:
         """A message of ``topic`` stamped ``stamp_ns`` [ns] arrived (cheap: call it for every
-        message, from any thread). Its distance from the node's clock (without the clock's
-        jumps) is checked once a second."""
+        message, from any thread). Its distance from the node's clock is checked once a
+        second, except within :data:`JUMP_SHOWN_S` of a jump (the jump is the fault named
+        then)."""
         now = self._node.get_clock().now().nanoseconds
         if now == 0:
             return  # simulated time before the first /clock: nothing to compare yet
         self._stream = topic
-        # against the clock without its jumps: a jump is named as such, not as a stream
-        # on another clock
-        self._stamp_offset_s = (stamp_ns - now + self._offset_ns) * 1e-9
+        self._stamp_offset_s = (stamp_ns - now) * 1e-9
 
     # ----------------------------------------------------------------------------------
     # Conditions, logs and the diagnostic status
@@ -180,7 +179,8 @@ class ClockWatch:
                 f'({self._publishers_text()}): nodes on simulated time beside it run on '
                 'another clock; start every node with the same use_sim_time')
         offset = self._stamp_offset_s
-        if math.isfinite(offset) and abs(offset) > self._bound_s:
+        if math.isfinite(offset) and abs(offset) > self._bound_s and \
+                not self.last_jump(JUMP_SHOWN_S):
             found['stamps'] = (
                 f'{self._stream} is stamped {offset:+.3f} s from this node\'s '
                 f'{"simulated" if self.sim_time else "wall"} clock: its publisher runs on '

@@ -50,8 +50,8 @@ With ``use_sim_time:=false`` the grasp's timing (trajectory, phase timeouts, ram
 ``state_timeout``) runs on the steady clock. With ``use_sim_time:=true`` (the stand-in's
 simulated time, fixed at start-up) it runs on the stamps of ``/joint_states`` (the stand-in's
 simulated time): a machine that holds the suite up slows the grasp down and changes nothing
-else. ``state_timeout`` is then simulated time (``/clock``, its jumps taken out, against the
-newest joint state's stamp: a ``/clock`` jump is no silence), and a silence of
+else. ``state_timeout`` is then simulated time (the time ``/clock`` advanced, its jumps taken
+out, since the newest joint state came: a ``/clock`` jump is no silence), and a silence of
 ``sim.stall_timeout_s`` of wall time (a stand-in or driver that died stops the simulated
 clock) fails the grasp all the same. The result's ``duration`` is on the grasp's clock (the
 same simulated time, or steady), ``wall_duration`` on the steady clock.
@@ -251,6 +251,8 @@ class SpcmControllerNode(Node):
         self._hold_sent = False
         self._last_state_time: float | None = None  # steady clock [s]
         self._last_control_time = 0.0  # the grasp's time of the newest joint state [s]
+        #: On simulated time: the clock without its jumps when the newest joint state came [s].
+        self._last_state_clock = 0.0
         self._stall_timeout_s = float(self._config.sim.stall_timeout_s)
         self._commands_published = (0, 0)  # (count, header stamp of the last one [ns])
         self._silence_suspected = False
@@ -386,8 +388,10 @@ class SpcmControllerNode(Node):
             return (wall, 's') if wall > timeout else None
         if wall > self._stall_timeout_s:
             return wall, f's of wall time (sim.stall_timeout_s {self._stall_timeout_s:g} s)'
-        # the clock without its jumps: a /clock jump is named as one, not taken for a silence
-        sim = self._clock_watch.steady_now_s() - self._last_control_time
+        # The simulated time that passed since the newest joint state came, on the clock
+        # without its jumps: a jump (a second /clock publisher, a simulator or a bag that
+        # starts its time over) is named as one, never taken for a silence.
+        sim = self._clock_watch.steady_now_s() - self._last_state_clock
         return (sim, 's of simulated time') if sim > timeout else None
 
     def _on_joint_state(self, msg: JointState) -> None:
@@ -419,6 +423,8 @@ class SpcmControllerNode(Node):
         with self._lock:
             self._last_state_time = wall
             self._last_control_time = now
+            if self._sim_time:
+                self._last_state_clock = self._clock_watch.steady_now_s()
             self._last_pos = pos
             self._last_eff = eff
             if self._release is not None:
