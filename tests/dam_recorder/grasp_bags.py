@@ -196,7 +196,9 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                 delta_theta_s=np.array([], dtype=np.float64),
                 outcome=1 if phase == 'DONE' else 0,
                 outcome_name='SUCCESS' if phase == 'DONE' else 'UNKNOWN',
-                message='grasp done: enveloped' if phase == 'DONE' else '')
+                message='grasp done: enveloped' if phase == 'DONE' else '',
+                compliant_torque_estimate=np.array([0.1 * k, 0.05 * k, 0.05 * k]),
+                compliant_effort_measured=np.array([0.1 * k, 0.05 * k, 0.05 * k]))
             pending.append((T0 + STATUS_OFFSET_NS + k * STATUS_STEP_NS, '/dam/status', msg))
     if '/sim/object_pose' in topics:
         for k in range(POSE_COUNT):
@@ -215,7 +217,9 @@ def write_grasp_bag(path: Path, typestore: Any, prefixes: list[str], *,
                 phase='CHECK_LIFT' if n == 0 else 'APPROACH', outcome=0, outcome_name='',
                 progress=0.1 * n,
                 lift_checked=checked, lift_guaranteed=lift, worst_case_margin=worst,
-                csm_lift=csm, csm_margin=csm_margin, compliant_torque=np.array([0.3, 0.15]))
+                csm_lift=csm, csm_margin=csm_margin, compliant_torque=np.array([0.3, 0.15]),
+                compliant_torque_estimate=np.array([0.3, 0.15]),
+                compliant_effort_measured=np.array([0.3, 0.15]))
             msg = t['dam_interfaces/action/DamGrasp_FeedbackMessage'](
                 goal_id=t['unique_identifier_msgs/msg/UUID'](
                     uuid=np.frombuffer(bytes.fromhex(GOAL_ID), dtype=np.uint8).copy()),

@@ -80,7 +80,10 @@ def test_status_pose_and_feedback_fields(exported) -> None:
                           'feedback.lift_checked', 'feedback.lift_guaranteed',
                           'feedback.worst_case_margin', 'feedback.csm_lift',
                           'feedback.csm_margin', 'feedback.compliant_torque.0',
-                          'feedback.compliant_torque.1']
+                          'feedback.compliant_torque.1', 'feedback.compliant_torque_estimate.0',
+                          'feedback.compliant_torque_estimate.1',
+                          'feedback.compliant_effort_measured.0',
+                          'feedback.compliant_effort_measured.1']
     assert [r['goal_id.uuid'] for r in feedback] == [gb.GOAL_ID] * 3
     assert [r['feedback.lift_checked'] for r in feedback] == ['false', 'true', 'true']
     assert feedback[0]['feedback.worst_case_margin'] == 'nan'

@@ -262,7 +262,8 @@ def multi_bag(tmp_path_factory, typestore, prefixes) -> Path:
         pending.append((time_s, '/dam/status', t['dam_interfaces/msg/DamStatus'](
             header=header(time_s), phase=phase, progress=0.5, finger_names=list(gb.FINGERS),
             compliant_torque=np.zeros(3), delta_theta_s=np.zeros(3), outcome=outcome,
-            outcome_name=names[outcome], message='')))
+            outcome_name=names[outcome], message='', compliant_torque_estimate=np.zeros(3),
+            compliant_effort_measured=np.zeros(3))))
 
     status(0.0, 'IDLE', 0)
     for (outcome, _name), start in zip(MULTI_GRASPS, MULTI_START_S, strict=True):

@@ -41,7 +41,9 @@ def dam_status(store, i: int) -> bytes:
                                         frame_id=''),
         phase=f'PHASE_{i}', progress=i / 10, finger_names=['f1', 'f2'][: i % 3],
         compliant_torque=np.array([1.0, 2.0]), delta_theta_s=np.array([]), outcome=i % 6,
-        outcome_name='SUCCESS' if i % 6 == 1 else '', message='m')
+        outcome_name='SUCCESS' if i % 6 == 1 else '', message='m',
+        compliant_torque_estimate=np.array([1.0, 2.0]),
+        compliant_effort_measured=np.array([0.5, 0.0]))
     return bytes(store.serialize_cdr(message, 'dam_interfaces/msg/DamStatus'))
 
 

@@ -43,7 +43,9 @@ def dam_status(store, rng: random.Random):
         compliant_torque=np.array([rng.random() for _ in range(rng.randrange(0, 4))]),
         delta_theta_s=np.array([rng.random() for _ in range(rng.randrange(0, 4))]),
         outcome=rng.randrange(6), outcome_name='o' * rng.randrange(0, 9),
-        message='m' * rng.randrange(0, 7))
+        message='m' * rng.randrange(0, 7),
+        compliant_torque_estimate=np.array([rng.random() for _ in range(rng.randrange(0, 4))]),
+        compliant_effort_measured=np.array([rng.random() for _ in range(rng.randrange(0, 4))]))
 
 
 def diagnostics(store, rng: random.Random):
@@ -67,7 +69,9 @@ def feedback(store, rng: random.Random):
             phase='P' * rng.randrange(4), outcome=rng.randrange(6),
             outcome_name='o' * rng.randrange(0, 9), progress=0.5, lift_checked=True,
             lift_guaranteed=False, worst_case_margin=1.0, csm_lift=True, csm_margin=2.0,
-            compliant_torque=np.array([rng.random() for _ in range(rng.randrange(4))])))
+            compliant_torque=np.array([rng.random() for _ in range(rng.randrange(4))]),
+            compliant_torque_estimate=np.array([rng.random() for _ in range(rng.randrange(4))]),
+            compliant_effort_measured=np.array([rng.random() for _ in range(rng.randrange(4))])))
 
 
 CASES = [('sensor_msgs/msg/JointState', joint_state),

@@ -79,7 +79,8 @@ def test_action_feedback_message_is_found_in_the_action_description(prefixes) ->
                 store.fielddefs['dam_interfaces/action/DamGrasp_Feedback'][1]]
     assert feedback == ['phase', 'outcome', 'outcome_name', 'progress', 'lift_checked',
                         'lift_guaranteed',
-                        'worst_case_margin', 'csm_lift', 'csm_margin', 'compliant_torque']
+                        'worst_case_margin', 'csm_lift', 'csm_margin', 'compliant_torque',
+                        'compliant_torque_estimate', 'compliant_effort_measured']
     assert store.hash_rihs01(message_type.name) == message_type.type_hash
 
 
