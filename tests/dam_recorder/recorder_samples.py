@@ -41,6 +41,7 @@ def sample(topic: str, i: int) -> dict[str, Any]:
                                                                       'ENVELOPE'][i % 3],
                 'progress': i / 1000.0, 'finger_names': ['f1', 'f2', 'f3'][: 1 + i % 3],
                 'compliant_torque': [0.1 * i, 0.2], 'delta_theta_s': [],
+                'compliant_torque_estimate': [0.1 * i, 0.2], 'compliant_effort_measured': [],
                 'outcome': i % 6, 'outcome_name': 'o' * (i % 4), 'message': 'x' * (i % 5)}
     if topic == '/hand/command':
         return {'header': {'stamp': stamp, 'frame_id': 'palm'},
@@ -57,7 +58,9 @@ def sample(topic: str, i: int) -> dict[str, Any]:
                              'outcome_name': 'o' * (i % 3), 'progress': 0.5, 'lift_checked': True,
                              'lift_guaranteed': i % 2 == 0, 'worst_case_margin': -1.0 * i,
                              'csm_lift': False, 'csm_margin': float('inf') if i == 0 else 1.0,
-                             'compliant_torque': [0.3, 0.15, 0.15]}}
+                             'compliant_torque': [0.3, 0.15, 0.15],
+                             'compliant_torque_estimate': [0.3, 0.15, 0.15],
+                             'compliant_effort_measured': [0.0, 0.1, 0.2]}}
     if topic == LATE_TOPIC:
         return {'header': {'stamp': stamp, 'frame_id': ''},
                 'status': [{'level': 1, 'name': f'device {i}', 'message': 'ok',

@@ -20,6 +20,7 @@ import yaml
 from dam_recorder.recorder_node import STARTUP_DISCOVERY_S
 from ros_testing import (
     RosClient,
+    cpu_burners,
     fixture_command,
     installed_executable,
     node_process,
@@ -451,6 +452,105 @@ def test_messages_before_the_first_clock_are_held_not_stamped_1970(tmp_path: Pat
         assert held == 0
         assert min(t for t, _v in stamped) > 10**18  # receive times: not 1970
         assert 'no /clock came while recording' in log
+
+
+def test_log_times_on_simulated_time_beside_two_burners(tmp_path: Path) -> None:
+    """use_sim_time beside two CPU burners: an unstamped message's log time is the simulated
+    time at its receipt (within one period of the clock tick published just before it), a
+    stamped message's is its header stamp; none bunches up where the recorder wrote it."""
+    from builtin_interfaces.msg import Time
+    from rosbags.highlevel import AnyReader
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Header, Int64
+
+    bag = tmp_path / 'sim_log_times'
+    period_ns = 10_000_000
+    start_ns = 50 * 10**9
+    ticks = 400
+    with cpu_burners(2), node_process([RECORDER, '-o', str(bag), '/dam_test_counter',
+                                       '/dam_test_stamped', '--ros-args', '-p',
+                                       'use_sim_time:=true']) as rec:
+        wait_for(rec, f'recording {bag}')
+        client = RosClient()
+        try:
+            counter = client.node.create_publisher(Int64, '/dam_test_counter', 1000)
+            stamped = client.node.create_publisher(JointState, '/dam_test_stamped', 1000)
+            clock_pub = client.node.create_publisher(Clock, '/clock', 1000)
+            assert client.spin_until(lambda: counter.get_subscription_count() > 0
+                                     and stamped.get_subscription_count() > 0, 30.0)
+            wait_for(rec, 'recording /dam_test_stamped')
+            for i in range(ticks):
+                t = start_ns + i * period_ns
+                now = Time(sec=t // 10**9, nanosec=t % 10**9)
+                clock_pub.publish(Clock(clock=now))
+                counter.publish(Int64(data=i))
+                # Stamped half a period later than the tick: its header, not the receipt.
+                half = t + period_ns // 2
+                stamped.publish(JointState(header=Header(
+                    stamp=Time(sec=half // 10**9, nanosec=half % 10**9))))
+                client.spin_until(lambda: False, 0.01)
+            client.spin_until(lambda: False, 1.0)
+        finally:
+            client.close()
+        assert stop(rec, signal.SIGINT) == 0, rec.output()
+        log = rec.output()
+    with AnyReader([bag]) as reader:
+        counts, stamps = {}, []
+        for conn, t, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            if conn.topic == '/dam_test_counter':
+                counts[msg.data] = t
+            else:
+                stamps.append((t, msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec))
+    assert sorted(counts) == list(range(ticks)), log[-1500:]
+    for i, t in counts.items():
+        assert abs(t - (start_ns + i * period_ns)) <= period_ns, (i, t, log[-1500:])
+    assert len(stamps) == ticks and all(t == header for t, header in stamps)
+    assert metadata(bag)['custom_data']['dam_recorder.log_time'].startswith('header stamp')
+
+
+def test_every_selected_topic_is_recorded_or_named_as_not_recorded(tmp_path: Path) -> None:
+    """100 topics the regex selects: 60 published, 40 with only a subscriber; and one topic
+    named that never appears. Each is in the bag with its messages, or named with the reason
+    in the metadata and in the closing line."""
+    from std_msgs.msg import Int64
+
+    bag = tmp_path / 'many'
+    published = [f'/dam_many/p{i:02d}' for i in range(60)]
+    subscribed = [f'/dam_many/s{i:02d}' for i in range(40)]
+    client = RosClient()
+    try:
+        pubs = [client.node.create_publisher(Int64, t, 10) for t in published]
+        subs = [client.node.create_subscription(Int64, t, lambda _m: None, 10)
+                for t in subscribed]
+        with node_process([RECORDER, '-o', str(bag), '/dam_never', '--regex',
+                           '^/dam_many/']) as rec:
+            wait_for(rec, f'recording {bag}')
+            deadline = time.monotonic() + 60.0
+            while rec.output().count('recording /dam_many/p') < len(published):
+                assert time.monotonic() < deadline, rec.output()[-2000:]
+                client.spin_until(lambda: False, 0.2)
+            for round_ in range(5):
+                for pub in pubs:
+                    pub.publish(Int64(data=round_))
+                client.spin_until(lambda: False, 0.1)
+            client.spin_until(lambda: False, 1.0)
+            assert stop(rec, signal.SIGINT) == 0, rec.output()
+            log = rec.output()
+        assert subs
+    finally:
+        client.close()
+    meta = metadata(bag)
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in meta['topics_with_message_count']}
+    assert {t: counts.get(t) for t in published} == {t: 5 for t in published}
+    not_recorded = json.loads(meta['custom_data']['dam_recorder.not_recorded_topics'])
+    assert sorted(not_recorded) == sorted([*subscribed, '/dam_never'])
+    assert not_recorded['/dam_never'] == 'never appeared while recording'
+    assert all('no publisher' in not_recorded[t] for t in subscribed)
+    line = [x for x in log.splitlines() if f'closed {bag}' in x][-1]
+    assert 'topics not recorded 41 (' in line and '/dam_many/s39: no publisher' in line, line
 
 
 def test_record_sh_records_beside_a_session_until_stopped(tmp_path: Path) -> None:

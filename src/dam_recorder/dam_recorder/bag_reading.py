@@ -37,6 +37,11 @@ LOST_KEY = 'dam_recorder.lost_messages'
 PAUSED_KEY = 'dam_recorder.paused_messages'
 TRIMMED_KEY = 'dam_recorder.trimmed_messages'
 DROPPED_KEY = 'dam_recorder.dropped_messages'
+#: ... dropped by the recorder from its full backlog, not written when its stop time ran out.
+SHED_KEY = 'dam_recorder.backlog_dropped_messages'
+STOP_UNWRITTEN_KEY = 'dam_recorder.stop_unwritten_messages'
+#: JSON ``{topic: reason}``: topics selected for the recording that it does not hold.
+NOT_RECORDED_KEY = 'dam_recorder.not_recorded_topics'
 
 
 def one_line(text: str) -> str:

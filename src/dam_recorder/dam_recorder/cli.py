@@ -34,7 +34,11 @@ start time and outcome (2026_11_29-18_05_12_success), with the goal, the /check_
 outcome, the controller's configuration and the software version in its metadata.
 
 Services while recording (std_srvs/srv/Trigger): ~/pause, ~/resume, ~/split.
-SIGINT or SIGTERM closes the bag (exit status 0). A write error (a full or read-only file
+SIGINT or SIGTERM closes the bag (exit status 0): what was received is written for at most
+--stop-write-time seconds, the rest is counted per topic (metadata and the closing line), and
+an episode that lacks it is INCOMPLETE. Log times: a message's header stamp when it starts
+with a std_msgs/Header, else its receive time (on the simulated clock with use_sim_time).
+A write error (a full or read-only file
 system, the bag directory removed) is logged once, the bag closed with what is on disk and the
 recorder exits with status 74. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
 Every option is also a parameter of the node (see the README, section Recording)."""
@@ -100,6 +104,14 @@ def build_parser() -> argparse.ArgumentParser:
                         help='write the pending chunk out at least this often: the most that '
                              f'a SIGKILL can lose (default: 1.0; {CHUNK_INTERVAL_RANGE_S[0]:g} '
                              f'to {CHUNK_INTERVAL_RANGE_S[1]:g})')
+    parser.add_argument('--max-backlog-bytes', type=_number(int, low=10_000), metavar='B',
+                        help='most memory the messages waiting to be written may take; a '
+                             'recorder that falls further behind drops (and counts) what '
+                             'arrives, never the goal events (default: 268435456, 256 MiB)')
+    parser.add_argument('--stop-write-time', type=_number(float, high=60.0), metavar='S',
+                        help='after SIGINT or SIGTERM, write what was received for at most '
+                             'this long, then count the rest as not written and close '
+                             '(default: 2.0)')
     parser.add_argument('--episodes', action='store_true', default=None,
                         help='one bag per /dam_grasp goal, in the directory -o')
     parser.add_argument('--pre-roll', type=_number(float), metavar='S',
@@ -121,7 +133,8 @@ def parameter_overrides(argv: Sequence[str]) -> dict[str, Any]:
         # (an override of a string array parameter cannot be empty).
         overrides['topics'] = ['']
     for option in ('output', 'storage', 'compression', 'regex', 'exclude', 'max_bag_size',
-                   'max_bag_duration', 'chunk_interval', 'episodes', 'pre_roll', 'post_roll'):
+                   'max_bag_duration', 'chunk_interval', 'max_backlog_bytes',
+                   'stop_write_time', 'episodes', 'pre_roll', 'post_roll'):
         value = getattr(args, option)
         if value is not None:
             overrides[option] = value

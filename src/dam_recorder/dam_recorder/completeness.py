@@ -36,6 +36,12 @@ What a complete episode's bag holds (each rule names the kind of :class:`Missing
 ``dropped``
     No message of the episode's window was dropped on the way: no gap in the publisher's
     sequence numbers (topics with one publisher) and none reported lost by the middleware.
+``backlog_dropped``
+    The recorder dropped none of the topic's messages because its backlog was full (a
+    recorder starved of CPU time keeps at most ``max_backlog_bytes`` in memory).
+``not_written``
+    Every message received before the recorder was asked to stop was written (a recorder
+    far behind writes for ``stop_write_time`` after SIGINT or SIGTERM, then counts the rest).
 """
 
 from __future__ import annotations
@@ -125,8 +131,9 @@ class Missing:
     ----------
     kind : str
         ``result``, ``start_event``, ``end_event``, ``final_status``, ``short``, ``stopped``,
-        ``dropped`` (see the module) or ``unwritten`` (a write error, set by
-        :mod:`~dam_recorder.episodes`).
+        ``dropped``, ``backlog_dropped``, ``not_written`` (see the module), ``unwritten``
+        (a write error, set by :mod:`~dam_recorder.episodes`) or ``killed`` (the recorder
+        died with the episode open, set by :mod:`~dam_recorder.episode_recovery`).
     topic : str
         The topic it concerns.
     detail : str
@@ -140,7 +147,7 @@ class Missing:
         ``until_ns`` and the end of the episode's window [s since the bag's first message].
     basis : str
         What ``expected`` rests on: ``publisher count``, ``rate`` (the topic's own median
-        rate, an estimate), ``sequence numbers`` or ``middleware report``.
+        rate, an estimate), ``sequence numbers``, ``middleware report`` or ``recorder count``.
     """
 
     kind: str
@@ -213,6 +220,8 @@ class _TopicAccount:
     counts: list[tuple[int, int, int]] = field(default_factory=list)  # (received, count, last)
     latched: bool = False
     dropped: int = 0
+    shed: int = 0  # dropped from the recorder's full backlog
+    unwritten: int = 0  # taken, but not written when the stop's time ran out
 
 
 def _median_period(stamps: Sequence[int]) -> float | None:
@@ -269,6 +278,16 @@ class EpisodeAccount:
         """``count`` messages of ``topic`` inside the window were dropped on the way."""
         self._topic(topic).dropped += int(count)
 
+    def shed(self, topic: str, count: int) -> None:
+        """``count`` messages of ``topic`` were dropped by the recorder itself: its backlog
+        was full (``max_backlog_bytes``)."""
+        self._topic(topic).shed += int(count)
+
+    def unwritten_at_stop(self, topic: str, count: int) -> None:
+        """``count`` messages of ``topic``, received before the recorder was asked to stop,
+        were not written within the time it has to stop (``stop_write_time``)."""
+        self._topic(topic).unwritten += int(count)
+
     @property
     def first_ns(self) -> int | None:
         """The bag's first message [ns] (``None`` without messages)."""
@@ -315,6 +334,7 @@ class EpisodeAccount:
             elif name not in GOAL_BOUND_TOPICS and not account.latched:
                 missing += self._judge_stream(name, account, window)
             missing += _judge_dropped(name, account, int((lost or {}).get(name, 0)))
+            missing += _judge_recorder_losses(name, account)
         return missing
 
     def _judge_stream(self, name: str, account: _TopicAccount, window: _Window
@@ -401,6 +421,24 @@ def _judge_dropped(name: str, account: _TopicAccount, lost: int) -> list[Missing
                     f'({how})', expected=len(account.stamps) + dropped,
                     recorded=len(account.stamps), short=dropped,
                     basis='sequence numbers' if by_sequence else 'middleware report')]
+
+
+def _judge_recorder_losses(name: str, account: _TopicAccount) -> list[Missing]:
+    missing = []
+    recorded = len(account.stamps)
+    if account.shed:
+        missing.append(Missing(
+            'backlog_dropped', name, f'{account.shed} message(s) dropped by the recorder: its '
+            'backlog was full (it got too little CPU time to write what arrived; '
+            'max_backlog_bytes)', expected=recorded + account.shed, recorded=recorded,
+            short=account.shed, basis='recorder count'))
+    if account.unwritten:
+        missing.append(Missing(
+            'not_written', name, f'{account.unwritten} message(s) received before the recorder '
+            'was stopped were not written: its stop time (stop_write_time) ran out',
+            expected=recorded + account.unwritten, recorded=recorded, short=account.unwritten,
+            basis='recorder count'))
+    return missing
 
 
 def describe(missing: Sequence[Missing]) -> list[str]:

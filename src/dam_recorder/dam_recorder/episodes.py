@@ -32,6 +32,10 @@ Episode metadata (``custom_data`` of ``metadata.yaml``, strings):
 ``dam_recorder.lost_messages``, ``dam_recorder.dropped_messages``, ``dam_recorder.backlog``
     The recorder's counts of this episode's messages, and its backlog while the episode was
     open (:mod:`~dam_recorder.backlog`).
+``dam_recorder.backlog_dropped_messages``, ``dam_recorder.stop_unwritten_messages``
+    Messages per topic the recorder dropped from its full backlog, and those received before
+    it was stopped that it had no time left to write (at most: counted for every episode open
+    at the stop).
 ``dam_recorder.unwritten_messages``
     After a write error: the episode's messages that are not on disk (its bag counts them).
 
@@ -55,7 +59,7 @@ from typing import Any, NamedTuple
 from rosbags.interfaces import Qos
 
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
-from dam_recorder.bag_reading import DROPPED_KEY
+from dam_recorder.bag_reading import DROPPED_KEY, SHED_KEY, STOP_UNWRITTEN_KEY
 from dam_recorder.bag_writer import BagWriter
 from dam_recorder.completeness import (
     INCOMPLETE_SUFFIX,
@@ -109,6 +113,8 @@ class TopicSpec:
     type_hash: str
     offered_qos: Sequence[Qos]
     latched: bool = False
+    #: Written whatever the stop's time (the goal's events and statuses).
+    protected: bool = False
 
 
 #: A message as the episodes keep it: (topic key, receive stamp [ns], data, trimmed, facts).
@@ -127,6 +133,8 @@ class _Episode:
     paused: dict[str, int] = field(default_factory=dict)
     start_info: dict[str, str] = field(default_factory=dict)
     dropped: dict[str, int] = field(default_factory=dict)
+    shed: dict[str, int] = field(default_factory=dict)  # dropped from a full backlog
+    unwritten_at_stop: dict[str, int] = field(default_factory=dict)
     backlog: Backlog = field(default_factory=Backlog)
     summary: dict[str, Any] | None = None
     close_after_ns: int | None = None
@@ -211,6 +219,9 @@ class EpisodeRecorder:
         #: The finished episodes, oldest first.
         self.finished: list[Closed] = []
         self._unwritten_closed = 0  # messages the finished episodes could not write
+        #: Messages held back (:data:`HOLD_BACK_NS`) not written when the stop's time ran out,
+        #: per topic (the most of any one episode: the episodes hold the same messages).
+        self.held_unwritten: dict[str, int] = {}
 
     # -- topics and messages -----------------------------------------------------------------
 
@@ -282,6 +293,23 @@ class EpisodeRecorder:
                     episode.close_after_ns is None or stamp_ns <= episode.close_after_ns):
                 episode.dropped[name] = episode.dropped.get(name, 0) + int(count)
                 episode.account.dropped(name, count)
+
+    def note_shed(self, key: int, count: int) -> None:
+        """The recorder dropped ``count`` messages of topic ``key`` (its backlog was full):
+        the loss of every open episode (they were received while it was open, or in its
+        pre-roll)."""
+        name = self._topics[key].name
+        for episode in self._open.values():
+            episode.shed[name] = episode.shed.get(name, 0) + int(count)
+            episode.account.shed(name, count)
+
+    def note_unwritten_at_stop(self, key: int, count: int) -> None:
+        """``count`` messages of topic ``key`` received before the stop were not written (the
+        stop's time ran out): at most that many of every open episode's."""
+        name = self._topics[key].name
+        for episode in self._open.values():
+            episode.unwritten_at_stop[name] = episode.unwritten_at_stop.get(name, 0) + int(count)
+            episode.account.unwritten_at_stop(name, count)
 
     def note_paused(self, key: int) -> None:
         """A message of topic ``key`` arrived while the recorder was paused (not written)."""
@@ -361,16 +389,20 @@ class EpisodeRecorder:
                if e.close_after_ns is not None and taken_ns >= e.close_after_ns + CLOSE_MARGIN_NS]
         return [self._close(goal_id, self._open[goal_id].close_after_ns) for goal_id in due]
 
-    def close_all(self, taken_ns: int | None = None) -> list[Closed]:
+    def close_all(self, taken_ns: int | None = None, deadline: float | None = None
+                  ) -> list[Closed]:
         """Close every open episode now (the recorder stops; ``taken_ns`` as in :meth:`poll`,
         default: the latest stamp handed over); a goal that has not ended gets the outcome
-        :data:`UNFINISHED`. Their windows end at ``taken_ns`` (a post-roll is cut short)."""
+        :data:`UNFINISHED`. Their windows end at ``taken_ns`` (a post-roll is cut short).
+        Messages still held back (:data:`HOLD_BACK_NS`) are written until ``deadline``
+        (``time.monotonic()``; None: all); the rest are counted as not written at the stop."""
         end_ns = self._newest_ns if taken_ns is None else taken_ns
         closed: list[Closed] = []
         error: BagWriteError | None = None
         for goal_id, episode in list(self._open.items()):
             try:
-                closed.append(self._close(goal_id, min(end_ns, episode.close_after_ns or end_ns)))
+                closed.append(self._close(goal_id, min(end_ns, episode.close_after_ns or end_ns),
+                                          deadline))
             except BagWriteError as exc:
                 error = error or exc
         if error is not None:
@@ -379,11 +411,28 @@ class EpisodeRecorder:
 
     # -- helpers -----------------------------------------------------------------------------
 
-    def _release_held(self, episode: _Episode) -> None:
+    def _release_held(self, episode: _Episode, deadline: float | None = None) -> None:
         """Write the held messages inside the episode's window; drop those after its
-        post-roll (they arrived before the ENDED event did)."""
+        post-roll (they arrived before the ENDED event did). Past ``deadline``
+        (``time.monotonic()``) the rest are counted as not written at the stop."""
         close_after = episode.close_after_ns
         while episode.held:
+            if deadline is not None and time.monotonic() >= deadline:
+                left: dict[str, int] = {}
+                for message in episode.held:
+                    if close_after is None or message[1] <= close_after:
+                        if self._topics[message[0]].protected:
+                            self._write_to(episode, *message)
+                            continue
+                        name = self._topics[message[0]].name
+                        left[name] = left.get(name, 0) + 1
+                episode.held.clear()
+                for name, count in left.items():
+                    self.held_unwritten[name] = max(self.held_unwritten.get(name, 0), count)
+                    episode.unwritten_at_stop[name] = \
+                        episode.unwritten_at_stop.get(name, 0) + count
+                    episode.account.unwritten_at_stop(name, count)
+                return
             message = episode.held.popleft()
             if close_after is None or message[1] <= close_after:
                 self._write_to(episode, *message)
@@ -418,6 +467,8 @@ class EpisodeRecorder:
         data['dam_recorder.trimmed_messages'] = json.dumps(episode.trimmed, sort_keys=True)
         data['dam_recorder.paused_messages'] = json.dumps(episode.paused, sort_keys=True)
         data[DROPPED_KEY] = json.dumps(episode.dropped, sort_keys=True)
+        data[SHED_KEY] = json.dumps(episode.shed, sort_keys=True)
+        data[STOP_UNWRITTEN_KEY] = json.dumps(episode.unwritten_at_stop, sort_keys=True)
         data[BACKLOG_KEY] = episode.backlog.json()
         data.update(completeness_custom_data(episode.missing))
         data.update(episode.start_info)
@@ -430,12 +481,14 @@ class EpisodeRecorder:
                                            allow_nan=False)
         return data
 
-    def _close(self, goal_id: str, window_end_ns: int) -> Closed:
-        """Close the episode of ``goal_id``, its window ending at ``window_end_ns`` [ns]."""
+    def _close(self, goal_id: str, window_end_ns: int, deadline: float | None = None
+               ) -> Closed:
+        """Close the episode of ``goal_id``, its window ending at ``window_end_ns`` [ns]
+        (held messages written until ``deadline``, :meth:`_release_held`)."""
         episode = self._open.pop(goal_id)
         error: BagWriteError | None = None
         try:
-            self._release_held(episode)
+            self._release_held(episode, deadline)
         except BagWriteError as exc:
             error = exc
         got_result = episode.summary is not None

@@ -74,6 +74,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rclpy.utilities import remove_ros_args
+from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from dam_common.clock import create_steady_timer
@@ -82,10 +83,16 @@ from dam_common.node import run_node
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
-from dam_recorder.bag_reading import DROPPED_KEY
+from dam_recorder.bag_reading import (
+    DROPPED_KEY,
+    NOT_RECORDED_KEY,
+    SHED_KEY,
+    STOP_UNWRITTEN_KEY,
+)
 from dam_recorder.bag_writer import CHUNK_INTERVAL_RANGE_S, MIN_SPLIT_BYTES, BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
+from dam_recorder.clock_receipts import ClockReceipts, clock_ns_of
 from dam_recorder.completeness import (
     ACTION_STATUS_TOPIC,
     COUNTED_TOPICS,
@@ -117,6 +124,35 @@ from dam_recorder.write_failure import WRITE_ERROR_STATUS, WriteFailure
 
 #: Longest time [s] a stop request waits for messages still arriving (see begin_shutdown).
 DRAIN_QUIET_S = 0.1
+#: Longest time [s] one turn of the executor spends writing the backlog: the executor
+#: comes back to its other work (a stop request, services, discovery) at least this often.
+WRITE_SLICE_S = 0.05
+#: After the stop's writing time, how long closing episodes may write the messages they held
+#: back (:data:`~dam_recorder.episodes.HOLD_BACK_NS`) [s]; the rest is counted.
+CLOSE_WRITE_S = 0.5
+#: A stop that has taken longer than this when the bags are closed [s] leaves the node's
+#: middleware entities to the end of the process (the process exits at once, with the bags
+#: closed and the log flushed): a starved process takes seconds to delete them one by one.
+TEARDOWN_SKIP_AFTER_S = 5.0
+#: A stop with more messages than this waiting to be written is hurried: no wait for
+#: messages in flight, and the subscriptions and services are not deleted one by one (each
+#: deletion waits for the middleware's threads, which a starved process runs seldom).
+HURRIED_BACKLOG = 1000
+#: Memory a message in the backlog takes beside its data (the tuple and the middleware's
+#: information dictionary) [bytes], for ``max_backlog_bytes``.
+MESSAGE_OVERHEAD_BYTES = 400
+#: A header stamp is a message's log time when it is at most this far after the receipt
+#: (clocks of two machines differ a little) [ns] ...
+HEADER_LEAD_LIMIT_NS = 1_000_000_000
+#: ... and at most this far before it [ns] (a receipt that late is no delivery delay).
+HEADER_LAG_LIMIT_NS = 300_000_000_000
+#: What a bag's log times are (custom_data ``dam_recorder.log_time``).
+LOG_TIME_TEXT = ('header stamp for messages that start with a std_msgs/Header (else, and for '
+                 'a stamp of 0 or far from the receipt, the receive time); receive time for '
+                 'the others; with use_sim_time on the simulated clock')
+#: Topics whose messages the backlog never drops and that are written first: the goal's
+#: events and statuses (what labels an episode).
+PROTECTED_TOPICS = frozenset({EPISODE_TOPIC, ACTION_STATUS_TOPIC})
 #: How often the taker thread takes what is queued [s].
 TAKE_PERIOD_S = 0.005
 #: How often the executor's thread writes what the taker took [s].
@@ -201,6 +237,33 @@ class _Recorded:
     followed: bool = False
     #: What an episode reads from a message (None: nothing).
     facts: Any = None
+    #: Never dropped from the backlog, written first (:data:`PROTECTED_TOPICS`).
+    protected: bool = False
+    #: Its messages start with a ``std_msgs/Header``: logged at their header stamp.
+    stamped: bool = False
+    #: Of those, messages logged at their receipt instead (a header stamp of 0, from the
+    #: future, or older than :data:`HEADER_LAG_LIMIT_NS`).
+    logged_at_receipt: int = 0
+    #: Messages put into the backlog (the taker's thread) and taken out of it (the
+    #: executor's): their difference is what the backlog holds of the topic.
+    queued: int = 0
+    dequeued: int = 0
+    #: Dropped because the backlog was full (the taker's thread counts), and how many of them
+    #: the executor's thread has passed on to the episodes.
+    shed: int = 0
+    shed_noted: int = 0
+    #: In the backlog when the stop's time ran out: not written.
+    unwritten_at_stop: int = 0
+    #: Messages were still queued in the middleware when the stop's time ran out (not taken,
+    #: not counted).
+    not_taken: bool = False
+
+
+def _starts_with_header(cls: type) -> bool:
+    """The message type ``cls`` starts with a ``std_msgs/Header``."""
+    fields = getattr(cls, 'get_fields_and_field_types', None)
+    first = next(iter(fields().items()), None) if callable(fields) else None
+    return first is not None and first[1] == 'std_msgs/Header'
 
 
 def _descriptor(description: str, **kwargs: Any) -> ParameterDescriptor:
@@ -223,7 +286,28 @@ class RecorderNode(Node):
         #: recorded, data, info) or ('lost', recorded, count). Only the executor's thread
         #: touches the writer (sqlite3 connections belong to the thread that opened them).
         self._inbox: deque[tuple[Any, ...]] = deque()
+        #: Messages of the protected topics and the middleware's loss reports: written before
+        #: the inbox, never dropped.
+        self._urgent: deque[tuple[Any, ...]] = deque()
+        #: Bytes put into the inbox (the taker's thread) and taken out (the executor's).
+        self._inbox_in_bytes = 0
+        self._inbox_out_bytes = 0
+        self._shed_total = 0  # (the taker's thread)
+        self._shed_noted_total = 0
+        #: The /clock receipts (use_sim_time): log times are receive times on that clock.
+        self._clock_receipts = ClockReceipts()
+        #: When the writing of the backlog ends after a stop request (time.monotonic()).
+        self._stop_deadline: float | None = None
+        self._stop_requested_at: float | None = None
+        #: The stop came with a backlog (:data:`HURRIED_BACKLOG`): the middleware entities are
+        #: left to the end of the process.
+        self._hurried = False
         self._recorded: dict[str, _Recorded] = {}
+        #: (goal id, event) of the goal events handled (each comes twice, see
+        #: _on_episode_event).
+        self._events_handled: set[tuple[str, int]] = set()
+        #: Selected topics seen in the graph without a publisher to subscribe to (yet).
+        self._without_publisher: set[str] = set()
         #: use_sim_time: the first /clock has come (until then messages are held), or never
         #: came while recording (then they are stamped with their receive time).
         self._clock_started = False
@@ -237,13 +321,15 @@ class RecorderNode(Node):
         self._found_first: set[str] = set()
         self._started_at = time.monotonic()
         self._discovery_passes = 0
-        self._refused: set[str] = set()
+        self._refused: dict[str, str] = {}  # topic -> why it is not recorded
         self._paused = False
         self._last_message = time.monotonic()
         self._backlog = Backlog()
         #: Every message received before this [ns] has been handed over (episode mode).
         self._taken_ns = 0
         p = self._declare_parameters()
+        self._max_backlog_bytes = int(p['max_backlog_bytes'])
+        self._stop_write_s = float(p['stop_write_time'])
         self._selection = TopicSelection(p['topics'], p['regex'], p['exclude'])
         for topic in self._selection.topics:
             if self._selection.excluded(topic):
@@ -285,6 +371,15 @@ class RecorderNode(Node):
         self._taker = SerializedTaker(
             self, TAKE_PERIOD_S,
             on_swept=None if self._episodes is None else lambda t: inbox.append(('swept', t)))
+        if self._use_sim_time:  # first: every later message has the clock of its receipt
+            receipts = self._clock_receipts
+
+            def on_clock(data: bytes, info: dict[str, Any]) -> None:
+                clock_ns = clock_ns_of(data)
+                if clock_ns is not None:
+                    receipts.add(info.get('received_timestamp') or time.time_ns(), clock_ns)
+            self._taker.subscribe(Clock, '/clock', QoSProfile(
+                depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT), on_clock)
         self.create_service(Trigger, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/resume', self._on_resume, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/split', self._on_split, qos_profile=SERVICE_QOS)
@@ -337,6 +432,14 @@ class RecorderNode(Node):
             'queue_depth': (5000, _descriptor(
                 'depth of each subscription queue [messages]',
                 integer_range=[IntegerRange(from_value=1, to_value=1_000_000, step=1)])),
+            'max_backlog_bytes': (256 * 2**20, _descriptor(
+                'most memory the messages waiting to be written may take [bytes]; beyond it '
+                'messages are dropped and counted (never the goal events and statuses)',
+                integer_range=[IntegerRange(from_value=10_000, to_value=2**40, step=1)])),
+            'stop_write_time': (2.0, _descriptor(
+                'after SIGINT or SIGTERM, how long the recorder goes on writing what it '
+                'received before it counts the rest as not written and closes [s]',
+                floating_point_range=[FloatingPointRange(from_value=0.0, to_value=60.0)])),
             'episodes': (False, _descriptor(
                 'one bag per /dam_grasp goal, in the directory output')),
             'pre_roll': (3.0, _descriptor(
@@ -352,7 +455,12 @@ class RecorderNode(Node):
     # -- topics ------------------------------------------------------------------------------
 
     def _discover(self) -> None:
-        if self._stopped or self.write_failure is not None:
+        if self._stopped or self.write_failure is not None or SHUTDOWN.requested:
+            return
+        if len(self._inbox) > HURRIED_BACKLOG and self._discovery_passes > \
+                STARTUP_DISCOVERY_PASSES:
+            # Behind: the graph's queries wait for the middleware's threads, which a starved
+            # process runs seldom; writing (and a stop request) come first.
             return
         for recorded in self._recorded.values():
             one = self.count_publishers(recorded.name) == 1
@@ -373,7 +481,9 @@ class RecorderNode(Node):
                 continue
             offers = self.get_publishers_info_by_topic(name)
             if not offers:
+                self._without_publisher.add(name)
                 continue  # no publisher yet: its QoS decides the subscription's
+            self._without_publisher.discard(name)
             try:
                 self._record(name, types[0], offers)
             except BagWriteError as exc:
@@ -385,7 +495,7 @@ class RecorderNode(Node):
             self._recorded[name].appeared_late = name not in self._found_first
 
     def _refuse(self, name: str, reason: str) -> None:
-        self._refused.add(name)
+        self._refused[name] = reason
         self.get_logger().warning(f'not recording {name}: {reason}')
 
     def _record(self, name: str, type_name: str, offers: Sequence[Any]) -> None:
@@ -410,16 +520,18 @@ class RecorderNode(Node):
         if self._episodes is not None:
             topic_id = self._episodes.add_topic(TopicSpec(
                 name, type_name, message_type.definition(), type_hash, profiles,
-                latched=request.transient_local))
+                latched=request.transient_local, protected=name in PROTECTED_TOPICS))
         else:
             topic_id = self._writer.add_topic(name, type_name, message_type.definition(),
                                               type_hash, profiles)
         recorded = _Recorded(name, topic_id, end, one_publisher=len(offers) == 1,
-                             facts=self._fact_reader(name, type_name, cls))
+                             facts=self._fact_reader(name, type_name, cls),
+                             protected=name in PROTECTED_TOPICS,
+                             stamped=_starts_with_header(cls))
         self._recorded[name] = recorded
         self._taker.subscribe(
             cls, name, qos, self._callback(recorded),
-            on_lost=lambda change, r=recorded: self._inbox.append(('lost', r, change)),
+            on_lost=lambda change, r=recorded: self._urgent.append(('lost', r, change)),
             on_incompatible=lambda change, policy, r=recorded: self._on_incompatible(
                 r, change, policy))
         self.get_logger().info(
@@ -451,34 +563,50 @@ class RecorderNode(Node):
         return read
 
     def _callback(self, recorded: _Recorded) -> Any:
-        inbox = self._inbox
+        """What the taker's thread does with a message of ``recorded``: into the backlog
+        (the urgent one for a protected topic), or dropped and counted when the backlog holds
+        ``max_backlog_bytes`` already."""
+        inbox = self._urgent if recorded.protected else self._inbox
+        limit = self._max_backlog_bytes
 
         def on_message(data: bytes, info: dict[str, Any]) -> None:  # the taker's thread
             self._last_message = time.monotonic()
+            size = len(data) + MESSAGE_OVERHEAD_BYTES
+            if not recorded.protected:
+                if self._inbox_in_bytes - self._inbox_out_bytes + size > limit:
+                    recorded.shed += 1
+                    self._shed_total += 1
+                    return
+                self._inbox_in_bytes += size
+            recorded.queued += 1
             inbox.append(('message', recorded, data, info))
         return on_message
 
     def _write_inbox(self, final: bool = False) -> None:
-        """Write what the taker took (in the executor's thread).
+        """Write what the taker took (in the executor's thread): the urgent messages first,
+        then the backlog, for at most :data:`WRITE_SLICE_S` a turn (``final``: until the
+        stop's deadline, then the rest is counted, :meth:`_give_up`).
 
         With ``use_sim_time``, messages that arrive before the first ``/clock`` are held (in
-        order) and written once it comes, stamped with the clock's time then: a bag on
-        simulated time never starts in 1970. When the recorder stops (``final``) without a
-        ``/clock`` ever, they are written with their receive time (system clock)."""
+        order) and written once it comes, stamped with its time: a bag on simulated time never
+        starts in 1970. When the recorder stops (``final``) without a ``/clock`` ever, they
+        are written with their receive time (system clock)."""
         inbox = self._inbox
         if self._use_sim_time and not self._clock_started:
-            held = sum(1 for item in inbox if item[0] == 'message')
-            if self.get_clock().now().nanoseconds > 0:
+            if self._clock_receipts.started:
                 self._clock_started = True
+                held = sum(r.queued - r.dequeued for r in self._recorded.values())
                 self._before_clock = held
                 self._to_release = held
                 if held:
+                    first = self._clock_receipts.at(0) or 0
                     self.get_logger().info(
                         f'{held} message(s) arrived before the first /clock: written now, '
-                        f'stamped with its time ({self.get_clock().now().nanoseconds * 1e-9:.3f}'
-                        f' s; counted in dam_recorder.before_clock_messages)')
+                        f'stamped with its time ({first * 1e-9:.3f} s; counted in '
+                        f'dam_recorder.before_clock_messages)')
             elif final:
                 self._no_clock = True
+                held = sum(r.queued - r.dequeued for r in self._recorded.values())
                 if held:
                     self.get_logger().warning(
                         f'no /clock came while recording (use_sim_time): {held} message(s) '
@@ -486,26 +614,113 @@ class RecorderNode(Node):
             else:
                 return  # held until the clock runs
         writer = self._writer if self._episodes is None else self._episodes
+        urgent = self._urgent
+        while urgent and not self._stopped:
+            self._write_item(writer, urgent.popleft())
+        if final and self._stop_deadline is None:
+            self._stop_deadline = time.monotonic() + self._stop_write_s
+        deadline = self._stop_deadline if final else time.monotonic() + WRITE_SLICE_S
+        stop_request = SHUTDOWN if not final else None
         while inbox and not self._stopped:
+            # Every message: a starved process may wait long for its next time slice.
+            if time.monotonic() >= deadline or (stop_request is not None
+                                                and stop_request.requested):
+                break
+            while urgent:  # (an event that came meanwhile goes first)
+                self._write_item(writer, urgent.popleft())
             item = inbox.popleft()
             if item[0] == 'message':
-                self._releasing = self._to_release > 0
-                self._to_release = max(self._to_release - 1, 0)
-                try:
-                    self._write(writer, item[1], item[2], item[3])
-                except BagWriteError as exc:
-                    self._on_write_error(exc)
-            elif item[0] == 'swept':
-                self._taken_ns = item[1]
-            else:
-                self._on_lost(item[1], item[2])
+                item[1].dequeued += 1
+                self._inbox_out_bytes += len(item[2]) + MESSAGE_OVERHEAD_BYTES
+            self._write_item(writer, item)
+        if self._shed_total != self._shed_noted_total:
+            self._note_shed()
+        if final:
+            while urgent and not self._stopped:
+                self._write_item(writer, urgent.popleft())
+            if inbox:
+                self._give_up()
+
+    def _write_item(self, writer: Any, item: tuple[Any, ...]) -> None:
+        if item[0] == 'message':
+            if item[1].protected:
+                item[1].dequeued += 1
+            self._releasing = self._to_release > 0
+            self._to_release = max(self._to_release - 1, 0)
+            try:
+                self._write(writer, item[1], item[2], item[3])
+            except BagWriteError as exc:
+                self._on_write_error(exc)
+        elif item[0] == 'swept':
+            self._taken_ns = item[1]
+        else:
+            self._on_lost(item[1], item[2])
+
+    def _note_shed(self) -> None:
+        """Log what the taker dropped from the full backlog since the last look, and count it
+        in the open episodes."""
+        self._shed_noted_total = self._shed_total
+        names = []
+        for recorded in self._recorded.values():
+            new = recorded.shed - recorded.shed_noted
+            if new > 0:
+                recorded.shed_noted += new
+                names.append(f'{recorded.name} {recorded.shed}')
+                if self._episodes is not None:
+                    self._episodes.note_shed(recorded.topic_id, new)
+        if names:
+            self.get_logger().warning(
+                f'the backlog is full (max_backlog_bytes {self._max_backlog_bytes}): messages '
+                f'dropped and counted ({", ".join(names)} in all; never the goal events); the '
+                f'recorder gets too little CPU time', throttle_duration_sec=5.0)
+
+    def _give_up(self) -> None:
+        """The stop's time ran out: count what is left in the backlog per topic as not
+        written (dam_recorder.stop_unwritten_messages, and in the open episodes)."""
+        self._inbox.clear()
+        left = []
+        for recorded in self._recorded.values():
+            if recorded.protected:
+                continue
+            count = recorded.queued - recorded.dequeued
+            if count <= 0:
+                continue
+            recorded.dequeued = recorded.queued
+            recorded.unwritten_at_stop += count
+            left.append(f'{recorded.name} {count}')
+            if self._episodes is not None:
+                self._episodes.note_unwritten_at_stop(recorded.topic_id, count)
+        if left:
+            self.get_logger().warning(
+                f'stop: {self._stop_write_s:g} s of writing after the stop request did not '
+                f'reach the end of the backlog: not written, counted ({", ".join(left)})')
+
+    def _receipt_ns(self, received: int) -> int:
+        """The receive time of a message received at ``received`` [ns, system clock]: that
+        time, or with ``use_sim_time`` the simulated time at the receipt
+        (:mod:`~dam_recorder.clock_receipts`)."""
+        if self._use_sim_time and not self._no_clock:
+            stamp = self._clock_receipts.at(received) if received else None
+            return stamp if stamp is not None else self.get_clock().now().nanoseconds
+        return received or time.time_ns()
+
+    def _log_time_ns(self, recorded: _Recorded, data: bytes, received: int) -> int:
+        """A message's log time (:data:`LOG_TIME_TEXT`): its header stamp, or its receive
+        time. Receive times bunch up when the recorder's middleware gets too little CPU time
+        (it takes in bursts); header stamps are where the publisher put the messages."""
+        receipt = self._receipt_ns(received)
+        if recorded.stamped:
+            header = header_stamp_ns(data)
+            if header and receipt - HEADER_LAG_LIMIT_NS <= header <= receipt + \
+                    HEADER_LEAD_LIMIT_NS:
+                return header
+            recorded.logged_at_receipt += 1
+        return receipt
 
     def _write(self, writer: Any, recorded: _Recorded, data: bytes,
                info: dict[str, Any]) -> None:
         received = info.get('received_timestamp', 0)
-        stamp = received
-        if (self._use_sim_time and not self._no_clock) or not stamp:
-            stamp = self.get_clock().now().nanoseconds
+        stamp = self._log_time_ns(recorded, data, received)
         self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp)
         if self._paused:
             recorded.paused += 1
@@ -533,6 +748,8 @@ class RecorderNode(Node):
         trimmed = len(cut) != len(data)
         recorded.trimmed += trimmed
         if self._episodes is not None:
+            if recorded.name == EPISODE_TOPIC:
+                self._on_taken_event(cut, stamp)
             writer.write(recorded.topic_id, stamp, cut, trimmed, self._read_facts(recorded, cut),
                          backlog)
         else:
@@ -611,7 +828,25 @@ class RecorderNode(Node):
                 'dam_recorder.incompatible_publishers': counts('incompatible'),
                 'dam_recorder.before_subscription_messages': counts('before_subscription'),
                 'dam_recorder.before_clock_messages': str(self._before_clock),
-                DROPPED_KEY: counts('dropped'), BACKLOG_KEY: self._backlog.json()}
+                DROPPED_KEY: counts('dropped'), SHED_KEY: counts('shed'),
+                STOP_UNWRITTEN_KEY: counts('unwritten_at_stop'),
+                'dam_recorder.not_taken_topics': json.dumps(
+                    sorted(r.name for r in self._recorded.values() if r.not_taken)),
+                NOT_RECORDED_KEY: json.dumps(self.not_recorded(), sort_keys=True),
+                'dam_recorder.logged_at_receipt_messages': counts('logged_at_receipt'),
+                'dam_recorder.log_time': LOG_TIME_TEXT,
+                BACKLOG_KEY: self._backlog.json()}
+
+    def not_recorded(self) -> dict[str, str]:
+        """The selected topics the recording does not hold, each with the reason: named
+        but never seen, seen without a publisher, or refused."""
+        reasons = dict(self._refused)
+        for name in self._without_publisher - set(self._recorded):
+            reasons.setdefault(name, 'no publisher while recording (only subscribers)')
+        for name in self._selection.topics:
+            if name not in self._recorded and not self._selection.excluded(name):
+                reasons.setdefault(name, 'never appeared while recording')
+        return reasons
 
     # -- services and timers -----------------------------------------------------------------
 
@@ -640,12 +875,20 @@ class RecorderNode(Node):
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
-    def _on_episode_event(self, msg: Any) -> None:
+    def _on_episode_event(self, msg: Any, received_ns: int | None = None) -> None:
+        """A goal event, from the subscription (received now) or taken with the recorded
+        messages (at ``received_ns``, its log time), whichever comes first: a starved
+        executor may take its subscription's late, while the event is in the bag."""
         if self._stopped or self.write_failure is not None:
             return
+        key = (str(msg.goal_id), int(msg.event))
+        if key in self._events_handled:
+            return
+        self._events_handled.add(key)
+        now = self._now_ns() if received_ns is None else received_ns
         if msg.event == msg.EVENT_STARTED:
             try:
-                path = self._episodes.started(msg.goal_id, self._now_ns(),
+                path = self._episodes.started(msg.goal_id, now,
                                               stamp_ns(msg.header.stamp), start_info(msg))
             except BagWriteError as exc:
                 self._on_write_error(exc)
@@ -653,7 +896,7 @@ class RecorderNode(Node):
             self.get_logger().info(f'episode of goal {msg.goal_id[:8]}: recording into {path}')
         elif msg.event == msg.EVENT_ENDED:
             summary = summary_from_event(msg)
-            if not self._episodes.ended(msg.goal_id, self._now_ns(), summary,
+            if not self._episodes.ended(msg.goal_id, now, summary,
                                         ended_ns=summary['ended_ns']):
                 self.get_logger().warning(
                     f'goal {msg.goal_id[:8]} ended ({msg.outcome_name}) but it started before '
@@ -661,10 +904,23 @@ class RecorderNode(Node):
         else:
             self.get_logger().warning(f'{EPISODE_TOPIC}: unknown event {msg.event}, ignored')
 
+    def _on_taken_event(self, data: bytes, stamp: int) -> None:
+        from rclpy.serialization import deserialize_message
+
+        from dam_interfaces.msg import GraspEpisode
+        try:
+            msg = deserialize_message(data, GraspEpisode)
+        except Exception:  # noqa: BLE001 - another type on the topic: the facts say so
+            return
+        self._on_episode_event(msg, stamp)
+
     def _taken_until_ns(self) -> int:
         """Every message received before this [ns] has been handed to the episodes (with
-        use_sim_time the node's clock stamps each message as it is handed over)."""
-        return self._now_ns() if self._use_sim_time else self._taken_ns
+        use_sim_time: on the simulated clock, as the messages' log times)."""
+        if self._use_sim_time and not self._no_clock:
+            at = self._clock_receipts.at(self._taken_ns) if self._taken_ns else None
+            return at or 0
+        return self._taken_ns
 
     def _close_due_episodes(self) -> None:
         if self._stopped or self.write_failure is not None:
@@ -730,14 +986,26 @@ class RecorderNode(Node):
 
     # -- shutdown ----------------------------------------------------------------------------
 
-    def begin_shutdown(self) -> Future:
+    def begin_shutdown(self) -> Future | None:
         """On a stop request: keep taking messages until none arrived for
         :data:`DRAIN_QUIET_S` (what was in flight is recorded), at most ``run_node``'s
-        finishing time."""
+        finishing time. From now on the backlog is written for ``stop_write_time`` at most
+        (:meth:`destroy_node`)."""
+        self._stop_requested_at = time.monotonic()
+        self._stop_deadline = self._stop_requested_at + self._stop_write_s
+        backlog = sum(r.queued - r.dequeued for r in self._recorded.values())
+        self._hurried = backlog > HURRIED_BACKLOG
+        self.get_logger().info(
+            f'stop requested: writing what was received ({backlog} message(s) waiting) for '
+            f'at most {self._stop_write_s:g} s (stop_write_time), then closing')
+        if self._hurried:
+            return None  # behind: nothing in flight is worth waiting for
         done = Future()
 
-        def check() -> None:
-            if not done.done() and time.monotonic() - self._last_message >= DRAIN_QUIET_S:
+        def check() -> None:  # (behind: nothing is in flight that the backlog waits for)
+            if not done.done() and (time.monotonic() - self._last_message >= DRAIN_QUIET_S
+                                    or time.monotonic() >= self._stop_deadline
+                                    or len(self._inbox) > 1000):
                 done.set_result(True)
         create_steady_timer(self, DRAIN_QUIET_S / 2, check)
         return done
@@ -750,11 +1018,25 @@ class RecorderNode(Node):
         if taker is not None:
             taker.stop()
             taken = time.time_ns()
-            taker.drain()
+            if self._stop_deadline is None:
+                self._stop_deadline = time.monotonic() + self._stop_write_s
+            for topic in taker.drain(self._stop_deadline):
+                recorded = self._recorded.get(topic)
+                if recorded is not None:
+                    recorded.not_taken = True
         self._write_inbox(final=True)
         self._taken_ns = taken
         self._stopped = True
         self._close_bags()
+        late = self._stop_requested_at is not None and \
+            time.monotonic() - self._stop_requested_at > TEARDOWN_SKIP_AFTER_S
+        if self._hurried or late:
+            self.get_logger().warning(
+                f'stop: the bags are closed {time.monotonic() - self._stop_requested_at:.1f} s '
+                'after the stop request; the recorder was behind: its subscriptions and '
+                'services are left to the end of the process (deleting them one by one takes '
+                'a starved process seconds)')
+            return
         if taker is not None:
             taker.destroy()
         super().destroy_node()
@@ -763,18 +1045,22 @@ class RecorderNode(Node):
         if self._episodes is not None:
             before = len(self._episodes.finished)
             try:
-                self._episodes.close_all(self._taken_until_ns())
+                self._episodes.close_all(self._taken_until_ns(), self._close_deadline())
             except BagWriteError as exc:  # (close_all closes every episode all the same)
                 self._on_write_error(exc)
+            for name, count in self._episodes.held_unwritten.items():
+                if name in self._recorded:
+                    self._recorded[name].unwritten_at_stop += count
             for closed in self._episodes.finished[before:]:
                 self._log_episode(closed)
             incomplete = sum(1 for c in self._episodes.finished if c.missing)
             unwritten = self._episodes.unwritten_count()
-            log = self.get_logger().warning if unwritten else self.get_logger().info
-            log(f'{len(self._episodes.finished)} episode(s) recorded in '
-                f'{self._episodes.out_dir} ({incomplete} incomplete); not written '
-                f'{unwritten}; backlog {self._backlog.describe()}; dropped '
-                f'{self._dropped_text()}')
+            text = (f'{len(self._episodes.finished)} episode(s) recorded in '
+                    f'{self._episodes.out_dir} ({incomplete} incomplete); '
+                    f'{self._losses_text(unwritten)}')
+            log = self.get_logger().warning if incomplete or unwritten or \
+                self._lost_anything() else self.get_logger().info
+            log(text)
         writer, self._writer = self._writer, None
         if writer is None:
             return
@@ -783,22 +1069,56 @@ class RecorderNode(Node):
         except BagWriteError as exc:
             self._on_write_error(exc)
         count = sum(t.message_count for t in writer.topics)
-        lost = sum(r.lost for r in self._recorded.values())
         unwritten = sum(writer.unwritten.values())
         text = (f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
-                f'{len(writer.files)} file(s); not written {unwritten}; the middleware reported '
-                f'{lost} lost; dropped {self._dropped_text()}; backlog '
-                f'{self._backlog.describe()}')
+                f'{len(writer.files)} file(s); {self._losses_text(unwritten)}')
         if writer.failure is None:
-            self.get_logger().info(text)
+            (self.get_logger().warning if self._lost_anything() else self.get_logger().info)(
+                text)
             return
         where = 'metadata.yaml says so' if writer.metadata_current else (
             'metadata.yaml could not be written: run recover on the bag')
         self.get_logger().warning(f'{text} ({writer.failure.errno_name}; {where})')
 
-    def _dropped_text(self) -> str:
-        dropped = {r.name: r.dropped for r in self._recorded.values() if r.dropped}
-        return ', '.join(f'{n} {c}' for n, c in sorted(dropped.items())) or "none"
+    def _close_deadline(self) -> float | None:
+        """Until when closing episodes write what they held back (None: no limit)."""
+        if self._stop_deadline is None:
+            return None
+        if self._hurried:
+            return time.monotonic()  # what was held back is counted, not written
+        return self._stop_deadline + CLOSE_WRITE_S
+
+    def _lost_anything(self) -> bool:
+        return any(r.lost or r.dropped or r.shed or r.unwritten_at_stop or r.not_taken
+                   or r.before_subscription or r.incompatible
+                   for r in self._recorded.values()) or bool(self.not_recorded())
+
+    def _losses_text(self, unwritten: int) -> str:
+        """The closing line's account of every message and topic not in the bag(s)."""
+        def per_topic(attribute: str) -> str:
+            counts = {r.name: getattr(r, attribute) for r in self._recorded.values()
+                      if getattr(r, attribute)}
+            total = sum(counts.values())
+            return f'{total}' + (' (' + ', '.join(f'{n} {c}' for n, c in sorted(
+                counts.items())) + ')' if total else '')
+        not_taken = sorted(r.name for r in self._recorded.values() if r.not_taken)
+        not_recorded = self.not_recorded()
+        parts = [
+            f'not written {unwritten} (write errors)',
+            f'not written at the stop {per_topic("unwritten_at_stop")}',
+            f'dropped from the full backlog {per_topic("shed")}',
+            f'dropped on the way {per_topic("dropped")}',
+            f'reported lost by the middleware {per_topic("lost")}',
+            f'before the subscription {per_topic("before_subscription")}',
+            f'backlog {self._backlog.describe()}',
+        ]
+        if not_taken:
+            parts.append('still queued in the middleware at the stop (not counted): '
+                         + ', '.join(not_taken))
+        parts.append(f'topics not recorded {len(not_recorded)}' + (
+            ' (' + '; '.join(f'{n}: {why}' for n, why in sorted(not_recorded.items())) + ')'
+            if not_recorded else ''))
+        return '; '.join(parts)
 
 
 def main(args: list[str] | None = None) -> None:
@@ -817,8 +1137,13 @@ def main(args: list[str] | None = None) -> None:
         made.append(RecorderNode(overrides))
         return made[-1]
     run_node(make, 'recorder', argv, startup_errors=(DamRecorderError,))
-    if made and made[-1].write_failure is not None:
-        raise SystemExit(WRITE_ERROR_STATUS)
+    status = WRITE_ERROR_STATUS if made and made[-1].write_failure is not None else 0
+    # The bags are closed and rclpy (its log files too) is shut down: nothing is left to
+    # finish. The interpreter's own teardown is skipped: a process starved of CPU time can
+    # take seconds over it, and the stop is bounded (stop_write_time).
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 if __name__ == '__main__':

@@ -116,11 +116,18 @@ class SerializedTaker:
                 policy = qos_policy_name_from_kind(status.last_policy_kind)
                 on_incompatible(change, policy)
 
-    def _take_all(self, until_stopped: bool = True) -> int:
+    def _take_all(self, until_stopped: bool = True, deadline: float | None = None
+                  ) -> tuple[int, list[str]]:
+        """Take what each subscription has queued; stop at ``deadline`` (time.monotonic()).
+        Return how many messages, and the topics whose queue was not emptied."""
         with self._lock:
             subscriptions = list(self._subscriptions)
         taken = 0
+        left: list[str] = []
         for subscription, on_message in subscriptions:
+            if deadline is not None and time.monotonic() >= deadline:
+                left.append(subscription.topic_name)
+                continue
             while not (until_stopped and self._stop.is_set()):
                 with subscription.handle:
                     taken_message = subscription.handle.take_message(subscription.msg_type,
@@ -134,7 +141,10 @@ class SerializedTaker:
                     self._owner.get_logger().error(
                         f'{subscription.topic_name}: a message was not recorded: {exc!r}',
                         throttle_duration_sec=5.0)
-        return taken
+                if deadline is not None and time.monotonic() >= deadline:
+                    left.append(subscription.topic_name)
+                    break
+        return taken, left
 
     def _run(self) -> None:
         next_loss_read = time.monotonic()
@@ -155,12 +165,13 @@ class SerializedTaker:
                                                throttle_duration_sec=5.0)
                 time.sleep(self._period_s)
 
-    def drain(self) -> int:
+    def drain(self, deadline: float | None = None) -> list[str]:
         """Take what is queued now and read the losses, in the calling thread (the taker's
-        thread must be stopped); return how many messages."""
-        taken = self._take_all(until_stopped=False)
+        thread must be stopped), until ``deadline`` (time.monotonic(); None: all). Return the
+        topics whose queue was not emptied by then."""
+        _taken, left = self._take_all(until_stopped=False, deadline=deadline)
         self._read_losses()
-        return taken
+        return left
 
     def stop(self) -> None:
         """Stop the thread (it finishes the message in hand first)."""
