@@ -229,6 +229,38 @@ def test_stopping_closes_open_episodes_as_unfinished_and_counts_losses_per_episo
     assert [r.values['phase'] for r in topics['/dam/status']] == ['PHASE_2']
 
 
+def test_a_stop_out_of_time_counts_what_the_backlog_and_the_episode_held_back(
+        tmp_path: Path, prefixes, typestore) -> None:
+    """The recorder's own losses (its full backlog, its stop's time run out) make the episode
+    incomplete with their counts; past the close's deadline the messages held back are
+    counted as not written, except the goal's events (protected), which are written."""
+    rec = make_recorder(tmp_path)
+    js = rec.add_topic(specs(prefixes)[0])
+    events = rec.add_topic(TopicSpec('/dam/episode', 'std_msgs/msg/String', 'string data\n',
+                                     '', [], protected=True))
+    rec.note_shed(js, 3)  # before the episode: not its loss
+    event(rec, events, T0, 0)
+    rec.started(GOAL, T0)
+    for i in range(1, 11):  # held back (HOLD_BACK_NS): none written yet
+        rec.write(js, T0 + i * MS, joint_state(typestore, i))
+    event(rec, events, T0 + 11 * MS, 1)
+    rec.note_shed(js, 4)
+    rec.note_unwritten_at_stop(js, 7)
+    [(bag, _outcome, missing)] = rec.close_all(T0 + 12 * MS, deadline=time.monotonic())
+    items = {(m.kind, m.topic): m for m in missing}
+    assert items[('backlog_dropped', '/joint_states')].short == 4
+    # The 7 left in the recorder's backlog and the 10 the episode held back.
+    assert items[('not_written', '/joint_states')].short == 17
+    assert items[('not_written', '/joint_states')].recorded == 0
+    assert rec.held_unwritten == {'/joint_states': 10}
+    custom = yaml.safe_load((bag / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information']['custom_data']
+    assert json.loads(custom['dam_recorder.backlog_dropped_messages']) == {'/joint_states': 4}
+    assert json.loads(custom['dam_recorder.stop_unwritten_messages']) == {'/joint_states': 17}
+    topics = read_with_rosbags(bag)
+    assert len(topics['/dam/episode']) == 2 and not topics.get('/joint_states')
+
+
 def test_a_goal_that_started_before_the_recorder_has_no_episode(tmp_path: Path) -> None:
     rec = make_recorder(tmp_path)
     assert rec.ended(GOAL, T0, summary()) is False
