@@ -15,6 +15,10 @@ durations, outcome, whether it is complete, ``k_theta``, ``delta_theta_p``, whet
 is guaranteed) read from the metadata only, and the number of episodes per outcome, where an
 incomplete episode counts as ``INCOMPLETE`` whatever its outcome.
 
+An episode its recorder has not closed (``..._recording``: still being recorded, or the
+recorder was killed) is shown as such, outcome ``OPEN``, with :data:`OPEN_HINT`: ``recover``
+makes its bag readable and labels it by what it holds (:mod:`dam_recorder.episode_recovery`).
+
 Times are receive times; "s" columns are seconds since the bag's first message.
 """
 
@@ -23,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from collections import Counter
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -58,6 +63,16 @@ STATUS_TOPIC = '/dam/status'
 #: Phases of a running grasp, and the phases a grasp ends in.
 ACTIVE_PHASES = frozenset({'APPROACH', 'ROLLING_UP', 'ENVELOPE'})
 END_PHASES = frozenset({'DONE', 'ABORTED', 'FAILED'})
+#: Outcome shown for an episode its recorder has not closed, and what to do about it.
+OPEN_OUTCOME = 'OPEN'
+OPEN_HINT = ('if its recorder was killed (none writes it any more), `ros2 run dam_recorder '
+             'recover DIR` rebuilds the bag and labels the episode by what it holds')
+
+
+def is_open(completeness: Completeness | None) -> bool:
+    """Whether the metadata marks the episode open (an item of kind ``open``: its recorder
+    has not closed it)."""
+    return completeness is not None and any(m.kind == 'open' for m in completeness.missing)
 
 
 @dataclass(frozen=True)
@@ -208,7 +223,8 @@ class EpisodeRow:
         wall clock).
     outcome : str
         The summary's outcome name; without a summary the directory name's suffix in upper
-        case; ``ERROR`` when the bag cannot be read.
+        case, ``OPEN`` for an episode its recorder has not closed; ``ERROR`` when the bag
+        cannot be read.
     k_theta : tuple of float
         As run [N*m/rad]; for a goal that never ran (refused), as the client sent it.
     delta_theta_p : tuple of float
@@ -347,7 +363,15 @@ def bag_info(path: str | os.PathLike[str]) -> BagInfo:
                                                                 TRIMMED_KEY, DROPPED_KEY))
     episode = meta.episode()
     completeness = meta.completeness()
-    with BagReader(meta.path) as bag:
+    with ExitStack() as stack:
+        try:
+            bag = stack.enter_context(BagReader(meta.path))
+        except BagReadError as exc:
+            if not is_open(completeness):
+                raise
+            cause = str(exc).removeprefix(f'{meta.path}: ').split('; a file without')[0]
+            raise BagReadError(f'{meta.path}: an episode its recorder has not closed (still '
+                               f'being recorded, or killed): {cause}; {OPEN_HINT}') from None
         types = bag.topics
         for name, type_name in meta.topics.items():
             types.setdefault(name, type_name)  # topics without messages
@@ -396,6 +420,8 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
     if completeness is not None:
         complete: bool | None = completeness.complete
         missing = tuple(describe(completeness.missing))
+        if is_open(completeness):
+            missing += (f'({OPEN_HINT})',)
     else:  # a bag without the key: its name may still say
         complete = False if name.endswith(INCOMPLETE_SUFFIX) else None
         missing = ()
@@ -405,6 +431,8 @@ def episode_row(bag_dir: Path) -> EpisodeRow:
         if named is None and completeness is None:  # an ordinary bag, not an episode
             return EpisodeRow(name, start, duration, None, '-', kind='bag', **sizes)
         outcome = named[1].upper() if named else 'UNKNOWN'
+        if is_open(completeness):
+            outcome = OPEN_OUTCOME
         return EpisodeRow(name, start, duration, None, outcome, complete=complete,
                           missing=missing, **sizes)
     summary = episode.summary

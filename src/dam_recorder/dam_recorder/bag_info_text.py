@@ -10,7 +10,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from dam_recorder.bag_info import STATUS_TOPIC, BagInfo, EpisodesInfo
+from dam_recorder.bag_info import OPEN_HINT, STATUS_TOPIC, BagInfo, EpisodesInfo, is_open
 from dam_recorder.completeness import Completeness, describe
 from dam_recorder.episode import Episode, format_floats
 from dam_recorder.object_record import ObjectTruth, object_lines
@@ -108,8 +108,11 @@ def completeness_lines(completeness: Completeness | None) -> list[str]:
         return []
     if completeness.complete:
         return ['complete:   yes']
-    return ['complete:   NO, INCOMPLETE: the bag lacks',
-            *(f'  {line}' for line in describe(completeness.missing))]
+    lines = ['complete:   NO, INCOMPLETE: the bag lacks',
+             *(f'  {line}' for line in describe(completeness.missing))]
+    if is_open(completeness):
+        lines.append(f'  ({OPEN_HINT})')
+    return lines
 
 
 def format_bag_info(info: BagInfo) -> str:

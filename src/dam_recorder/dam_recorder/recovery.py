@@ -20,6 +20,12 @@ topic's type and offered QoS from the files, its type hash computed from the sto
 (else kept from the old metadata when its type is the files' type); the old ``custom_data`` is
 kept and ``dam_recorder.recovered_files`` names the rebuilt files. The report names, per file
 and for the metadata, what was lost or corrected and why.
+
+An episode its recorder left open (``..._recording``, :mod:`dam_recorder.episode_recovery`) is
+then judged from what the recovered bag holds: ``dam_episode.summary``, ``dam_episode.complete``
+and ``dam_episode.missing`` are written into ``metadata.yaml`` (never complete: an item of kind
+``killed`` says what a kill loses) and the directory is renamed
+``<stem>_<outcome>_incomplete`` (:attr:`RecoveryReport.episode`, :attr:`RecoveryReport.path`).
 """
 
 from __future__ import annotations
@@ -42,6 +48,12 @@ from dam_recorder.bag_writer import (
     add_connection,
     make_connection,
     open_storage,
+)
+from dam_recorder.episode_recovery import (
+    EpisodeVerdict,
+    is_open_episode,
+    judge_open_episode,
+    relabel,
 )
 from dam_recorder.errors import RecoveryError
 from dam_recorder.mcap_salvage import MCAP_MAGIC, Salvage, salvage_mcap
@@ -88,12 +100,16 @@ class FileReport:
 @dataclass
 class RecoveryReport:
     """The result of :func:`recover_bag`: one :class:`FileReport` per file, the topics, and
-    what was wrong with ``metadata.yaml`` (``metadata_problems``, one sentence each)."""
+    what was wrong with ``metadata.yaml`` (``metadata_problems``, one sentence each); for an
+    episode left open, the verdict on it (``episode``) and the directory's new path
+    (``path``; else ``bag_dir``)."""
 
     bag_dir: Path
     files: list[FileReport] = field(default_factory=list)
     topics: list[TopicInfo] = field(default_factory=list)
     metadata_problems: list[str] = field(default_factory=list)
+    episode: EpisodeVerdict | None = None
+    path: Path | None = None
 
     @property
     def message_count(self) -> int:
@@ -369,8 +385,9 @@ def recover_bag(bag_dir: str | os.PathLike[str]) -> RecoveryReport:
     """Make the bag in ``bag_dir`` readable by every reader again; return what was found.
 
     Run it only on a bag whose recorder has ended. A bag that is whole is left as it is
-    (``metadata.yaml`` is rewritten with the same content). What was lost or corrected, and
-    why, is in the report (:attr:`FileReport.problems`,
+    (``metadata.yaml`` is rewritten with the same content). An episode left open is judged
+    and renamed (see the module; :attr:`RecoveryReport.path` is where it is then). What was
+    lost or corrected, and why, is in the report (:attr:`FileReport.problems`,
     :attr:`RecoveryReport.metadata_problems`).
 
     Raises
@@ -404,7 +421,25 @@ def recover_bag(bag_dir: str | os.PathLike[str]) -> RecoveryReport:
         custom[RECOVERED_KEY] = ','.join(rebuilt)
     report.topics = topics.finish()
     distro = (old or {}).get('ros_distro')
-    write_metadata(bag_dir, bag_metadata(
-        storage_identifier=storage, files=infos, topics=report.topics, custom_data=custom,
-        ros_distro=distro if isinstance(distro, str) and distro else 'jazzy'))
+
+    def write() -> None:
+        write_metadata(bag_dir, bag_metadata(
+            storage_identifier=storage, files=infos, topics=report.topics, custom_data=custom,
+            ros_distro=distro if isinstance(distro, str) and distro else 'jazzy'))
+    write()
+    report.path = bag_dir
+    if is_open_episode(bag_dir, custom):
+        report.episode = judge_open_episode(
+            bag_dir, custom, ((t.name, _latched(t.offered_qos)) for t in report.topics))
+        custom.update(report.episode.custom_data)
+        write()
+        report.path = relabel(bag_dir, report.episode)
     return report
+
+
+def _latched(profiles: list[Any]) -> bool:
+    """Whether every publisher offered transient local durability (``rosbags`` QoS
+    profiles): the recorder then records the topic as latched."""
+    return bool(profiles) and all(
+        getattr(getattr(q, 'durability', None), 'name', '') == 'TRANSIENT_LOCAL'
+        for q in profiles)
