@@ -34,9 +34,10 @@ def build_parser() -> argparse.ArgumentParser:
                     'the recorder died are lost (at most chunk_interval, 1 s by default). An '
                     'episode the recorder left open (DIR named ..._recording) is then labelled '
                     'by what its bag proves: the outcome from the goal\'s ENDED event in the '
-                    'bag (else UNKNOWN), always INCOMPLETE (the kill lost the last '
-                    'chunk_interval and the 3 s an episode holds back), with what else it '
-                    'lacks; metadata.yaml says so (dam_episode.summary, complete, missing) and '
+                    'bag (else UNKNOWN), always INCOMPLETE (the kill lost up to '
+                    'chunk_interval, and while the goal runs up to 3 s more that an episode '
+                    'holds back), with what else it lacks; metadata.yaml says so '
+                    '(dam_episode.summary, complete, missing) and '
                     'DIR is renamed <start>_<outcome>_incomplete. It prints the verdict and '
                     'the new path.')
     parser.add_argument('bag', metavar='DIR', help='the bag directory')
