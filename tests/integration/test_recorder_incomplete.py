@@ -173,9 +173,9 @@ def test_truncated_episodes_are_marked_incomplete_with_what_they_lack(tmp_path: 
     assert table.returncode == 0, table.stderr
     rows = {line.split()[0]: line.split() for line in table.stdout.splitlines()
             if line.startswith(tuple(b.name for b in bags.values()))}
-    assert rows[whole.name][5:7] == ['SUCCESS', 'yes']
-    assert rows[killed.name][5:7] == ['SUCCESS', 'NO']
-    assert rows[stopped.name][5:7] == ['UNKNOWN', 'NO']
+    assert rows[whole.name][6:8] == ['SUCCESS', 'yes']
+    assert rows[killed.name][6:8] == ['SUCCESS', 'NO']
+    assert rows[stopped.name][6:8] == ['UNKNOWN', 'NO']
     assert '  SUCCESS            1\n  INCOMPLETE         2' in table.stdout
     one = subprocess.run([bag, 'info', str(killed)], capture_output=True, text=True,
                          timeout=60)

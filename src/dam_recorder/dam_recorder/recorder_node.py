@@ -56,14 +56,12 @@ up"). It counts what it could not record instead: gaps in each publisher's seque
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 import sys
 import time
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -114,9 +112,18 @@ from dam_recorder.errors import (
     CdrError,
     ConfigurationError,
     DamRecorderError,
-    TypeDescriptionError,
 )
-from dam_recorder.qos import OfferedQos, request_for_offers, to_rosbags_qos
+from dam_recorder.qos import request_for_offers, to_rosbags_qos
+from dam_recorder.recorded_topics import (
+    LOG_TIME_TEXT,
+    PROTECTED_TOPICS,
+    RecordedTopic,
+    counts_json,
+    header_log_time_ns,
+    losses_text,
+    lost_anything,
+)
+from dam_recorder.ros_types import message_class, offered_qos, starts_with_header
 from dam_recorder.selection import DEFAULT_TOPICS, TopicSelection
 from dam_recorder.taker import SerializedTaker
 from dam_recorder.type_description import install_prefix_of, load_message_type
@@ -141,18 +148,6 @@ HURRIED_BACKLOG = 1000
 #: Memory a message in the backlog takes beside its data (the tuple and the middleware's
 #: information dictionary) [bytes], for ``max_backlog_bytes``.
 MESSAGE_OVERHEAD_BYTES = 400
-#: A header stamp is a message's log time when it is at most this far after the receipt
-#: (clocks of two machines differ a little) [ns] ...
-HEADER_LEAD_LIMIT_NS = 1_000_000_000
-#: ... and at most this far before it [ns] (a receipt that late is no delivery delay).
-HEADER_LAG_LIMIT_NS = 300_000_000_000
-#: What a bag's log times are (custom_data ``dam_recorder.log_time``).
-LOG_TIME_TEXT = ('header stamp for messages that start with a std_msgs/Header (else, and for '
-                 'a stamp of 0 or far from the receipt, the receive time); receive time for '
-                 'the others; with use_sim_time on the simulated clock')
-#: Topics whose messages the backlog never drops and that are written first: the goal's
-#: events and statuses (what labels an episode).
-PROTECTED_TOPICS = frozenset({EPISODE_TOPIC, ACTION_STATUS_TOPIC})
 #: How often the taker thread takes what is queued [s].
 TAKE_PERIOD_S = 0.005
 #: How often the executor's thread writes what the taker took [s].
@@ -173,97 +168,6 @@ STARTUP_DISCOVERY_PASSES = 7
 FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
               EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
               ACTION_STATUS_TOPIC: 'action_msgs/msg/GoalStatusArray'}
-
-
-def message_class(type_name: str) -> type:
-    """The Python class of ``type_name`` (``pkg/msg/Name``, or a type derived from an action
-    or a service such as ``pkg/action/Name_FeedbackMessage``).
-
-    Raises
-    ------
-    TypeDescriptionError
-        If the class cannot be imported (the message names the type).
-    """
-    try:
-        package, kind, name = type_name.split('/')
-        module = importlib.import_module(f'{package}.{kind}')
-    except (ValueError, ImportError) as exc:
-        raise TypeDescriptionError(f'cannot import the type {type_name!r}: {exc}') from None
-    if hasattr(module, name):
-        return getattr(module, name)
-    for cut in range(len(name) - 1, 0, -1):  # Name_FeedbackMessage lives beside Name
-        base = getattr(module, name[:cut], None) if name[cut] == '_' else None
-        derived = getattr(sys.modules.get(getattr(base, '__module__', '')), name, None)
-        if derived is not None:
-            return derived
-    raise TypeDescriptionError(f'cannot import the type {type_name!r}: no class {name}')
-
-
-def offered_qos(info: Any) -> OfferedQos:
-    """The :class:`OfferedQos` of an rclpy ``TopicEndpointInfo``."""
-    qos = info.qos_profile
-    return OfferedQos(
-        history=qos.history.name, depth=int(qos.depth), reliability=qos.reliability.name,
-        durability=qos.durability.name, deadline_ns=qos.deadline.nanoseconds,
-        lifespan_ns=qos.lifespan.nanoseconds, liveliness=qos.liveliness.name,
-        liveliness_lease_duration_ns=qos.liveliness_lease_duration.nanoseconds,
-        avoid_ros_namespace_conventions=bool(qos.avoid_ros_namespace_conventions))
-
-
-@dataclass
-class _Recorded:
-    """A topic being recorded."""
-
-    name: str
-    topic_id: int
-    end: CdrEnd
-    lost: int = 0
-    paused: int = 0
-    trimmed: int = 0
-    malformed: int = 0
-    dropped: int = 0
-    #: Publishers that joined with a QoS the subscription cannot match (nothing of theirs is
-    #: recorded).
-    incompatible: int = 0
-    #: The topic appeared after the recording began (found by a later discovery).
-    appeared_late: bool = False
-    #: Messages its publisher sent before the recorder had subscribed (a late topic).
-    before_subscription: int = 0
-    #: Gaps in the publication sequence numbers count as dropped while the topic has one
-    #: publisher (rclpy does not say which publisher sent a message).
-    one_publisher: bool = False
-    last_sequence: int | None = None
-    #: A sequence number of the topic was seen.
-    followed: bool = False
-    #: What an episode reads from a message (None: nothing).
-    facts: Any = None
-    #: Never dropped from the backlog, written first (:data:`PROTECTED_TOPICS`).
-    protected: bool = False
-    #: Its messages start with a ``std_msgs/Header``: logged at their header stamp.
-    stamped: bool = False
-    #: Of those, messages logged at their receipt instead (a header stamp of 0, from the
-    #: future, or older than :data:`HEADER_LAG_LIMIT_NS`).
-    logged_at_receipt: int = 0
-    #: Messages put into the backlog (the taker's thread) and taken out of it (the
-    #: executor's): their difference is what the backlog holds of the topic.
-    queued: int = 0
-    dequeued: int = 0
-    #: Dropped because the backlog was full (the taker's thread counts), and how many of them
-    #: the executor's thread has passed on to the episodes.
-    shed: int = 0
-    shed_noted: int = 0
-    #: In the backlog when the stop's time ran out: not written.
-    unwritten_at_stop: int = 0
-    #: Messages were still queued in the middleware when the stop's time ran out (not taken,
-    #: not counted).
-    not_taken: bool = False
-
-
-def _starts_with_header(cls: type) -> bool:
-    """The message type ``cls`` starts with a ``std_msgs/Header``."""
-    fields = getattr(cls, 'get_fields_and_field_types', None)
-    first = next(iter(fields().items()), None) if callable(fields) else None
-    return first is not None and first[1] == 'std_msgs/Header'
 
 
 def _descriptor(description: str, **kwargs: Any) -> ParameterDescriptor:
@@ -302,7 +206,7 @@ class RecorderNode(Node):
         #: The stop came with a backlog (:data:`HURRIED_BACKLOG`): the middleware entities are
         #: left to the end of the process.
         self._hurried = False
-        self._recorded: dict[str, _Recorded] = {}
+        self._recorded: dict[str, RecordedTopic] = {}
         #: (goal id, event) of the goal events handled (each comes twice, see
         #: _on_episode_event).
         self._events_handled: set[tuple[str, int]] = set()
@@ -524,10 +428,10 @@ class RecorderNode(Node):
         else:
             topic_id = self._writer.add_topic(name, type_name, message_type.definition(),
                                               type_hash, profiles)
-        recorded = _Recorded(name, topic_id, end, one_publisher=len(offers) == 1,
+        recorded = RecordedTopic(name, topic_id, end, one_publisher=len(offers) == 1,
                              facts=self._fact_reader(name, type_name, cls),
                              protected=name in PROTECTED_TOPICS,
-                             stamped=_starts_with_header(cls))
+                             stamped=starts_with_header(cls))
         self._recorded[name] = recorded
         self._taker.subscribe(
             cls, name, qos, self._callback(recorded),
@@ -562,7 +466,7 @@ class RecorderNode(Node):
                                 int(s.status))) for s in msg.status_list]
         return read
 
-    def _callback(self, recorded: _Recorded) -> Any:
+    def _callback(self, recorded: RecordedTopic) -> Any:
         """What the taker's thread does with a message of ``recorded``: into the backlog
         (the urgent one for a protected topic), or dropped and counted when the backlog holds
         ``max_backlog_bytes`` already."""
@@ -704,23 +608,10 @@ class RecorderNode(Node):
             return stamp if stamp is not None else self.get_clock().now().nanoseconds
         return received or time.time_ns()
 
-    def _log_time_ns(self, recorded: _Recorded, data: bytes, received: int) -> int:
-        """A message's log time (:data:`LOG_TIME_TEXT`): its header stamp, or its receive
-        time. Receive times bunch up when the recorder's middleware gets too little CPU time
-        (it takes in bursts); header stamps are where the publisher put the messages."""
-        receipt = self._receipt_ns(received)
-        if recorded.stamped:
-            header = header_stamp_ns(data)
-            if header and receipt - HEADER_LAG_LIMIT_NS <= header <= receipt + \
-                    HEADER_LEAD_LIMIT_NS:
-                return header
-            recorded.logged_at_receipt += 1
-        return receipt
-
-    def _write(self, writer: Any, recorded: _Recorded, data: bytes,
+    def _write(self, writer: Any, recorded: RecordedTopic, data: bytes,
                info: dict[str, Any]) -> None:
         received = info.get('received_timestamp', 0)
-        stamp = self._log_time_ns(recorded, data, received)
+        stamp = header_log_time_ns(recorded, data, self._receipt_ns(received))
         self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp)
         if self._paused:
             recorded.paused += 1
@@ -755,7 +646,7 @@ class RecorderNode(Node):
         else:
             writer.write(recorded.topic_id, stamp, cut)
 
-    def _read_facts(self, recorded: _Recorded, data: bytes) -> Facts | None:
+    def _read_facts(self, recorded: RecordedTopic, data: bytes) -> Facts | None:
         if recorded.facts is None:
             return None
         try:
@@ -766,7 +657,7 @@ class RecorderNode(Node):
                                       throttle_duration_sec=5.0)
             return None
 
-    def _follow_sequence(self, recorded: _Recorded, sequence: int | None, stamp: int) -> None:
+    def _follow_sequence(self, recorded: RecordedTopic, sequence: int | None, stamp: int) -> None:
         """Count the messages missing before this one by its publisher's sequence number."""
         if not sequence:
             return
@@ -798,14 +689,14 @@ class RecorderNode(Node):
                 f'(sequence {last} to {sequence}; {recorded.dropped} in all)',
                 throttle_duration_sec=2.0)
 
-    def _on_lost(self, recorded: _Recorded, change: int) -> None:
+    def _on_lost(self, recorded: RecordedTopic, change: int) -> None:
         recorded.lost += change
         if self._episodes is not None:
             self._episodes.note_lost(recorded.topic_id, change)
         self.get_logger().warning(f'{recorded.name}: the middleware reports {change} message(s) '
                                   f'lost ({recorded.lost} in all)')
 
-    def _on_incompatible(self, recorded: _Recorded, change: int, policy: str) -> None:
+    def _on_incompatible(self, recorded: RecordedTopic, change: int, policy: str) -> None:
         """The taker's thread: ``change`` more publishers of the topic offer a QoS its
         subscription cannot match. Logged once per topic, counted in the bag's custom data
         (``dam_recorder.incompatible_publishers``)."""
@@ -820,8 +711,7 @@ class RecorderNode(Node):
 
     def _custom_data(self) -> dict[str, str]:
         def counts(attribute: str) -> str:
-            return json.dumps({r.name: getattr(r, attribute) for r in self._recorded.values()
-                               if getattr(r, attribute)}, sort_keys=True)
+            return counts_json(self._recorded.values(), attribute)
         return {'dam_recorder.lost_messages': counts('lost'),
                 'dam_recorder.paused_messages': counts('paused'),
                 'dam_recorder.trimmed_messages': counts('trimmed'),
@@ -1057,9 +947,9 @@ class RecorderNode(Node):
             unwritten = self._episodes.unwritten_count()
             text = (f'{len(self._episodes.finished)} episode(s) recorded in '
                     f'{self._episodes.out_dir} ({incomplete} incomplete); '
-                    f'{self._losses_text(unwritten)}')
+                    f'{self._losses(unwritten)}')
             log = self.get_logger().warning if incomplete or unwritten or \
-                self._lost_anything() else self.get_logger().info
+                self._lost() else self.get_logger().info
             log(text)
         writer, self._writer = self._writer, None
         if writer is None:
@@ -1071,14 +961,21 @@ class RecorderNode(Node):
         count = sum(t.message_count for t in writer.topics)
         unwritten = sum(writer.unwritten.values())
         text = (f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
-                f'{len(writer.files)} file(s); {self._losses_text(unwritten)}')
+                f'{len(writer.files)} file(s); {self._losses(unwritten)}')
         if writer.failure is None:
-            (self.get_logger().warning if self._lost_anything() else self.get_logger().info)(
+            (self.get_logger().warning if self._lost() else self.get_logger().info)(
                 text)
             return
         where = 'metadata.yaml says so' if writer.metadata_current else (
             'metadata.yaml could not be written: run recover on the bag')
         self.get_logger().warning(f'{text} ({writer.failure.errno_name}; {where})')
+
+    def _losses(self, unwritten: int) -> str:
+        return losses_text(self._recorded.values(), unwritten, self._backlog.describe(),
+                           self.not_recorded())
+
+    def _lost(self) -> bool:
+        return lost_anything(self._recorded.values(), self.not_recorded())
 
     def _close_deadline(self) -> float | None:
         """Until when closing episodes write what they held back (None: no limit)."""
@@ -1088,37 +985,6 @@ class RecorderNode(Node):
             return time.monotonic()  # what was held back is counted, not written
         return self._stop_deadline + CLOSE_WRITE_S
 
-    def _lost_anything(self) -> bool:
-        return any(r.lost or r.dropped or r.shed or r.unwritten_at_stop or r.not_taken
-                   or r.before_subscription or r.incompatible
-                   for r in self._recorded.values()) or bool(self.not_recorded())
-
-    def _losses_text(self, unwritten: int) -> str:
-        """The closing line's account of every message and topic not in the bag(s)."""
-        def per_topic(attribute: str) -> str:
-            counts = {r.name: getattr(r, attribute) for r in self._recorded.values()
-                      if getattr(r, attribute)}
-            total = sum(counts.values())
-            return f'{total}' + (' (' + ', '.join(f'{n} {c}' for n, c in sorted(
-                counts.items())) + ')' if total else '')
-        not_taken = sorted(r.name for r in self._recorded.values() if r.not_taken)
-        not_recorded = self.not_recorded()
-        parts = [
-            f'not written {unwritten} (write errors)',
-            f'not written at the stop {per_topic("unwritten_at_stop")}',
-            f'dropped from the full backlog {per_topic("shed")}',
-            f'dropped on the way {per_topic("dropped")}',
-            f'reported lost by the middleware {per_topic("lost")}',
-            f'before the subscription {per_topic("before_subscription")}',
-            f'backlog {self._backlog.describe()}',
-        ]
-        if not_taken:
-            parts.append('still queued in the middleware at the stop (not counted): '
-                         + ', '.join(not_taken))
-        parts.append(f'topics not recorded {len(not_recorded)}' + (
-            ' (' + '; '.join(f'{n}: {why}' for n, why in sorted(not_recorded.items())) + ')'
-            if not_recorded else ''))
-        return '; '.join(parts)
 
 
 def main(args: list[str] | None = None) -> None:
