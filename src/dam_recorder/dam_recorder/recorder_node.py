@@ -27,6 +27,12 @@ discovery_period : double [s]
 queue_depth : int [messages]
     Depth of each subscription's queue (default 5000: 10 s of a 500 Hz topic, a recorder
     that falls behind for a while loses nothing).
+max_backlog_bytes : int [bytes]
+    Most memory the messages waiting to be written may take (default 256 MiB); beyond it
+    messages are dropped and counted per topic, never the goal's events and statuses.
+stop_write_time : double [s]
+    After SIGINT or SIGTERM, how long the recorder goes on writing what it received (default
+    2); the rest is counted per topic as not written.
 episodes : bool
     Episode mode: one bag per ``/dam_grasp`` goal in the directory ``output``
     (:mod:`~dam_recorder.episodes`), from ``pre_roll`` before the goal to ``post_roll`` after.
@@ -34,9 +40,13 @@ pre_roll, post_roll : double [s]
     What an episode holds before its goal starts and after it ends.
 
 Messages are taken serialized (``raw=True``: never deserialized), cut at their CDR end
-(:mod:`~dam_recorder.cdr_end`) and stamped with the time the middleware received them (the
-node's clock with ``use_sim_time:=true``). Services (``std_srvs/srv/Trigger``): ``~/pause``,
-``~/resume``, ``~/split``. SIGINT and SIGTERM close the bag (``destroy_node``).
+(:mod:`~dam_recorder.cdr_end`) and logged at their header stamp when their type starts with a
+``std_msgs/Header``, else at the time the middleware received them (on the simulated clock
+with ``use_sim_time:=true``, :mod:`~dam_recorder.clock_receipts`). Services
+(``std_srvs/srv/Trigger``): ``~/pause``, ``~/resume``, ``~/split``. SIGINT and SIGTERM close
+the bag (``destroy_node``) within ``stop_write_time`` of writing; the closing line and the
+bag's metadata count every message and name every selected topic not recorded
+(:mod:`~dam_recorder.recorded_topics`).
 
 The first error writing the bag (a full or read-only file system, the bag directory removed,
 an I/O error; :mod:`~dam_recorder.write_failure`) is logged once, naming the bag, the file and
