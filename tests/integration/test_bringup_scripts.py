@@ -165,7 +165,9 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
     after 60 s: /check_lift has not answered") while check_lift_server was still starting.
     Beside six burners on two cores it waits while the nodes progress and runs the grasp.
     ``--keep`` leaves the suite up to look at: ``--object``, ``--params-file`` and
-    ``--ros-args`` reached the nodes, and the stand-in is every node's clock."""
+    ``--ros-args`` reached the nodes, and the stand-in is every node's clock. A recorder with
+    one-message reader queues loses joint states: the grasp's result line is printed and
+    run.sh exits with 5 (the episode bag is incomplete), not 0."""
     params = tmp_path / 'params.yaml'
     params.write_text(yaml.safe_dump({
         '/**': {'ros__parameters': {'check_lift_timeout': 5.0}},
@@ -175,7 +177,7 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
     command = ['bash', str(SCRIPTS / 'run.sh'), '--backend', 'sim', '--object', 'hex_bar',
                '--keep', '--params-file', str(params), '--ros-args', '-p',
                'hand_driver:thread_priority:=0', '-p', 'recorder:pre_roll:=0.5', '-p',
-               'recorder:post_roll:=0.5', '--']
+               'recorder:post_roll:=0.5', '-p', 'recorder:queue_depth:=1', '--']
     errors = tmp_path / 'run.stderr'
     with errors.open('w', encoding='utf-8') as err, subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=err, text=True, env=env,
@@ -199,11 +201,12 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
         output = run.stdout + run.stderr
         assert 'not ready after' not in output and 'nothing progressed' not in output, output
         assert 'Up. Stop with' in run.stdout, output
-        # the result line, and a status that goes with it (5: the episode bag is incomplete)
+        # the result line, and its own status for an episode bag that is incomplete: the
+        # recorder's reader queues hold one message (queue_depth 1), so beside the burners
+        # joint states are dropped on the way (gaps in their sequence numbers)
         assert re.search(r'^result: [A-Z_]+ \(', run.stdout, re.M), output
-        assert run.returncode in (0, 3, 5), output
-        assert (run.returncode == 5) == ('exit status 5: the episode bag is INCOMPLETE'
-                                         in run.stderr), output
+        assert run.returncode == 5, output
+        assert 'exit status 5: the episode bag is INCOMPLETE' in run.stderr, output
         controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')
         assert 'object hex_bar (' in controller_log, controller_log
         client = RosClient()
