@@ -278,13 +278,14 @@ def judge_open_episode(bag_dir: Path, custom_data: Mapping[str, str],
     got_result = bool(ended)
     missing = account.judge(first_ns, last_ns, [name for name, _ in topics], got_result,
                             _counts(custom_data, LOST_KEY))
-    end_s = round((last_ns - first_ns) * 1e-9, 3)
+    end_s = round((last_ns - first_ns) * 1e-9, 3) if read.messages else None
     missing.append(Missing(
         KILLED_KIND, '', f'the recorder was killed with the episode open: what it had received '
         f'after the last chunk it wrote out is not in the bag (up to chunk_interval; while '
         f'the goal runs up to {HOLD_BACK_NS / 1e9:g} s more, which an open episode holds '
-        f'back; the bag ends at {end_s:.3f} s)', until_ns=last_ns, until_s=end_s,
-        end_s=end_s))
+        f'back; ' + (f'the bag ends at {end_s:.3f} s)' if read.messages
+                     else 'the bag holds no message)'),
+        until_ns=last_ns if read.messages else None, until_s=end_s, end_s=end_s))
     summary: dict[str, Any] | None = None
     if ended:
         summary = summary_from_event(ended[0][2])
