@@ -71,6 +71,10 @@ COUNTED_TOPICS: dict[str, str] = {'/joint_states': 'joint_states',
                                   '/hand/command': 'hand_commands'}
 #: Topics published while a grasp runs (or holds its result): they stop when it ends.
 GOAL_BOUND_TOPICS = frozenset({'/hand/command', '/dam_grasp/_action/feedback'})
+#: The types whose messages an episode reads facts from: topic -> type.
+FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
+              EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
+              ACTION_STATUS_TOPIC: 'action_msgs/msg/GoalStatusArray'}
 #: ``/dam/episode`` event codes (``GraspEpisode.EVENT_*``).
 EVENT_STARTED, EVENT_ENDED = 0, 1
 #: Final states of a goal (``action_msgs/GoalStatus.STATUS_*``).

@@ -41,12 +41,12 @@ from typing import Any
 
 from dam_recorder.bag_reading import DROPPED_KEY, LOST_KEY, SHED_KEY, typestore_of
 from dam_recorder.completeness import (
-    ACTION_STATUS_TOPIC,
     COUNTED_TOPICS,
     DIAGNOSTICS_TOPIC,
     EPISODE_TOPIC,
     EVENT_ENDED,
     EVENT_STARTED,
+    FACT_TYPES,
     INCOMPLETE_SUFFIX,
     MISSING_KEY,
     EpisodeAccount,
@@ -70,11 +70,6 @@ from dam_recorder.errors import RecoveryError
 
 #: Kind of the :class:`Missing` item every recovered killed episode gets.
 KILLED_KIND = 'killed'
-#: The topics whose messages the recorder decodes for their facts, with the type it expects
-#: (as the recorder node's ``FACT_TYPES``).
-FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
-              EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
-              ACTION_STATUS_TOPIC: 'action_msgs/msg/GoalStatusArray'}
 #: An open episode's directory: ``<stem>_recording``, or with the goal id's first 8 digits
 #: (and a number) when that name was taken (the recorder's free name).
 _OPEN_NAME = re.compile(rf'^(?P<stem>.+)_{OPEN_SUFFIX}(_[0-9a-f]{{8}}(_\d+)?)?$')

@@ -102,9 +102,9 @@ from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
 from dam_recorder.clock_receipts import ClockReceipts, clock_ns_of
 from dam_recorder.completeness import (
-    ACTION_STATUS_TOPIC,
     COUNTED_TOPICS,
     DIAGNOSTICS_TOPIC,
+    FACT_TYPES,
     Facts,
     describe,
     diagnostic_counts,
@@ -174,10 +174,6 @@ STARTUP_DISCOVERY_S = 3.0
 #: ... and the start-up window lasts at least this many discovery passes: on a loaded machine
 #: the passes come late, and discovery, which runs on the same starved cores, is late too.
 STARTUP_DISCOVERY_PASSES = 7
-#: The types whose messages an episode reads facts from (:mod:`dam_recorder.completeness`).
-FACT_TYPES = {DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
-              EPISODE_TOPIC: 'dam_interfaces/msg/GraspEpisode',
-              ACTION_STATUS_TOPIC: 'action_msgs/msg/GoalStatusArray'}
 
 
 def _descriptor(description: str, **kwargs: Any) -> ParameterDescriptor:
