@@ -41,8 +41,9 @@ class DriverClient:
         node.create_subscription(JointState, '/joint_states', self._on_js, 50)
 
     def _on_diag(self, msg: Any) -> None:
-        for status in msg.status:
-            if status.name.startswith('dam_hand_driver'):
+        for status in msg.status:  # the driver's own status (not its clock watch's)
+            if status.name.startswith('dam_hand_driver') and \
+                    status.name != 'dam_hand_driver: clock':
                 self.diag = {kv.key: kv.value for kv in status.values}
                 self.diag['message'] = status.message
 
