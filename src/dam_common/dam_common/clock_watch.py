@@ -191,7 +191,8 @@ class ClockWatch:
             if kind not in self._conditions:
                 logger.warning(f'clock: {text}')
         for kind in self._conditions.keys() - found.keys():
-            logger.info(f'clock: no longer {kind}: {self._conditions[kind].split(":")[0]}')
+            logger.info(f'clock: cleared ({self._conditions[kind].split(":")[0]} no longer '
+                        f'holds; now {self._publishers_text()})')
         self._conditions = found
 
     @property
