@@ -59,6 +59,8 @@ class RecordedTopic:
     #: publisher (rclpy does not say which publisher sent a message).
     one_publisher: bool = False
     last_sequence: int | None = None
+    #: ``shed`` as it was when the message of ``last_sequence`` was queued.
+    last_shed: int = 0
     #: A sequence number of the topic was seen.
     followed: bool = False
     #: What an episode reads from a message (None: nothing).

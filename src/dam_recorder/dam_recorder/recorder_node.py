@@ -289,7 +289,7 @@ class RecorderNode(Node):
                 if clock_ns is not None:
                     receipts.add(info.get('received_timestamp') or time.time_ns(), clock_ns)
             self._taker.subscribe(Clock, '/clock', QoSProfile(
-                depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT), on_clock)
+                depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT), on_clock, first=True)
         self.create_service(Trigger, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/resume', self._on_resume, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/split', self._on_split, qos_profile=SERVICE_QOS)
@@ -443,7 +443,8 @@ class RecorderNode(Node):
             cls, name, qos, self._callback(recorded),
             on_lost=lambda change, r=recorded: self._urgent.append(('lost', r, change)),
             on_incompatible=lambda change, policy, r=recorded: self._on_incompatible(
-                r, change, policy))
+                r, change, policy),
+            first=recorded.protected)  # the goal's events: taken first, at a stop too
         self.get_logger().info(
             f'recording {name} ({type_name}, {"reliable" if request.reliable else "best_effort"}'
             f', {"transient_local" if request.transient_local else "volatile"})')
@@ -489,7 +490,9 @@ class RecorderNode(Node):
                     return
                 self._inbox_in_bytes += size
             recorded.queued += 1
-            inbox.append(('message', recorded, data, info))
+            # (with the topic's count of dropped ones so far: the gap they leave in the
+            # sequence numbers is the recorder's drop, not one on the way)
+            inbox.append(('message', recorded, data, info, recorded.shed))
         return on_message
 
     def _write_inbox(self, final: bool = False) -> None:
@@ -558,7 +561,7 @@ class RecorderNode(Node):
             self._releasing = self._to_release > 0
             self._to_release = max(self._to_release - 1, 0)
             try:
-                self._write(writer, item[1], item[2], item[3])
+                self._write(writer, item[1], item[2], item[3], item[4])
             except BagWriteError as exc:
                 self._on_write_error(exc)
         elif item[0] == 'swept':
@@ -615,10 +618,10 @@ class RecorderNode(Node):
         return received or time.time_ns()
 
     def _write(self, writer: Any, recorded: RecordedTopic, data: bytes,
-               info: dict[str, Any]) -> None:
+               info: dict[str, Any], shed: int = 0) -> None:
         received = info.get('received_timestamp', 0)
         stamp = header_log_time_ns(recorded, data, self._receipt_ns(received))
-        self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp)
+        self._follow_sequence(recorded, info.get('publication_sequence_number'), stamp, shed)
         if self._paused:
             recorded.paused += 1
             if self._episodes is not None:
@@ -663,10 +666,14 @@ class RecorderNode(Node):
                                       throttle_duration_sec=5.0)
             return None
 
-    def _follow_sequence(self, recorded: RecordedTopic, sequence: int | None, stamp: int) -> None:
-        """Count the messages missing before this one by its publisher's sequence number."""
+    def _follow_sequence(self, recorded: RecordedTopic, sequence: int | None, stamp: int,
+                         shed: int = 0) -> None:
+        """Count the messages missing before this one by its publisher's sequence number
+        (``shed``: the topic's count of messages the recorder dropped, up to this one; those
+        are no gap on the way)."""
         if not sequence:
             return
+        shed_between, recorded.last_shed = shed - recorded.last_shed, shed
         last, recorded.last_sequence = recorded.last_sequence, sequence
         first, recorded.followed = not recorded.followed, True
         if last is None:
@@ -685,8 +692,8 @@ class RecorderNode(Node):
             return
         if sequence <= last:  # another publisher's: gaps mean nothing until the graph says one
             recorded.one_publisher = False
-        elif sequence > last + 1 and recorded.one_publisher:
-            gap = sequence - last - 1
+        elif sequence > last + 1 + shed_between and recorded.one_publisher:
+            gap = sequence - last - 1 - shed_between
             recorded.dropped += gap
             if self._episodes is not None:
                 self._episodes.note_dropped(recorded.topic_id, gap, stamp)

@@ -65,6 +65,7 @@ class SerializedTaker:
                           context=owner.context, use_global_arguments=False,
                           start_parameter_services=False, enable_rosout=False)
         self._subscriptions: list[tuple[Any, OnMessage]] = []
+        self._first_count = 0  # the subscriptions taken first lead the list
         self._lost_handlers: list[tuple[Any, Callable[[int], None]]] = []
         self._incompatible_handlers: list[tuple[Any, Callable[[int, str], None]]] = []
         self._lock = threading.Lock()
@@ -74,11 +75,14 @@ class SerializedTaker:
 
     def subscribe(self, msg_type: type, topic: str, qos: QoSProfile, on_message: OnMessage,
                   on_lost: Callable[[int], None] | None = None,
-                  on_incompatible: Callable[[int, str], None] | None = None) -> None:
+                  on_incompatible: Callable[[int, str], None] | None = None,
+                  first: bool = False) -> None:
         """Subscribe to ``topic``; ``on_message(data, info)`` runs in the taker's thread, and
         so does ``on_lost(count)`` when the middleware reports ``count`` more messages lost,
         and ``on_incompatible(count, policy)`` when ``count`` more publishers offer a QoS this
-        subscription cannot match (``policy``: the last incompatible policy's name)."""
+        subscription cannot match (``policy``: the last incompatible policy's name).
+        ``first``: taken before the others in every pass (after the earlier ``first`` ones),
+        and in a drain that runs out of time."""
         subscription = self._node.create_subscription(
             msg_type, topic, lambda *_args: None, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(
@@ -92,7 +96,11 @@ class SerializedTaker:
 
         lost, incompatible = handler('MESSAGE_LOST'), handler('INCOMPATIBLE_QOS')
         with self._lock:
-            self._subscriptions.append((subscription, on_message))
+            if first:
+                self._subscriptions.insert(self._first_count, (subscription, on_message))
+                self._first_count += 1
+            else:
+                self._subscriptions.append((subscription, on_message))
             if on_lost is not None and lost is not None:
                 self._lost_handlers.append((lost, on_lost))
             if on_incompatible is not None and incompatible is not None:
@@ -184,5 +192,6 @@ class SerializedTaker:
         self.stop()
         with self._lock:
             self._subscriptions, self._lost_handlers = [], []
+            self._first_count = 0
             self._incompatible_handlers = []
         self._node.destroy_node()
