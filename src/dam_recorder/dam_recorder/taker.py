@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.context import Context
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_policy_name_from_kind
@@ -66,12 +67,29 @@ class SerializedTaker:
                           start_parameter_services=False, enable_rosout=False)
         self._subscriptions: list[tuple[Any, OnMessage]] = []
         self._first_count = 0  # the subscriptions taken first lead the list
+        #: The ``first`` subscriptions live in a middleware participant of their own (a
+        #: second context): a recorder starved of CPU time receives the data streams late,
+        #: and a goal event queued behind them in the same participant came too late.
+        self._first_context: Context | None = None
+        self._first_node: Node | None = None
         self._lost_handlers: list[tuple[Any, Callable[[int], None]]] = []
         self._incompatible_handlers: list[tuple[Any, Callable[[int, str], None]]] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name='serialized_taker', daemon=True)
         self._thread.start()
+
+    def _own_first_node(self) -> Node:
+        if self._first_node is None:
+            context = Context()
+            context.init(args=None, initialize_logging=False,
+                         domain_id=self._owner.context.get_domain_id())
+            self._first_context = context
+            self._first_node = Node(f'{self._owner.get_name()}_events',
+                                    namespace=self._owner.get_namespace(), context=context,
+                                    use_global_arguments=False,
+                                    start_parameter_services=False, enable_rosout=False)
+        return self._first_node
 
     def subscribe(self, msg_type: type, topic: str, qos: QoSProfile, on_message: OnMessage,
                   on_lost: Callable[[int], None] | None = None,
@@ -83,7 +101,8 @@ class SerializedTaker:
         subscription cannot match (``policy``: the last incompatible policy's name).
         ``first``: taken before the others in every pass (after the earlier ``first`` ones),
         and in a drain that runs out of time."""
-        subscription = self._node.create_subscription(
+        node = self._node if not first else self._own_first_node()
+        subscription = node.create_subscription(
             msg_type, topic, lambda *_args: None, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(
                 message_lost=lambda _status: None, incompatible_qos=lambda _status: None,
@@ -195,3 +214,7 @@ class SerializedTaker:
             self._first_count = 0
             self._incompatible_handlers = []
         self._node.destroy_node()
+        if self._first_node is not None:
+            self._first_node.destroy_node()
+            self._first_context.try_shutdown()
+            self._first_node = self._first_context = None
