@@ -15,7 +15,8 @@ system time and maps a receive stamp to the simulated time then.
 from __future__ import annotations
 
 import bisect
-import struct
+
+from dam_recorder.completeness import header_stamp_ns
 
 #: How much system time of ``/clock`` receipts is kept [s] (a message that waited longer in
 #: the recorder's backlog gets the oldest kept value: it is counted as held, see the node).
@@ -23,11 +24,9 @@ KEEP_S = 600.0
 
 
 def clock_ns_of(data: bytes | memoryview) -> int | None:
-    """The time [ns] in a CDR-serialized ``rosgraph_msgs/Clock`` (``None`` if too short)."""
-    if len(data) < 12:
-        return None
-    sec, nanosec = struct.unpack_from('<iI' if data[1] & 1 else '>iI', data, 4)
-    return sec * 1_000_000_000 + nanosec
+    """The time [ns] in a CDR-serialized ``rosgraph_msgs/Clock`` (``None`` if too short): its
+    ``builtin_interfaces/Time`` comes first, where a header's stamp is."""
+    return header_stamp_ns(data)
 
 
 class ClockReceipts:

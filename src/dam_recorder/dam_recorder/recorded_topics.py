@@ -101,10 +101,13 @@ def header_log_time_ns(recorded: RecordedTopic, data: bytes, receipt_ns: int) ->
     return receipt_ns
 
 
+def _counts(recorded: Iterable[RecordedTopic], attribute: str) -> dict[str, int]:
+    return {r.name: getattr(r, attribute) for r in recorded if getattr(r, attribute)}
+
+
 def counts_json(recorded: Iterable[RecordedTopic], attribute: str) -> str:
     """JSON ``{topic: count}`` of the topics whose ``attribute`` is not 0 (custom_data)."""
-    return json.dumps({r.name: getattr(r, attribute) for r in recorded
-                       if getattr(r, attribute)}, sort_keys=True)
+    return json.dumps(_counts(recorded, attribute), sort_keys=True)
 
 
 def lost_anything(recorded: Iterable[RecordedTopic], not_recorded: Mapping[str, str]) -> bool:
@@ -122,7 +125,7 @@ def losses_text(recorded: Iterable[RecordedTopic], unwritten: int, backlog: str,
     recorded = list(recorded)
 
     def per_topic(attribute: str) -> str:
-        counts = {r.name: getattr(r, attribute) for r in recorded if getattr(r, attribute)}
+        counts = _counts(recorded, attribute)
         total = sum(counts.values())
         return f'{total}' + (' (' + ', '.join(f'{n} {c}' for n, c in sorted(
             counts.items())) + ')' if total else '')

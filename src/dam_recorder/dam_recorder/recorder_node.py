@@ -508,7 +508,7 @@ class RecorderNode(Node):
         if self._use_sim_time and not self._clock_started:
             if self._clock_receipts.started:
                 self._clock_started = True
-                held = sum(r.queued - r.dequeued for r in self._recorded.values())
+                held = self._waiting()
                 self._before_clock = held
                 self._to_release = held
                 if held:
@@ -519,7 +519,7 @@ class RecorderNode(Node):
                         f'dam_recorder.before_clock_messages)')
             elif final:
                 self._no_clock = True
-                held = sum(r.queued - r.dequeued for r in self._recorded.values())
+                held = self._waiting()
                 if held:
                     self.get_logger().warning(
                         f'no /clock came while recording (use_sim_time): {held} message(s) '
@@ -553,6 +553,10 @@ class RecorderNode(Node):
                 self._write_item(writer, urgent.popleft())
             if inbox:
                 self._give_up()
+
+    def _waiting(self) -> int:
+        """Messages taken and not yet written (both backlogs)."""
+        return sum(r.queued - r.dequeued for r in self._recorded.values())
 
     def _write_item(self, writer: Any, item: tuple[Any, ...]) -> None:
         if item[0] == 'message':
@@ -896,7 +900,7 @@ class RecorderNode(Node):
         (:meth:`destroy_node`)."""
         self._stop_requested_at = time.monotonic()
         self._stop_deadline = self._stop_requested_at + self._stop_write_s
-        backlog = sum(r.queued - r.dequeued for r in self._recorded.values())
+        backlog = self._waiting()
         self._hurried = backlog > HURRIED_BACKLOG
         self.get_logger().info(
             f'stop requested: writing what was received ({backlog} message(s) waiting) for '
