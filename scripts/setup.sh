@@ -155,7 +155,8 @@ ros_source=$MODE
 if [ "$MODE" = system ]; then ros_source="system $SYSTEM_ROS_PREFIX"; fi
 src_hash=$(
   cd "$REPO_ROOT" &&
-    { find src config -type f ! -name '*.pyc' ! -path '*/__pycache__/*' -printf '%p %s %T@\n' |
+    { find src interfaces config -type f ! -name '*.pyc' ! -path '*/__pycache__/*' \
+      -printf '%p %s %T@\n' |
       sort; echo "$ros_source $req_hash"; } | sha1sum | cut -d' ' -f1
 )
 build_stamp="$WS/install/.dam-source-hash"
@@ -173,8 +174,14 @@ else
     die "colcon is not installed" "apt-get install python3-colcon-common-extensions"
   mkdir -p "$WS/log"
   cd "$WS"
+  # interfaces/: standard ROS 2 messages the PyPI wheels lack (tf2_msgs/msg/TFMessage for /tf
+  # and /tf_static), built only where the ROS 2 underneath has no such package.
+  base_paths=("$REPO_ROOT/src")
+  if [ ! -f "$SYSTEM_ROS_PREFIX/share/tf2_msgs/package.xml" ] || [ "$MODE" = wheels ]; then
+    base_paths+=("$REPO_ROOT/interfaces")
+  fi
   info "colcon build (log: $WS/log/latest_build)"
-  if ! colcon --log-base "$WS/log" build --base-paths "$REPO_ROOT/src" \
+  if ! colcon --log-base "$WS/log" build --base-paths "${base_paths[@]}" \
     --build-base "$WS/build" --install-base "$WS/install" \
     --event-handlers console_cohesion- summary+ status- \
     --cmake-args -DPython3_EXECUTABLE="$VPY" -DBUILD_TESTING=OFF >"$WS/log/colcon-output.txt" 2>&1
