@@ -25,6 +25,7 @@ setup(
         'console_scripts': [
             'hand_driver = dam_hand_driver.entry_points:hand_driver',
             'hand_urdf = dam_hand_driver.urdf:main',
+            'dam_state_publisher = dam_hand_driver.entry_points:dam_state_publisher',
             'dynamixel_setup = dam_hand_driver.dynamixel_setup:main',
         ],
     },

@@ -13,3 +13,9 @@ from dam_common.shutdown import run_node_entry
 def hand_driver() -> None:
     """``ros2 run dam_hand_driver hand_driver``: the driver node."""
     run_node_entry('dam_hand_driver.driver_node')
+
+
+def dam_state_publisher() -> None:
+    """``ros2 run dam_hand_driver dam_state_publisher``: /tf and /tf_static of the hand and the
+    object."""
+    run_node_entry('dam_hand_driver.state_publisher')
