@@ -36,7 +36,9 @@ def test_check_delta_theta_p():
                                [0.0, 0.1, DP_MAX])
     for bad, pattern in (([], 'delta_theta_p: empty'), ([0.1, 0.2], 'expected 1 or 3'),
                          (-0.01, r'delta_theta_p: must be >= 0, got \[-0\.01'),
-                         (DP_MAX + 0.01, 'delta_theta_p: .* exceeds delta_theta_p_max'),
+                         (DP_MAX + 0.01,
+                          r'delta_theta_p: \[1\.144, 1\.144, 1\.144\] rad \(\[65\.57, 65\.57, '
+                          r'65\.57\] deg\) exceeds delta_theta_p_max 1\.134 rad \(65 deg\)$'),
                          (math.nan, 'delta_theta_p: non-finite')):
         with pytest.raises(InputError, match=pattern):
             check_delta_theta_p(bad, 3, DP_MAX)
@@ -47,7 +49,8 @@ def test_check_friction_angle():
     assert check_friction_angle(0.0, 0.1) == 0.0
     assert check_friction_angle(0.5, 0.1) == 0.5
     for bad, pattern in ((math.pi / 2, 'friction_angle: .* below 90 deg'),
-                         (2.0, 'friction_angle: 2.0'), (math.inf, 'friction_angle: non-finite'),
+                         (2.0, r'friction_angle: 2 rad \(114\.6 deg\) must be below 90 deg$'),
+                         (math.inf, 'friction_angle: non-finite'),
                          ([0.1, 0.2], 'friction_angle: expected one value')):
         with pytest.raises(InputError, match=pattern):
             check_friction_angle(bad, 0.1)

@@ -165,15 +165,15 @@ def test_the_csm_pair_is_the_largest_smallest_margin(config, planner) -> None:
 
 @pytest.mark.parametrize(('kwargs', 'words'), [
     ({'alpha': (6.0, 3.0)}, 'friction_angle: empty range'),
-    ({'alpha': (5.0, 90.0)}, 'is outside [0, pi/2)'),
+    ({'alpha': (5.0, 90.0)}, '[0.08727, 1.571] rad ([5, 90] deg) is outside [0, pi/2) rad'),
     ({'alpha': (math.nan, 5.0)}, 'friction_angle_min: non-finite value nan'),
-    ({'mass': (0.05, 0.03)}, 'mass: empty range, max 0.03 kg is below min 0.05 kg'),
-    ({'mass': (0.0, 0.03)}, 'mass_min: 0 kg must be positive'),
-    ({'tol': -1e-3}, 'position_tolerance: -0.001 m is outside'),
-    ({'tol': 0.02}, 'position_tolerance: 0.02 m is outside'),
+    ({'mass': (0.05, 0.03)}, 'mass: empty range, max 0.03 kg (30 g) is below min 0.05 kg (50 g)'),
+    ({'mass': (0.0, 0.03)}, 'mass_min: 0 kg (0 g) must be positive'),
+    ({'tol': -1e-3}, 'position_tolerance: -0.001 m (-1 mm) is outside'),
+    ({'tol': 0.02}, 'position_tolerance: 0.02 m (20 mm) is outside [0, 0.005] m ([0, 5] mm)'),
     ({'k_max': 0.0}, 'k_theta_max: 0 N*m/rad must be positive'),
     ({'k_max': math.inf}, 'k_theta_max: non-finite value inf'),
-    ({'dp': (10.0, 80.0)}, 'delta_theta_p: [0.174533, 1.39626] rad is outside'),
+    ({'dp': (10.0, 80.0)}, 'delta_theta_p: [0.1745, 1.396] rad ([10, 80] deg) is outside'),
     ({'margin': -0.5}, 'min_margin: -0.5 N must not be negative'),
 ])
 def test_bad_ranges_are_refused_with_the_field_and_value(config, planner, kwargs, words) -> None:

@@ -116,14 +116,14 @@ REFUSED = [
 #: Values the server or the controller would refuse, refused by the command line before it
 #: waits for anything (a fresh user's review: they were sent, and the user waited).
 OUT_OF_RANGE = [
-    ('dam_analysis', 'check_lift', ['--k-theta', '0'], "'0' must be above 0 N*m/rad"),
+    ('dam_analysis', 'check_lift', ['--k-theta', '0'], "'0' must be greater than 0 N*m/rad"),
     ('dam_analysis', 'check_lift', ['--k-theta', 'nan'], "'nan' is not a finite number"),
     ('dam_analysis', 'check_lift', ['--delta-theta-p', '95deg'], '95 deg must be at most 90'),
     ('dam_analysis', 'check_lift', ['--friction-angle', '95deg'], '95 deg must be below 90'),
     ('dam_analysis', 'check_lift', ['--timeout', 'nan'], "'nan' is not a finite number"),
     ('dam_analysis', 'plan_lift', ['--friction-angle', '90deg'], '90 deg must be below 90'),
     ('dam_analysis', 'plan_lift', ['--mass', '0'], '0 g must be above 0 g'),
-    ('dam_analysis', 'plan_lift', ['--k-theta-max', '0'], "'0' must be above 0 N*m/rad"),
+    ('dam_analysis', 'plan_lift', ['--k-theta-max', '0'], "'0' must be greater than 0 N*m/rad"),
     ('dam_analysis', 'plan_lift', ['--timeout', 'inf'], "'inf' is not a finite number"),
     ('dam_spcm_controller', 'dam_grasp', ['--delta-theta-p', '95deg'],
      '95 deg must be at most 90 deg'),

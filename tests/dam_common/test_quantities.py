@@ -19,6 +19,7 @@ from dam_common.quantities import (
     LENGTH,
     MASS,
     argument,
+    both_units,
     in_degrees,
     number_argument,
     parse_linspace,
@@ -188,3 +189,29 @@ def test_every_command_refuses_a_bare_angle_in_degrees_and_says_what_was_meant(
         _read(command, word)
     said = (capsys.readouterr().err if caught.type is SystemExit else str(caught.value))
     assert f'did you mean {word}deg?' in said, said
+
+
+@pytest.mark.parametrize(('value', 'quantity', 'text'), [
+    (math.radians(80.0), ANGLE, '1.396 rad (80 deg)'),
+    (0.006, LENGTH, '0.006 m (6 mm)'),
+    ([math.radians(80.0)] * 3, ANGLE, '[1.396, 1.396, 1.396] rad ([80, 80, 80] deg)'),
+    (np.full(9, 0.1), ANGLE, '[0.1, 0.1, 0.1, 0.1, 0.1, 0.1, ... (9 values)] rad '
+                             '([5.73, 5.73, 5.73, 5.73, 5.73, 5.73, ... (9 values)] deg)'),
+    ((0.03, 0.05), MASS, '[0.03, 0.05] kg ([30, 50] g)'),
+])
+def test_a_service_s_refusal_gives_si_and_the_usual_unit_to_4_digits(value, quantity,
+                                                                     text) -> None:
+    """``check_lift --delta-theta-p 80deg`` was refused as ``[1.3962634015954636, ...] rad``."""
+    assert both_units(value, quantity) == text
+
+
+@pytest.mark.parametrize(('text', 'says'), [
+    ('10Nm/rad', "'10Nm/rad' is not a number: a stiffness is a plain number in N*m/rad (10, "
+                 'not 10Nm/rad)'),
+    ('soft', "'soft' is not a number: a stiffness is a plain number in N*m/rad"),
+    ('0', "'0' must be greater than 0 N*m/rad"),
+])
+def test_a_stiffness_that_is_no_plain_number_is_refused_with_its_unit(text, says) -> None:
+    with pytest.raises(argparse.ArgumentTypeError) as info:
+        number_argument(above=0.0, unit='N*m/rad', what='stiffness')(text)
+    assert str(info.value) == says

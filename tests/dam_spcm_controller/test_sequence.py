@@ -335,7 +335,8 @@ def test_start_validates_arguments(params):
             seq.start(bad, DP)
     with pytest.raises(InputError, match='delta_theta_p'):
         seq.start(K_THETA, 0.0)
-    with pytest.raises(InputError, match=r'exceeds delta_theta_p_max'):
+    with pytest.raises(InputError, match=r'delta_theta_p \d\S* rad \(\d\S* deg\) exceeds '
+                                         r'delta_theta_p_max \d\S* rad \(\d\S* deg\)$'):
         seq.start(K_THETA, DP + 0.01)
     assert seq.phase is Phase.IDLE
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 from collections.abc import Iterator
 from pathlib import Path
@@ -296,10 +297,12 @@ def test_beyond_the_branch_end_is_ok_and_no_lift(client: RosClient, server,
     ([1.0], [-0.1], -1.0, r'delta_theta_p.*>= 0.*-0\.1'),
     ([1.0], [0.1, 0.2], 0.1, r'delta_theta_p.*1 or 3 values'),
     ([1.0], [-0.1], 0.1, r'delta_theta_p.*>= 0.*-0\.1'),
-    ([1.0], [math.radians(80.0)], 0.1, r'delta_theta_p.*exceeds'),
+    ([1.0], [math.radians(80.0)], 0.1,  # 4 significant digits, in rad and deg
+     r'delta_theta_p: \[1\.396(, 1\.396)*\] rad \(\[80(, 80)*\] deg\) exceeds '
+     r'delta_theta_p_max 1\.134 rad \(65 deg\)$'),
     ([1.0], [float('nan')], 0.1, r'delta_theta_p.*nan'),
     ([1.0], [0.3], math.pi / 2, r'friction_angle.*90'),
-    ([1.0], [0.3], 2.0, r'friction_angle.*2\.0'),
+    ([1.0], [0.3], 2.0, r'friction_angle: 2 rad \(114\.6 deg\)'),
     ([1.0], [0.3], float('nan'), r'friction_angle.*nan'),
     ([1.0], [0.3], float('-inf'), r'friction_angle.*inf'),
 ])
@@ -312,6 +315,8 @@ def test_bad_requests_are_rejected_with_the_field_and_value(
     assert response.ok is False
     assert re.search(pattern, response.message), response.message
     assert list(response.delta_theta_s) == []
+    # every number of a rejected answer is NaN: 0.0 would read "on the boundary"
+    assert math.isnan(response.worst_case_margin) and math.isnan(response.csm_margin)
     assert server.alive()
 
 
@@ -415,9 +420,16 @@ def test_command_line_client(server: object) -> None:
     outside = _run_client('--k-theta', '0.5', '--delta-theta-p', '40deg')
     assert outside.returncode == 0, outside.stderr
     assert 'lift guaranteed          : no' in outside.stdout
+    beyond = _run_client('--k-theta', '1', '--delta-theta-p', '80deg')  # the server refuses
+    assert beyond.returncode == 2, beyond.stderr
+    assert re.fullmatch(r'REJECTED: delta_theta_p: \[1\.396(, 1\.396)*\] rad \(\[80(, 80)*\] '
+                        r'deg\) exceeds delta_theta_p_max 1\.134 rad \(65 deg\)\n',
+                        beyond.stdout), beyond.stdout
+    words = _run_client('--k-theta', '10Nm/rad')
+    assert words.returncode == 2 and 'a stiffness is a plain number in N*m/rad' in words.stderr
     refused = _run_client('--k-theta', '-1', '--delta-theta-p', '0.3')  # before any request
     assert refused.returncode == 2 and 'REJECTED' not in refused.stdout
-    assert '--k-theta' in refused.stderr and 'must be above 0 N*m/rad' in refused.stderr
+    assert '--k-theta' in refused.stderr and 'must be greater than 0 N*m/rad' in refused.stderr
     bad_angle = _run_client('--k-theta', '1', '--delta-theta-p', 'forty')
     assert bad_angle.returncode == 2
     assert "'forty' is not an angle" in bad_angle.stderr

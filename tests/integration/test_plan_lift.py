@@ -105,7 +105,8 @@ def test_the_issue_s_ranges_cross_dds_as_the_core_answers_them(client: RosClient
 @pytest.mark.parametrize(('fields', 'words'), [
     ({'friction_angle_min': math.nan}, 'friction_angle_min: non-finite value nan'),
     ({'mass_min': 0.05, 'mass_max': 0.03}, 'mass: empty range'),
-    ({'position_tolerance': 0.5}, 'position_tolerance: 0.5 m is outside'),
+    ({'position_tolerance': 0.5},
+     'position_tolerance: 0.5 m (500 mm) is outside [0, 0.005] m ([0, 5] mm)'),
     ({'delta_theta_p_max': 2.0}, 'delta_theta_p: '),
     ({'k_theta_max': math.inf}, 'k_theta_max: non-finite value inf'),
 ])

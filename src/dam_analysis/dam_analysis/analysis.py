@@ -43,6 +43,7 @@ from dam_analysis.rolling import NOT_CHECKED, RollingCheck
 from dam_analysis.spcm import PATH_STEP_RAD, FingerContact, build_paths
 from dam_common.config import DamConfig, load_config
 from dam_common.echo import brief_repr
+from dam_common.quantities import ANGLE, both_units
 
 ArrayLike = float | Sequence[float] | np.ndarray
 
@@ -132,11 +133,10 @@ def check_delta_theta_p(delta_theta_p: ArrayLike, n_fingers: int,
         raise InputError(f'delta_theta_p: expected 1 or {n_fingers} values, got {arr.size}: '
                          f'{brief_repr(arr)}')
     if np.any(arr < 0.0):
-        raise InputError(f'delta_theta_p: must be >= 0, got {brief_repr(arr)} rad')
+        raise InputError(f'delta_theta_p: must be >= 0, got {both_units(arr, ANGLE)}')
     if np.any(arr > delta_theta_p_max + 1e-12):
-        raise InputError(f'delta_theta_p: {brief_repr(arr)} rad exceeds delta_theta_p_max = '
-                         f'{delta_theta_p_max!r} rad ({math.degrees(delta_theta_p_max):.6g} '
-                         'deg)')
+        raise InputError(f'delta_theta_p: {both_units(arr, ANGLE)} exceeds delta_theta_p_max '
+                         f'{both_units(delta_theta_p_max, ANGLE)}')
     return arr
 
 
@@ -149,8 +149,7 @@ def check_friction_angle(friction_angle: float, configured: float) -> float:
     if alpha < 0.0:
         return configured
     if alpha >= 0.5 * math.pi:
-        raise InputError(f'friction_angle: {alpha!r} rad ({math.degrees(alpha):.6g} deg) must '
-                         'be below 90 deg')
+        raise InputError(f'friction_angle: {both_units(alpha, ANGLE)} must be below 90 deg')
     return alpha
 
 

@@ -36,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = CommandLineParser(
         prog=PROG,
         description='Ask /check_lift whether a (k_theta, delta_theta_p) pair lifts the object.')
-    parser.add_argument('--k-theta', type=number_argument(above=0.0, unit='N*m/rad'), nargs='+',
+    parser.add_argument('--k-theta', type=number_argument(above=0.0, unit='N*m/rad',
+                                                         what='stiffness'), nargs='+',
                         default=[], metavar='N*m/rad',
                         help='compliant-joint stiffness: one value (finger 1, the others from '
                              'the configured ratios) or one per finger (default: the server\'s '

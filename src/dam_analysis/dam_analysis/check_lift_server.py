@@ -21,7 +21,9 @@ default-constructed request asks about the configured task pair at the configure
 angle; the answer's message says which values came from the configuration.
 
 Only a malformed request gets ``ok = false``, with a message that names the field and the
-value; the server never dies on input. A well-formed pair beyond the end of the SPCM branch
+value (angles in rad and deg, 4 significant digits: ``delta_theta_p: [1.396] rad ([80] deg)
+exceeds delta_theta_p_max 1.134 rad (65 deg)``), and every number of the answer NaN (the
+margins too); the server never dies on input. A well-formed pair beyond the end of the SPCM branch
 (eqs. 1-4 have no solution there) is answered ``ok = true`` with "no lift": both lift flags
 false, both margins NaN, NaN per-finger values for the fingers beyond, and a message naming
 where (deg) and why the branch ends.
@@ -134,8 +136,9 @@ class CheckLiftServer(Node):
         k_theta = list(request.k_theta)
         delta_theta_p = list(request.delta_theta_p)
         friction_angle = float(request.friction_angle)
-        response.friction_angle = math.nan  # until an answer is computed
-        response.torque_limit = math.nan
+        response.friction_angle = math.nan  # until an answer is computed: a rejected answer's
+        response.torque_limit = math.nan  # numbers are NaN (0.0 would read "on the boundary")
+        response.worst_case_margin = response.csm_margin = math.nan
         response.rolling_margin = response.rolling_turn = response.rolling_slide = math.nan
         response.csm_path_margin = response.csm_path_delta_theta_p = math.nan
         defaults: list[str] = []

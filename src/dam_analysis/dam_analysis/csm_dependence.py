@@ -38,7 +38,8 @@ def build_parser() -> argparse.ArgumentParser:
                    default=[5.0, 30.0], metavar='ANGLE',
                    help='friction angles alpha, 0 <= alpha < 90 deg, one panel each (5deg, '
                         '0.09rad; bare: rad; default 5deg 30deg)')
-    p.add_argument('--k-t', type=number_argument(above=0.0, unit='N/m'), nargs='+',
+    p.add_argument('--k-t', type=number_argument(above=0.0, unit='N/m', what='stiffness'),
+                   nargs='+',
                    default=list(DEFAULT_K_T), metavar='N_PER_M',
                    help='effective tangential stiffnesses [N/m] (default 10 30 100 300 1000 '
                         '1e5)')

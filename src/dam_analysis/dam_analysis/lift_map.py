@@ -41,6 +41,7 @@ from dam_analysis.regions import Boundaries
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.progress import Progress
 from dam_common.quantities import ANGLE, argument, in_degrees
 from dam_common.ros_args import strip_ros_args
 
@@ -88,15 +89,15 @@ def check_options(parser: argparse.ArgumentParser, options: argparse.Namespace) 
     """Reject values argparse cannot check by type; ``parser.error`` exits with status 2."""
     for alpha in options.friction_angles:
         if not (math.isfinite(alpha) and 0.0 <= alpha < 90.0):
-            parser.error(f'--friction-angles: {alpha:g} deg is outside [0, 90) deg')
+            parser.error(f'--friction-angles: {alpha:.4g} deg is outside [0, 90) deg')
     if options.n_delta_theta_p < 2:
         parser.error(f'--n-delta-theta-p: {options.n_delta_theta_p} must be at least 2')
     dp_max = options.delta_theta_p_max
     if dp_max is not None and not (math.isfinite(dp_max) and dp_max > 0.0):
-        parser.error(f'--delta-theta-p-max: {dp_max:g} deg must be positive')
+        parser.error(f'--delta-theta-p-max: {dp_max:.4g} deg must be positive')
     k_max = options.k_max
     if k_max is not None and not (math.isfinite(k_max) and k_max > 0.0):
-        parser.error(f'--k-max: {k_max:g} N*m/rad must be positive')
+        parser.error(f'--k-max: {k_max:.4g} N*m/rad must be positive')
 
 
 def compute_boundaries(analyzer: LiftAnalyzer, friction_angles_deg: Sequence[float],
@@ -108,7 +109,8 @@ def compute_boundaries(analyzer: LiftAnalyzer, friction_angles_deg: Sequence[flo
     analyzer : analysis facade of the hand.
     friction_angles_deg : friction angles alpha [deg].
     delta_theta_p : (D,) position-joint displacements [rad], within the configured maximum.
-    progress : print one line per friction angle to stderr.
+    progress : print one line per friction angle to stderr, and while one takes longer than
+        a few seconds a line every few seconds (:mod:`dam_common.progress`).
 
     Returns
     -------
@@ -117,7 +119,9 @@ def compute_boundaries(analyzer: LiftAnalyzer, friction_angles_deg: Sequence[flo
     out = []
     for j, alpha in enumerate(friction_angles_deg, start=1):
         start = time.perf_counter()
-        out.append(analyzer.boundaries(math.radians(alpha), delta_theta_p))
+        with Progress('lift_map', f'alpha = {alpha:g} deg ({j}/{len(friction_angles_deg)})',
+                      period=None if progress else 0.0):
+            out.append(analyzer.boundaries(math.radians(alpha), delta_theta_p))
         if progress:
             print(f'lift_map: alpha = {alpha:g} deg ({j}/{len(friction_angles_deg)}) done in '
                   f'{time.perf_counter() - start:.2f} s', file=sys.stderr, flush=True)
@@ -302,11 +306,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     config_max = math.degrees(config.task.delta_theta_p_max_rad)
     dp_max = config_max if options.delta_theta_p_max is None else options.delta_theta_p_max
     if dp_max > config_max + 1e-9:
-        parser.error(f'--delta-theta-p-max: {dp_max:g} deg exceeds the configured maximum '
-                     f'{config_max:g} deg')
+        parser.error(f'--delta-theta-p-max: {dp_max:.4g} deg exceeds the configured maximum '
+                     f'{config_max:.4g} deg')
     start = time.perf_counter()
     try:
-        analyzer = LiftAnalyzer(config)
+        with Progress('lift_map', 'caching the SPCM paths'):  # a line every few seconds
+            analyzer = LiftAnalyzer(config)
     except NoSolutionError as exc:
         print(f'lift_map: {unreachable_object(config, exc)}', file=sys.stderr)
         return 2

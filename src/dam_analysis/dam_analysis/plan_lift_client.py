@@ -63,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
                              '0.001m; bare: m; default: 0, the configured position)')
     parser.add_argument('--k-theta-max',
                         type=number_argument(low=0.0, why_low=LEAVE_OUT, above=0.0,
-                                             unit='N*m/rad'),
+                                             unit='N*m/rad', what='stiffness'),
                         default=None, metavar='N*m/rad',
                         help='largest finger-1 stiffness to propose (default: the largest '
                              'the device accepts)')

@@ -50,6 +50,7 @@ from dam_analysis.errors import InputError, Interrupted, NoSolutionError
 from dam_analysis.hand_limits import HandLimits
 from dam_analysis.lift import STATUS_BOUNDED
 from dam_common.config import DamConfig
+from dam_common.quantities import ANGLE, LENGTH, MASS, Quantity, both_units
 
 #: Largest spacing of the position grid [m].
 POSITION_STEP_M = 0.5e-3
@@ -92,10 +93,11 @@ def _finite(name: str, value: float) -> float:
     return value
 
 
-def _interval(name: str, low: float, high: float, unit: str) -> tuple[float, float]:
+def _interval(name: str, low: float, high: float, quantity: Quantity) -> tuple[float, float]:
     low, high = _finite(f'{name}_min', low), _finite(f'{name}_max', high)
     if high < low:
-        raise InputError(f'{name}: empty range, max {high:g} {unit} is below min {low:g} {unit}')
+        raise InputError(f'{name}: empty range, max {both_units(high, quantity)} is below min '
+                         f'{both_units(low, quantity)}')
     return low, high
 
 
@@ -112,28 +114,30 @@ def check_ranges(config: DamConfig, friction_angle: tuple[float, float],
         displacement outside ``[0, task.delta_theta_p_max]``, a negative margin; the message
         names the field and the value.
     """
-    alpha = _interval('friction_angle', *friction_angle, 'rad')
+    alpha = _interval('friction_angle', *friction_angle, ANGLE)
     if not (0.0 <= alpha[0] and alpha[1] < math.pi / 2):
-        raise InputError(f'friction_angle: [{alpha[0]:g}, {alpha[1]:g}] rad is outside '
-                         '[0, pi/2)')
-    masses = _interval('mass', *mass, 'kg')
+        raise InputError(f'friction_angle: {both_units(alpha, ANGLE)} is outside [0, pi/2) '
+                         'rad ([0, 90) deg)')
+    masses = _interval('mass', *mass, MASS)
     if masses[0] <= 0.0:
-        raise InputError(f'mass_min: {masses[0]:g} kg must be positive')
+        raise InputError(f'mass_min: {both_units(masses[0], MASS)} must be positive')
     tol = _finite('position_tolerance', position_tolerance)
     if not 0.0 <= tol <= MAX_POSITION_TOLERANCE_M:
-        raise InputError(f'position_tolerance: {tol:g} m is outside [0, '
-                         f'{MAX_POSITION_TOLERANCE_M:g}] m')
+        raise InputError(f'position_tolerance: {both_units(tol, LENGTH)} is outside [0, '
+                         f'{MAX_POSITION_TOLERANCE_M:.4g}] m ([0, '
+                         f'{MAX_POSITION_TOLERANCE_M * 1e3:.4g}] mm)')
     k_max = _finite('k_theta_max', k_theta_max)
     if k_max <= 0.0:
-        raise InputError(f'k_theta_max: {k_max:g} N*m/rad must be positive')
-    dps = _interval('delta_theta_p', *delta_theta_p, 'rad')
+        raise InputError(f'k_theta_max: {k_max:.4g} N*m/rad must be positive')
+    dps = _interval('delta_theta_p', *delta_theta_p, ANGLE)
     dp_limit = float(config.task.delta_theta_p_max_rad)
     if dps[0] < 0.0 or dps[1] > dp_limit + 1e-12:
-        raise InputError(f'delta_theta_p: [{dps[0]:g}, {dps[1]:g}] rad is outside [0, '
-                         f'{dp_limit:g}] rad (task.delta_theta_p_max_deg)')
+        raise InputError(f'delta_theta_p: {both_units(dps, ANGLE)} is outside [0, '
+                         f'{dp_limit:.4g}] rad ([0, {math.degrees(dp_limit):.4g}] deg, '
+                         'task.delta_theta_p_max_deg)')
     margin = _finite('min_margin', min_margin)
     if margin < 0.0:
-        raise InputError(f'min_margin: {margin:g} N must not be negative')
+        raise InputError(f'min_margin: {margin:.4g} N must not be negative')
     return PlanRanges(alpha, masses, tol, k_max, dps, margin)
 
 

@@ -152,10 +152,11 @@ def scale_study(config: DamConfig, radii_m: Sequence[float], delta_theta_p: Sequ
     dp_max = float(config.task.delta_theta_p_max_rad)
     for dp in dps:
         if not (math.isfinite(dp) and 0.0 <= dp <= dp_max + 1e-12):
-            raise InputError(f'delta_theta_p: {math.degrees(dp):g} deg is outside [0, '
-                             f'{math.degrees(dp_max):g}] deg')
+            raise InputError(f'delta_theta_p: {math.degrees(dp):.4g} deg is outside [0, '
+                             f'{math.degrees(dp_max):.4g}] deg')
     if not (math.isfinite(friction_angle) and 0.0 <= friction_angle < math.pi / 2):
-        raise InputError(f'friction_angle: {friction_angle!r} rad is outside [0, pi/2)')
+        raise InputError(f'friction_angle: {math.degrees(friction_angle):.4g} deg is outside '
+                         '[0, 90) deg')
     radii = np.asarray(radii_m, dtype=np.float64).reshape(-1)
     shape = (radii.size, dps.size)
     k_suf, k_csm, k_tau = (np.full(shape, np.nan) for _ in range(3))

@@ -27,7 +27,7 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,6 +86,37 @@ RIGHT_ANGLE = math.pi / 2.0
 LEAVE_OUT = 'leave the option out for the configured value'
 
 _VALUE = re.compile(r'^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z]*)\s*$')
+
+
+def both_units(value: float | Sequence[float], quantity: Quantity, *,
+               most: int = 6) -> str:
+    """``value`` [SI unit] in the SI unit and in the unit a person reads, 4 significant digits
+    each: ``'1.396 rad (80 deg)'``, ``'0.006 m (6 mm)'``, ``'[1.396, 0.7] rad ([80, 40.11]
+    deg)'`` (a service's refusal, read by command-line users and ``ros2 service call`` users).
+
+    Parameters
+    ----------
+    value : one value or a sequence of values [SI unit].
+    quantity : :data:`ANGLE`, :data:`LENGTH` or :data:`MASS`.
+    most : the most values of a sequence written out; more are counted (``... (N values)``).
+    """
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        v = float(value)
+        return f'{v:.4g} {quantity.si_unit} ({quantity.show(v)})'
+    values = [float(v) for v in np.asarray(value, dtype=np.float64).reshape(-1)]
+    tail = f', ... ({len(values)} values)' if len(values) > most else ''
+    shown = values[:most]
+    usual = [quantity.show(v) for v in shown]
+    usual_unit = usual[0].split(' ', 1)[1] if usual else quantity.si_unit
+    if any(u.split(' ', 1)[1] != usual_unit for u in usual):  # masses: g and kg mixed
+        usual = [f'{v:.4g}' for v in shown]
+        usual_unit = quantity.si_unit
+    else:
+        usual = [u.split(' ', 1)[0] for u in usual]
+    si = ', '.join(f'{v:.4g}' for v in shown)
+    if usual_unit == quantity.si_unit:
+        return f'[{si}{tail}] {quantity.si_unit}'
+    return f'[{si}{tail}] {quantity.si_unit} ([{", ".join(usual)}{tail}] {usual_unit})'
 
 
 def parse_quantity(text: str, quantity: Quantity) -> float:
@@ -274,21 +305,33 @@ def _article(noun: str) -> str:
 
 
 def number_argument(*, low: float | None = None, why_low: str = '', unit: str = '',
-                    above: float | None = None) -> Callable[[str], float]:
+                    above: float | None = None, what: str = '') -> Callable[[str], float]:
     """An argparse ``type=`` for a plain finite number (a stiffness [N*m/rad], a margin [N],
-    a time [s]) at least ``low`` and above ``above``.
+    a time [s]) at least ``low`` and greater than ``above``.
+
+    ``what`` names the quantity (``'stiffness'``) for the message of a word that is not a
+    number: "'10Nm/rad' is not a number: a stiffness is a plain number in N*m/rad (10, not
+    10Nm/rad)".
 
     Raises
     ------
     argparse.ArgumentTypeError
-        Not a finite number, below ``low`` (followed by ``why_low``), or not above ``above``.
+        Not a finite number, below ``low`` (followed by ``why_low``), or not greater than
+        ``above``.
     """
 
     def checked(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+            why = ''
+            if what or unit:
+                why = (f': {_article(what or "value")} is a plain number'
+                       f'{" in " + unit if unit else ""}')
+                match = _VALUE.match(text.split('/')[0])
+                if match and match.group(2):  # a number with a unit written after it
+                    why += f' ({match.group(1)}, not {text})'
+            raise argparse.ArgumentTypeError(f'{text!r} is not a number{why}') from None
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f'{text!r} is not a finite number')
         if low is not None and value < low:
@@ -297,7 +340,7 @@ def number_argument(*, low: float | None = None, why_low: str = '', unit: str = 
                 f'{text!r} must be at least {low:g}{" " + unit if unit else ""}{tail}')
         if above is not None and not value > above:
             raise argparse.ArgumentTypeError(
-                f'{text!r} must be above {above:g}{" " + unit if unit else ""}')
+                f'{text!r} must be greater than {above:g}{" " + unit if unit else ""}')
         return value
 
     checked.__name__ = 'number'

@@ -350,14 +350,14 @@ class SweepSpec:
         dp_max = math.degrees(float(config.task.delta_theta_p_max_rad))
         for dp in self.delta_theta_p_deg:
             if dp > dp_max + 1e-9:
-                raise SweepError(f'{OPTIONS["delta_theta_p_deg"]}: {dp:g} deg exceeds '
-                                 f'task.delta_theta_p_max_deg {dp_max:g} deg')
+                raise SweepError(f'{OPTIONS["delta_theta_p_deg"]}: {dp:.4g} deg exceeds '
+                                 f'task.delta_theta_p_max_deg {dp_max:.4g} deg')
         k_max = float(config.device.max_stiffness_nm_per_rad)
         ratio = float(np.max(config.hand.stiffness_ratios))
         for k in self.k_theta:
             if k * ratio > k_max * (1.0 + 1e-12):
-                raise SweepError(f'{OPTIONS["k_theta"]}: {k:g} N*m/rad exceeds the device limit '
-                                 f'{k_max:g} N*m/rad (device.max_stiffness_nm_per_rad)')
+                raise SweepError(f'{OPTIONS["k_theta"]}: {k:.4g} N*m/rad exceeds the device limit '
+                                 f'{k_max:.4g} N*m/rad (device.max_stiffness_nm_per_rad)')
         td = self.trajectory_duration_s
         timeout = float(config.controller.phase_timeout_s)
         if td is not None and td >= timeout:

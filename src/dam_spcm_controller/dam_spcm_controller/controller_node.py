@@ -105,6 +105,7 @@ from dam_common.node import (
     declare_object,
     run_node,
 )
+from dam_common.quantities import ANGLE, both_units
 from dam_common.service_qos import SERVICE_QOS, action_server_qos
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.action import DamGrasp
@@ -741,10 +742,10 @@ class SpcmControllerNode(Node):
                              'i to '
                              'ratio_i * k_theta')
         if not np.allclose(dp, dp[0], rtol=0.0, atol=1e-12):
-            raise InputError(f'delta_theta_p {brief_repr(dp)} rad: the controller moves every '
+            raise InputError(f'delta_theta_p {both_units(dp, ANGLE)}: the controller moves every '
                              'position joint by the same displacement')
         if dp[0] <= 0.0:
-            raise InputError(f'delta_theta_p must be positive, got {dp[0]!r} rad')
+            raise InputError(f'delta_theta_p must be positive, got {both_units(dp[0], ANGLE)}')
         k_max = float(self._config.device.max_stiffness_nm_per_rad)
         if self._flags['impedance_on_device'] and float(np.max(k)) > k_max:
             raise InputError(f'k_theta {brief_repr(k)} N*m/rad: the device accepts impedance '

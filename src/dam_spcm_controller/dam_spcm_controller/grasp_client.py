@@ -25,7 +25,13 @@ import time
 from collections.abc import Sequence
 
 from dam_common.command_line import CommandLineParser
-from dam_common.quantities import ANGLE, RIGHT_ANGLE, argument, parse_quantity
+from dam_common.quantities import (
+    ANGLE,
+    RIGHT_ANGLE,
+    argument,
+    number_argument,
+    parse_quantity,
+)
 from dam_common.ros_args import strip_ros_args
 
 EXIT_SUCCESS = 0
@@ -36,6 +42,8 @@ EXIT_OTHER_OUTCOME = 3
 #: The displacement: a positive angle (the position joints curl inward by it); a bare number
 #: is radians, as in every command of the suite (:mod:`dam_common.quantities`).
 _DELTA_THETA_P = argument(ANGLE, low=0.0, low_inclusive=False, high=RIGHT_ANGLE)
+#: Finger 1's stiffness [N*m/rad]: a plain positive number.
+_STIFFNESS = number_argument(above=0.0, unit='N*m/rad', what='stiffness')
 
 
 def parse_angle(text: str) -> float:
@@ -57,7 +65,7 @@ def _positive(text: str) -> float:
 def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p = CommandLineParser(
         prog='dam_grasp', description='Run one DAM grasp on /dam_grasp and print the result.')
-    p.add_argument('--k-theta', type=_positive, default=None,
+    p.add_argument('--k-theta', type=_STIFFNESS, default=None,
                    help='finger-1 compliant-joint stiffness [N*m/rad] (default: the '
                         "controller's configured one)")
     p.add_argument('--delta-theta-p', type=_DELTA_THETA_P, default=None,

@@ -66,6 +66,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from dam_common.quantities import ANGLE, both_units
 from dam_spcm_controller._validate import finite_scalar, finite_vector
 from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
 from dam_spcm_controller.errors import InputError, StateError
@@ -418,14 +419,14 @@ class DamSequence:
         k = finite_scalar('k_theta', k_theta, positive=True)
         dp = finite_scalar('delta_theta_p', delta_theta_p, positive=True)
         if dp > self._p.delta_theta_p_max + 1e-12:
-            raise InputError(f'delta_theta_p {dp!r} rad ({math.degrees(dp):.6g} deg) exceeds '
-                             f'delta_theta_p_max {self._p.delta_theta_p_max!r} rad')
+            raise InputError(f'delta_theta_p {both_units(dp, ANGLE)} exceeds delta_theta_p_max '
+                             f'{both_units(self._p.delta_theta_p_max, ANGLE)}')
         goal = self._p.layout.initial_position_angle + dp
         upper = float(self._p.layout.upper[2])
         if goal > upper + 1e-12:
-            raise InputError(f'delta_theta_p {dp!r} rad takes the position joints to '
-                             f'{math.degrees(goal):.6g} deg, beyond their limit '
-                             f'{math.degrees(upper):.6g} deg')
+            raise InputError(f'delta_theta_p {both_units(dp, ANGLE)} takes the position joints '
+                             f'to {math.degrees(goal):.4g} deg, beyond their limit '
+                             f'{math.degrees(upper):.4g} deg')
         t_last = self._t_last
         phase_before = self._phase
         self._reset_run()
