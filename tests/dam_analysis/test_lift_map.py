@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import subprocess
 import sys
 
@@ -235,3 +236,18 @@ def test_module_runs_without_ros_imports():
             'assert "rclpy" not in sys.modules, "lift_map imports rclpy"')
     subprocess.run([sys.executable, '-c', code], check=True, timeout=30,
                    env={'PYTHONPATH': ':'.join(p for p in sys.path if p)})
+
+
+def test_a_friction_angle_that_takes_long_reports_on_stderr_while_it_runs(
+        analyzer, capfd, monkeypatch) -> None:
+    """Besides the line per friction angle, a line every DAM_PROGRESS_S seconds while one
+    runs (5 by default; here 0.001, so that one angle of 27 displacements is slow enough)."""
+    monkeypatch.setenv('DAM_PROGRESS_S', '0.001')
+    lift_map.compute_boundaries(analyzer, [5.0], np.radians(np.linspace(0.0, 65.0, N_DP)))
+    captured = capfd.readouterr()
+    assert captured.out == ''
+    lines = captured.err.splitlines()
+    assert lines[-1].startswith('lift_map: alpha = 5 deg (1/1) done in ')
+    assert lines[:-1], captured.err
+    assert all(re.fullmatch(r'lift_map: alpha = 5 deg \(1/1\), \d+ s', ln)
+               for ln in lines[:-1]), lines

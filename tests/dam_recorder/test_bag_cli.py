@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -175,3 +176,37 @@ def test_installed_usage_errors_exit_2(argv, words) -> None:
     assert_one_line_error(done, 2, *words)
     assert done.stderr.startswith('usage: bag')
 
+
+
+def test_plot_and_export_say_on_stderr_what_they_do_while_they_work(bags, tmp_path) -> None:
+    """A line every DAM_PROGRESS_S seconds (5 by default; here 0.01, so that a small bag is
+    slow enough), on stderr only: standard output is what it was."""
+    env = {**os.environ, 'DAM_PROGRESS_S': '0.01'}
+    picture = tmp_path / 'grasp.png'
+    for argv, first in ((('plot', bags['grasp'], '-o', picture), f'{picture}: '),
+                        (('export', bags['grasp'], '-o', tmp_path / 'csv'), str(tmp_path))):
+        done = subprocess.run([str(BAG_EXE), *map(str, argv)], capture_output=True, text=True,
+                              timeout=120, env=env)
+        assert done.returncode == 0, done.stderr
+        assert done.stdout.startswith(first)
+        assert 'bag ' + argv[0] not in done.stdout
+        lines = [ln for ln in done.stderr.splitlines() if ln.startswith(f'bag {argv[0]}: ')]
+        assert lines and all(re.search(r', \d+ s$', ln) for ln in lines), done.stderr
+
+
+def test_reading_a_bag_counts_its_messages_in_the_progress_line(bags) -> None:
+    from dam_common.progress import Progress
+    from dam_recorder.bag_reading import BagReader
+
+    lines = []
+    with Progress('bag export', 'writing CSV', period=0.0) as progress, \
+            BagReader(bags['grasp']) as reader:
+        n = 0
+        for n, _message in enumerate(reader.raw_messages(['/joint_states']), start=1):
+            if n == 10:
+                lines.append(progress.line())
+        lines.append(progress.line())
+    assert n > 10
+    assert re.match(rf'bag export: reading messages of grasp 10 of {n:,} \(\d+ %\), \d+ s$',
+                    lines[0]), lines
+    assert re.match(rf'bag export: writing CSV \(read {n:,} messages\), \d+ s$', lines[1])

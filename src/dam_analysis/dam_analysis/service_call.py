@@ -20,6 +20,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from dam_common.progress import Progress
 from dam_common.shutdown import SHUTDOWN, ShutdownRequest
 
 #: Exit status when the service is not there or does not answer in time.
@@ -114,14 +115,19 @@ def call_and_print(prog: str, argv: Sequence[str], srv_type: Any, service: str, 
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         client = node.create_client(srv_type, service)
-        if not _wait_for_service(client, timeout_s, shutdown):
+        with Progress(prog, f'waiting for the service {service}'):
+            found = _wait_for_service(client, timeout_s, shutdown)
+        if not found:
             if shutdown.requested:
                 return _stopped(prog, shutdown, f'service {service}')
             print(f'{prog}: service {service} is not available '
                   f'(is check_lift_server running in this ROS_DOMAIN_ID?)', file=sys.stderr)
             return NO_ANSWER
         future = client.call_async(request)
-        if not _spin_until(executor, future, timeout_s, shutdown):
+        # a line on stderr every few seconds while the server works (dam_common.progress)
+        with Progress(prog, f'waiting for the answer of {service}'):
+            answered = _spin_until(executor, future, timeout_s, shutdown)
+        if not answered:
             if shutdown.requested:
                 return _stopped(prog, shutdown, f'the answer of {service}')
             print(f'{prog}: no answer from {service} within {timeout_s} s', file=sys.stderr)

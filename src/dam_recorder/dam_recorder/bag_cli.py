@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dam_common.command_line import CommandLineParser
+from dam_common.progress import Progress
 from dam_recorder.errors import DamRecorderError
 
 PROG = 'bag'
@@ -164,8 +165,9 @@ def run_plot(args: argparse.Namespace) -> int:
     if args.dpi <= 0:
         raise DamRecorderError(f'--dpi must be positive, got {args.dpi}')
     output = args.output or Path(f'{Path(args.bag).resolve().name}.png')
-    result = plot_bag(args.bag, output, dpi=args.dpi, episode=args.episode,
-                      start_s=args.start, end_s=args.end)
+    with Progress(f'{PROG} plot', 'drawing'):  # a line every few seconds (stderr)
+        result = plot_bag(args.bag, output, dpi=args.dpi, episode=args.episode,
+                          start_s=args.start, end_s=args.end)
     data = result.data
     print(f'{output}: {data.title()}')
     chosen = data.selection
@@ -193,15 +195,16 @@ def run_export(args: argparse.Namespace) -> int:
     _one_bag(args.bag)
     topics = [t for group in args.topics for t in group] if args.topics else None
     selection = None
-    if args.episode is not None or args.start is not None or args.end is not None:
-        from dam_recorder.bag_plot import read_selection
+    with Progress(f'{PROG} export', 'writing CSV'):  # a line every few seconds (stderr)
+        if args.episode is not None or args.start is not None or args.end is not None:
+            from dam_recorder.bag_plot import read_selection
 
-        selection = read_selection(args.bag, episode=args.episode, start_s=args.start,
-                                   end_s=args.end)
-        print(f'{args.bag}: {selection.description}')
-    for exported in export_bag(args.bag, args.output, topics, selection):
-        print(f'{exported.path}: {exported.rows} rows, {len(exported.columns)} columns '
-              f'({exported.topic})')
+            selection = read_selection(args.bag, episode=args.episode, start_s=args.start,
+                                       end_s=args.end)
+            print(f'{args.bag}: {selection.description}')
+        for exported in export_bag(args.bag, args.output, topics, selection):
+            print(f'{exported.path}: {exported.rows} rows, {len(exported.columns)} columns '
+                  f'({exported.topic})')
     return 0
 
 

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from dam_common.progress import current as current_progress
 from dam_recorder.backlog import BACKLOG_KEY
 from dam_recorder.completeness import Completeness, completeness_from_custom_data
 from dam_recorder.episode import Episode, episode_from_custom_data
@@ -408,9 +409,18 @@ class BagReader:
         connections = self._connections(topics)
         if not connections:
             return
+        # a command's progress line (dam_common.progress) counts the messages read
+        progress = current_progress()
+        if progress is not None:
+            progress.stage(f'reading messages of {self.path.name}',
+                           total=sum(int(getattr(c, 'msgcount', 0) or 0) for c in connections))
         try:
             for connection, time_ns, data in self._reader.messages(connections=connections):
+                if progress is not None:
+                    progress.done += 1
                 yield connection.topic, int(time_ns), data
+            if progress is not None:
+                progress.end_stage(f'read {progress.done:,} messages')
         except Exception as exc:  # noqa: BLE001 - a damaged file is raised as the reader's error
             raise BagReadError(f'{self.path}: cannot read the messages: '
                                f'{one_line(str(exc)) or type(exc).__name__}') from None
