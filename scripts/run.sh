@@ -32,7 +32,8 @@
 #   0  SUCCESS, and the episode bag is complete
 #   1  the bring-up failed (a node or the recorder died while starting: its fatal line; the
 #      probe refused), or no /dam_grasp action server answered; nothing is left running
-#   2  bad arguments (refused before anything starts), or the controller refused the goal
+#   2  bad arguments (a missing value, an unknown option or backend, a value out of range:
+#      one line, refused before anything starts), or the controller refused the goal
 #   3  another outcome (not lifted, lifted but not enveloped, aborted, cancelled)
 #   4  gave up waiting for the bring-up or the recorder (--timeout, or nothing progressed
 #      for 120 s)
@@ -52,6 +53,12 @@ keep=false
 object=""
 timeout=${DAM_BRINGUP_TIMEOUT:-none}
 params=()    # the caller's --params-file FILE pairs, for every node
+usage_error() { echo "run.sh: $1 (see --help)" >&2; exit 2; }
+# need_value OPTION [VALUE ...] WHAT: OPTION must be followed by a value (not by another option)
+need_value() {
+  local what=${*: -1}
+  [ $# -ge 3 ] && [ -n "$2" ] && [[ "$2" != --* ]] || usage_error "$1 needs $what"
+}
 ros_args=()  # the caller's --ros-args, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -62,17 +69,22 @@ while [ $# -gt 0 ]; do
     --ros-args) shift
       while [ $# -gt 0 ] && [ "$1" != -- ]; do ros_args+=("$1"); shift; done
       [ $# -eq 0 ] || shift ;;
-    --k-theta) k_theta=${2:?--k-theta needs a value}; shift 2 ;;
-    --delta-theta-p) delta_theta_p=${2:?--delta-theta-p needs a value}; shift 2 ;;
-    --backend) backend=${2:?--backend needs auto, sim, hardware or dynamixel}; shift 2 ;;
-    --port) port=${2:?--port needs a serial device (backend dynamixel)}; shift 2 ;;
+    --k-theta) need_value "$@" "a stiffness in N*m/rad"; k_theta=$2; shift 2 ;;
+    --delta-theta-p) need_value "$@" "an angle (10deg)"; delta_theta_p=$2; shift 2 ;;
+    --backend) need_value "$@" "auto, sim, hardware or dynamixel"; backend=$2; shift 2 ;;
+    --port) need_value "$@" "a serial device (backend dynamixel)"; port=$2; shift 2 ;;
     --keep) keep=true; shift ;;
-    --object) object=${2:?--object needs a name of object.library}; shift 2 ;;
-    --timeout) timeout=${2:?--timeout needs a number of seconds or none}; shift 2 ;;
+    --object) need_value "$@" "a name of object.library"; object=$2; shift 2 ;;
+    --timeout) need_value "$@" "a number of seconds or none"; timeout=$2; shift 2 ;;
     -h|--help) sed -n '2,/^[^#]/s/^# \{0,1\}//p' "$0"; exit 0 ;;
-    *) echo "run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+    *) usage_error "unknown argument '$1'" ;;
   esac
 done
+case "$backend" in auto|sim|hardware|dynamixel) ;; *)
+  usage_error "--backend must be auto, sim, hardware or dynamixel, got '$backend'" ;;
+esac
+[ -z "$port" ] || [ "$backend" = dynamixel ] ||
+  usage_error "--port is for --backend dynamixel (the UDP link's addresses are in device:)"
 
 bash "$REPO_ROOT/scripts/setup.sh" >/dev/null
 set +u
@@ -102,15 +114,14 @@ except ConfigError as exc:
     sys.exit(f"run.sh: --object: {exc}")
 dp_max = config.task.delta_theta_p_max_rad
 for option, parse, text in (
-        ("--k-theta", number_argument(low=0.0, unit="N*m/rad"), os.environ["DAM_RUN_K"]),
+        ("--k-theta", number_argument(above=0.0, unit="N*m/rad", what="stiffness"),
+         os.environ["DAM_RUN_K"]),
         ("--delta-theta-p", argument(ANGLE, low=0.0, low_inclusive=False, high=dp_max),
          os.environ["DAM_RUN_DP"])):
     try:
         value = parse(text)
     except argparse.ArgumentTypeError as exc:
-        sys.exit(f"run.sh: {option}: {exc}")
-    if option == "--k-theta" and value <= 0.0:
-        sys.exit(f"run.sh: --k-theta: {text!r} must be a positive stiffness [N*m/rad]")' || exit 2
+        sys.exit(f"run.sh: {option}: {exc}")' || exit 2
 
 [ "$timeout" = none ] || { [[ "$timeout" =~ ^[0-9]+([.][0-9]+)?$ ]] &&
   [[ "$timeout" =~ [1-9] ]]; } || {
@@ -124,7 +135,7 @@ bringup_args=(--backend "$backend" --timeout "$timeout" ${params[@]+"${params[@]
 # bringup.sh returns when every node serves; when it fails it has stopped what it started.
 up=0
 bash "$REPO_ROOT/scripts/bringup.sh" "${bringup_args[@]}" || up=$?
-case "$up" in 0) ;; 4) exit 4 ;; *) exit 1 ;; esac
+case "$up" in 0) ;; 2|4) exit "$up" ;; *) exit 1 ;; esac
 exe() { echo "$REPO_ROOT/ros2_ws/install/$1/lib/$1/$2"; }
 
 # The recorder, in episode mode: this grasp becomes one bag.

@@ -320,8 +320,10 @@ def test_run_sh_refuses_an_object_outside_the_library(tmp_path: Path) -> None:
     (['--delta-theta-p', '10'], "'10' has no unit, so it reads as 10 rad (573 deg)"),
     (['--delta-theta-p', '80deg'], '80 deg must be at most 65 deg'),
     (['--delta-theta-p', '-5deg'], '-5 deg must be above 0 deg'),
-    (['--k-theta', 'soft'], "'soft' is not a number"),
-    (['--k-theta', '0'], "'0' must be a positive stiffness"),
+    (['--k-theta', 'soft'], "'soft' is not a number: a stiffness is a plain number in N*m/rad"),
+    (['--k-theta', '10Nm/rad'], 'a stiffness is a plain number in N*m/rad (10, not 10Nm/rad)'),
+    (['--k-theta', '0'], "'0' must be greater than 0 N*m/rad"),
+    (['--k-theta', '-1'], "'-1' must be greater than 0 N*m/rad"),  # not "at least 0"
 ])
 def test_run_sh_checks_the_pair_before_anything_starts(tmp_path: Path, args: list[str],
                                                        says: str) -> None:
@@ -335,6 +337,30 @@ def test_run_sh_checks_the_pair_before_anything_starts(tmp_path: Path, args: lis
     assert 'bringing up' not in refused.stdout.lower(), refused.stdout
     assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
     assert not (tmp_path / 'bags').exists() or not any((tmp_path / 'bags').rglob('*'))
+
+
+@pytest.mark.parametrize(('args', 'says'), [
+    (['--k-theta'], 'run.sh: --k-theta needs a stiffness in N*m/rad (see --help)'),
+    (['--k-theta', '--keep'], 'run.sh: --k-theta needs a stiffness in N*m/rad (see --help)'),
+    (['--backend'], 'run.sh: --backend needs auto, sim, hardware or dynamixel (see --help)'),
+    (['--backend', 'foo'],
+     "run.sh: --backend must be auto, sim, hardware or dynamixel, got 'foo' (see --help)"),
+    (['--port', '/dev/null'], 'run.sh: --port is for --backend dynamixel'),
+    (['--timeout'], 'run.sh: --timeout needs a number of seconds or none (see --help)'),
+    (['--frobnicate'], "run.sh: unknown argument '--frobnicate' (see --help)"),
+])
+def test_run_sh_refuses_bad_arguments_with_the_usage_status(tmp_path: Path, args: list[str],
+                                                            says: str) -> None:
+    """Every bad argument is status 2 (1 is a failed bring-up) with one clean line: a
+    missing value printed bash's ``line 48: 2: --k-theta needs a value``; ``--backend foo``
+    exited with 1."""
+    env = _env(tmp_path)
+    refused = _script('run.sh', *args, env=env)
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert refused.stderr.strip() == says or refused.stderr.startswith(says), refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and 'line ' not in refused.stderr
+    assert 'bringing up' not in refused.stdout.lower(), refused.stdout
+    assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
 
 
 @pytest.mark.parametrize('sim_time', [True, False])
