@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # Bring the DAM suite up in the background (plain shell, no launch files):
-#   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers)
-#   and spcm_controller. Returns when every node serves, or fails (non-zero) with the fatal
+#   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers),
+#   spcm_controller and dam_state_publisher (/tf and /tf_static of the hand and the object). Returns when every node serves, or fails (non-zero) with the fatal
 #   line of the node that died, after stopping what it started. No fixed limit decides how
 #   long the nodes may take on a loaded machine: it waits while they progress.
 #
 #   bash scripts/bringup.sh [--backend auto|sim|hardware|dynamixel] [--port DEV] [--gui]
 #                           [--object NAME] [--timeout S] [--params-file FILE]...
+#                           [--state-publisher dam|system|none]
 #                           [--ros-args ARGS... [--]]
 #   bash scripts/stop.sh          # stops exactly the processes started here, by PID
 #
@@ -21,6 +22,12 @@
 #   --object    an object of config/dam.yaml's object.library (default object.default)
 #   --timeout S give up when the nodes are not ready S seconds after their start [s]
 #               (default $DAM_BRINGUP_TIMEOUT, else none: wait while they progress)
+#   --state-publisher    who publishes the hand's frames on /tf and /tf_static: dam (default)
+#               dam_state_publisher, the suite's own (the hand from /robot_description and
+#               /joint_states, the stand-in's object as the frame 'object'); system: the real
+#               robot_state_publisher of a system ROS 2 Jazzy (apt's
+#               ros-jazzy-robot-state-publisher) for the hand, dam_state_publisher for the
+#               object only; none: no /tf at all
 #   --params-file FILE   a ROS 2 parameter file for every node started (keys: the node name,
 #               e.g. spcm_controller: or hand_driver:, or /**: for all nodes); repeatable
 #   --ros-args ARGS [--] ROS arguments for every node started, e.g.
@@ -48,7 +55,7 @@
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
-NODES=(check_lift_server hand_driver spcm_controller)
+NODES=(check_lift_server hand_driver spcm_controller dam_state_publisher robot_state_publisher)
 
 usage_error() { echo "bringup.sh: $1 (see --help)" >&2; exit 2; }
 backend=auto
@@ -56,6 +63,7 @@ port=""
 gui=false
 object=""
 timeout=${DAM_BRINGUP_TIMEOUT:-none}
+state_publisher=dam
 user_args=()  # --params-file and --ros-args of the caller, for every node
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -66,6 +74,8 @@ while [ $# -gt 0 ]; do
     --gui) gui=true; shift ;;
     --object) [ $# -ge 2 ] || usage_error "--object needs a name of object.library"
       object=$2; shift 2 ;;
+    --state-publisher) [ $# -ge 2 ] || usage_error "--state-publisher needs dam, system or none"
+      state_publisher=$2; shift 2 ;;
     --timeout) [ $# -ge 2 ] || usage_error "--timeout needs a number of seconds or none"
       timeout=$2; shift 2 ;;
     --params-file) [ $# -ge 2 ] || usage_error "--params-file needs a file"
@@ -78,6 +88,9 @@ while [ $# -gt 0 ]; do
     *) usage_error "unknown argument '$1'" ;;
   esac
 done
+case "$state_publisher" in dam|system|none) ;; *)
+  usage_error "--state-publisher must be dam, system or none, got '$state_publisher'" ;;
+esac
 case "$backend" in auto|sim|hardware|dynamixel) ;; *)
   usage_error "--backend must be auto, sim, hardware or dynamixel, got '$backend'" ;;
 esac
@@ -94,6 +107,14 @@ set +u
 source "$REPO_ROOT/scripts/env.sh"
 set -u
 mkdir -p "$RUN_DIR"
+rsp_exe=""
+if [ "$state_publisher" = system ]; then
+  rsp_exe=$(python -c 'from ament_index_python.packages import get_package_prefix as p
+print(p("robot_state_publisher") + "/lib/robot_state_publisher/robot_state_publisher")' \
+    2>/dev/null) && [ -x "$rsp_exe" ] || usage_error "--state-publisher system: no" \
+    "robot_state_publisher in this ROS 2 (apt-get install ros-jazzy-robot-state-publisher;" \
+    "the PyPI wheels have none: use --state-publisher dam)"
+fi
 
 running() {  # running NAME: the PID of NAME started by an earlier bring-up, if it still runs
   local pid_file="$RUN_DIR/$1.pid" pid
@@ -176,9 +197,36 @@ port_args=()
 start hand_driver dam_hand_driver hand_driver -p "backend:=$driver_backend" -p "gui:=$gui" \
   ${object_args[@]+"${object_args[@]}"} ${port_args[@]+"${port_args[@]}"}
 start spcm_controller dam_spcm_controller spcm_controller ${object_args[@]+"${object_args[@]}"}
+case "$state_publisher" in
+  dam) start dam_state_publisher dam_hand_driver dam_state_publisher ;;
+  system)
+    # the real robot_state_publisher takes the URDF as a parameter, from a file
+    python - "$RUN_DIR/robot_state_publisher.yaml" <<'PY'
+import sys
+
+import yaml
+
+from dam_common.config import load_config
+from dam_common.hand_urdf import hand_urdf
+
+with open(sys.argv[1], 'w', encoding='utf-8') as f:
+    yaml.safe_dump({'robot_state_publisher': {'ros__parameters': {
+        'robot_description': hand_urdf(load_config())}}}, f)
+PY
+    PYTHONUNBUFFERED=1 nohup "$rsp_exe" --ros-args ${common[@]+"${common[@]}"} \
+      --params-file "$RUN_DIR/robot_state_publisher.yaml" \
+      ${user_args[@]+"${user_args[@]}"} >"$RUN_DIR/robot_state_publisher.log" 2>&1 </dev/null &
+    echo $! >"$RUN_DIR/robot_state_publisher.pid"
+    echo "    robot_state_publisher: PID $!, log $RUN_DIR/robot_state_publisher.log"
+    start dam_state_publisher dam_hand_driver dam_state_publisher -p robot_state:=false ;;
+esac
 
 watch=()
-for name in "${NODES[@]}"; do watch+=("$name=$(cat "$RUN_DIR/$name.pid"):$RUN_DIR/$name.log"); done
+watched=(check_lift_server hand_driver spcm_controller)
+[ "$state_publisher" = none ] || watched+=(dam_state_publisher)
+for name in "${watched[@]}"; do
+  watch+=("$name=$(cat "$RUN_DIR/$name.pid"):$RUN_DIR/$name.log")
+done
 if [ "$timeout" = none ]; then
   echo "==> Waiting until every node serves (while they progress; --timeout S sets a limit)"
 else

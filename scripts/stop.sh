@@ -43,8 +43,8 @@ stop_stage() {  # stop_stage NAME...: SIGINT to each, then wait for all of them 
   for name in "$@"; do rm -f "$RUN_DIR/$name.pid"; done
 }
 # The recorder first (it closes its bag), then the controller (it relaxes the hand) together
-# with the analysis server (independent of both), the driver last.
+# with the analysis server and the /tf publishers (independent of both), the driver last.
 stop_stage recorder
-stop_stage spcm_controller check_lift_server
+stop_stage spcm_controller check_lift_server dam_state_publisher robot_state_publisher
 stop_stage hand_driver
 echo "==> stopped $stopped process(es)"

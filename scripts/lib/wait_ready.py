@@ -17,7 +17,10 @@ Run with the workspace sourced (``source scripts/env.sh``)::
     ``ERROR`` (its device stream stalled while the machine was busy starting the suite) is
     asked once every few seconds to leave it through ``/hand_driver/reset``;
 ``recorder``
-    its log says it records ``/dam/episode`` and ``/joint_states`` (``run.sh``'s recorder).
+    its log says it records ``/dam/episode`` and ``/joint_states`` (``run.sh``'s recorder);
+``dam_state_publisher``
+    its log says it took the hand's model from ``/robot_description`` and published the fixed
+    frames on ``/tf_static`` (or, with ``robot_state:=false``, that it publishes no hand).
 
 No fixed limit decides on a loaded machine: while every process runs and something still
 progresses, it waits. Progress is any of: a new line in the log of a node not ready yet; CPU
@@ -53,9 +56,12 @@ from pathlib import Path
 
 #: The driver's diagnostic status that carries its state.
 DRIVER_STATUS_NAME = 'dam_hand_driver: device link'
-NODES = ('check_lift_server', 'hand_driver', 'spcm_controller', 'recorder')
+NODES = ('check_lift_server', 'hand_driver', 'spcm_controller', 'recorder',
+         'dam_state_publisher')
 #: Lines of the recorder's log that make it ready.
 RECORDER_READY = ('recording /dam/episode ', 'recording /joint_states ')
+#: Lines of dam_state_publisher's log of which one makes it ready.
+STATE_PUBLISHER_READY = ('fixed frames on /tf_static', 'no hand transforms')
 #: Lines of a log shown when it has no ``[FATAL]`` line.
 _TAIL_LINES = 8
 #: Least time between two ``~/reset`` requests to a driver in ERROR [s].
@@ -133,13 +139,15 @@ class Readiness:
     driver_state: str = ''  #: the last ``state`` of the driver's diagnostics ('' never seen)
     driver_message: str = ''  #: its status message
     recorder: bool = False  #: the recorder's log says it records what an episode needs
+    #: dam_state_publisher's log says it has the hand's model (or publishes no hand)
+    state_publisher: bool = False
     driver_states: set[str] = field(default_factory=set)  #: every driver state seen
     notes: list[str] = field(default_factory=list)
 
     def score(self) -> int:
         """How many conditions are met (and driver states seen): it grows as nodes come up."""
         return (self.check_lift + self.grasp_server + bool(self.joint_states)
-                + self.recorder + len(self.driver_states))
+                + self.recorder + self.state_publisher + len(self.driver_states))
 
     def missing_of(self, name: str) -> list[str]:
         """What node ``name`` still owes, one phrase each (empty: ready)."""
@@ -157,6 +165,8 @@ class Readiness:
                 out.append(f'the driver is not ACTIVE: {seen}')
         if name == 'recorder' and not self.recorder:
             out.append('it does not record /dam/episode and /joint_states yet')
+        if name == 'dam_state_publisher' and not self.state_publisher:
+            out.append('it has not taken the hand\'s model from /robot_description yet')
         return out
 
     def missing(self, names: list[str]) -> list[str]:
@@ -310,6 +320,9 @@ class Progress:
         if s.name == 'recorder' and not ready.recorder:
             text = s.log.read_text(encoding='utf-8', errors='replace')
             ready.recorder = all(pattern in text for pattern in RECORDER_READY)
+        if s.name == 'dam_state_publisher' and not ready.state_publisher:
+            text = s.log.read_text(encoding='utf-8', errors='replace')
+            ready.state_publisher = any(pattern in text for pattern in STATE_PUBLISHER_READY)
         return bool(lines)
 
     def report(self, ready: Readiness) -> list[str]:
@@ -439,7 +452,8 @@ def _done_line(s: Started, ready: Readiness) -> str:
     done = {'check_lift_server': '/check_lift answers',
             'spcm_controller': '/dam_grasp action server ready',
             'hand_driver': f'/joint_states published, driver {ready.driver_message}',
-            'recorder': 'records /dam/episode and /joint_states'}[s.name]
+            'recorder': 'records /dam/episode and /joint_states',
+            'dam_state_publisher': 'publishes /tf and /tf_static'}[s.name]
     when = ''
     if s.start_s is not None and s.ready_s is not None:
         first = ('no log line yet' if s.first_line_s is None else

@@ -27,7 +27,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SCRIPTS = REPO_ROOT / 'scripts'
 DRIVER_STATUS = 'dam_hand_driver: device link'
-NODES = ('check_lift_server', 'hand_driver', 'spcm_controller')
+NODES = ('check_lift_server', 'hand_driver', 'spcm_controller', 'dam_state_publisher')
 
 
 def _env(tmp_path: Path, **device: float) -> dict[str, str]:
@@ -49,6 +49,20 @@ def _script(name: str, *args: str, env: dict[str, str],
 def _started_pids(stdout: str) -> dict[str, int]:
     """The PIDs bringup.sh says it started, by node name."""
     return {m[1]: int(m[2]) for m in re.finditer(r'^ {4}(\w+): PID (\d+), log ', stdout, re.M)}
+
+
+@pytest.mark.parametrize(('args', 'says'), [
+    (['--state-publisher', 'rviz'],
+     "bringup.sh: --state-publisher must be dam, system or none, got 'rviz' (see --help)"),
+    (['--state-publisher'],
+     'bringup.sh: --state-publisher needs dam, system or none (see --help)'),
+])
+def test_bringup_refuses_a_bad_state_publisher_before_anything_starts(
+        tmp_path: Path, args: list[str], says: str) -> None:
+    up = _script('bringup.sh', '--backend', 'sim', *args, env=_env(tmp_path))
+    assert up.returncode == 2, up.stdout + up.stderr
+    assert up.stderr.strip().splitlines() == [says]
+    assert not (tmp_path / 'run').exists() or not list((tmp_path / 'run').glob('*.pid'))
 
 
 def _first_driver_state(client: RosClient, timeout: float = 10.0) -> str:
@@ -150,7 +164,7 @@ def test_bringup_returns_serving_and_stop_stops_it(tmp_path: Path) -> None:
     finally:
         down = _script('stop.sh', env=env)
     assert down.returncode == 0, down.stdout + down.stderr
-    assert 'stopped 3 process(es)' in down.stdout, down.stdout
+    assert 'stopped 4 process(es)' in down.stdout, down.stdout
     _assert_all_stopped(tmp_path, _started_pids(up.stdout))
     # every node says when it served and printed its first line (which may come after the
     # graph shows it serving), from its start, and its CPU time
@@ -223,7 +237,7 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
     assert check_lift_timeout == pytest.approx(5.0)  # /** in the file
     assert priority == 0  # node:name:=value after --ros-args
     assert sim_time == dict.fromkeys(NODES, True)  # the stand-in is the clock
-    assert 'stopped 3 process(es)' in down.stdout, down.stdout  # run.sh stopped its recorder
+    assert 'stopped 4 process(es)' in down.stdout, down.stdout  # run.sh stopped its recorder
     _assert_all_stopped(tmp_path, pids)
 
 

@@ -38,6 +38,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
 DELTA_THETA_P = math.radians(10.0)
 PRE_ROLL_S = 2.0
 POST_ROLL_S = 1.0
+FINGERS = ('finger1', 'finger2', 'finger3')
 
 
 class _Goals:
@@ -86,21 +87,24 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[_Goals, Pa
             node_process([installed_executable('dam_analysis', 'check_lift_server')],
                          env=env) as analysis, \
             node_process([installed_executable('dam_spcm_controller', 'spcm_controller')],
-                         env=env) as controller:
+                         env=env) as controller, \
+            node_process([installed_executable('dam_hand_driver', 'dam_state_publisher')],
+                         env=env) as frames:
         client = RosClient()
         goals = _Goals(client)
         try:
             assert goals.action.wait_for_server(timeout_sec=30.0), controller.output()
             deadline = time.monotonic() + 30.0
             while not all(f'recording {t} ' in recorder.output()
-                          for t in ('/joint_states', '/dam/episode', '/robot_description')):
+                          for t in ('/joint_states', '/dam/episode', '/robot_description',
+                                    '/tf', '/tf_static')):
                 assert time.monotonic() < deadline, recorder.output()
                 time.sleep(0.1)
             yield goals, episodes_dir, config_file, recorder
         finally:
             goals.action.destroy()
             client.close()
-            for proc in (controller, analysis, driver, recorder):
+            for proc in (frames, controller, analysis, driver, recorder):
                 assert proc.alive(), proc.output()
 
 
@@ -205,7 +209,8 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
         # pre-roll starts with the signals at the later of its start and the driver's reset
         # before the goal: where the stand-in had stalled, the driver published nothing before.)
         stamps = [r.timestamp for t, rs in topics.items() for r in rs]
-        firsts = [r[0].timestamp for t, r in topics.items() if r and t != '/robot_description']
+        firsts = [r[0].timestamp for t, r in topics.items()
+                  if r and t not in ('/robot_description', '/tf_static')]
         pre, post = PRE_ROLL_S * 1e9, POST_ROLL_S * 1e9
         assert summary['accepted_ns'] - pre - 0.1e9 < min(stamps)
         late = {t: rs[-1].timestamp - summary['ended_ns'] for t, rs in topics.items()
@@ -221,6 +226,21 @@ def test_each_goal_becomes_one_episode_bag_with_its_result_and_signals(stack) ->
         mcap_topics = read_with_mcap(bag)
         assert [r.data for r in mcap_topics['/dam/status']] == \
             [r.data for r in topics['/dam/status']]
+        # What a 3D view needs, read back by both readers: every joint's frame and the
+        # object's on /tf, and the latched fingertip frames on /tf_static in every episode.
+        moving = {t['child_frame_id'] for r in topics['/tf'] for t in r.values['transforms']}
+        assert moving == {f'{f}_{role}_link' for f in FINGERS
+                          for role in ('compliant', 'locked', 'position')} | {'object'}
+        assert {t['header']['frame_id'] for r in topics['/tf'] for t in r.values['transforms']
+                if t['child_frame_id'] == 'object'} == {'hand_base'}
+        [static] = topics['/tf_static']
+        assert {t['child_frame_id'] for t in static.values['transforms']} == \
+            {f'{f}_fingertip' for f in FINGERS}
+        for topic in ('/tf', '/tf_static'):
+            assert [r.data for r in mcap_topics[topic]] == [r.data for r in topics[topic]]
+            assert [[t['child_frame_id'] for t in r.values['transforms']]
+                    for r in mcap_topics[topic]] == \
+                [[t['child_frame_id'] for t in r.values['transforms']] for r in topics[topic]]
     assert checked >= 1  # the second goal, at least, found the server warm
     # The picture of the finished grasp, drawn by the installed bag tool.
     bag = bags[next(g for g, r in goals.results.items() if r is finished)]

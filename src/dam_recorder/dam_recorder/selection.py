@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 from dam_recorder.errors import ConfigurationError
 
 #: The hand's state and commands, the grasp's status, the action's status and feedback, the
-#: driver's diagnostics, the robot model (latched) and the stand-in's ground truth (the
-#: object's pose and whether it is on the table).
+#: driver's diagnostics, the robot model (latched), the hand's and the object's frames
+#: (``/tf``, and ``/tf_static`` latched: RViz and Foxglove draw the episode in 3D from them)
+#: and the stand-in's ground truth (the object's pose and whether it is on the table).
 DEFAULT_TOPICS: tuple[str, ...] = (
     '/joint_states',
     '/hand/command',
@@ -27,6 +28,8 @@ DEFAULT_TOPICS: tuple[str, ...] = (
     '/dam_grasp/_action/feedback',
     '/diagnostics',
     '/robot_description',
+    '/tf',
+    '/tf_static',
     '/sim/object_pose',
     '/sim/object_table_contact',
 )
