@@ -529,3 +529,28 @@ def test_objects_are_an_axis_each_trial_grasping_its_own(tmp_path: Path) -> None
     assert [c['object'] for c in cells] == ['cylinder', 'hex_bar']
     params = json.loads((tmp_path / 'two' / PARAMS_FILE).read_text(encoding='utf-8'))
     assert params['sweep']['objects'] == ['cylinder', 'hex_bar']
+
+
+def test_the_outcome_counts_say_which_disagree_with_the_ground_truth() -> None:
+    """"lifted 5, SUCCESS 3, LIFTED_DAM_FAILED 1, FAILURE 4" read inconsistent: one FAILURE
+    had lifted the object; the line says so."""
+    from dam_experiments.sweep_table import outcome_counts
+
+    trials = ([('SUCCESS', True)] * 3 + [('LIFTED_DAM_FAILED', True)]
+              + [('FAILURE', True)] + [('FAILURE', False)] * 3)
+    assert outcome_counts(trials) == ('SUCCESS 3, LIFTED_DAM_FAILED 1, FAILURE 4 (1 of them '
+                                      'did leave the table)')
+    assert outcome_counts([('SUCCESS', False), ('FAILURE', False)]) == (
+        'SUCCESS 1 (it never left the table), LIFTED_DAM_FAILED 0, FAILURE 1')
+
+
+def test_one_of_everything_is_said_in_the_singular(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """"1 trials (1 friction angles x ... 1 repeats)"."""
+    assert main(['--friction-angles', '5deg', '--k-theta', '10', '--delta-theta-p', '20deg',
+                 '--max-time', '0.6', '--config', str(CONFIG), '--out', str(tmp_path),
+                 '--workers', '1', '--quiet']) == 0
+    out = capsys.readouterr().out
+    assert ('sweep: 1 trial (object cylinder, 1 friction angle x 1 k_theta x 1 delta_theta_p x '
+            '1 repeat)') in out
+    assert '1 of 1 row in ' in out and '1 trials' not in out and '1 repeats' not in out

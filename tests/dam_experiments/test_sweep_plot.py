@@ -175,8 +175,8 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
     # trials 0-7 at 5 deg, 8-15 at 30 deg, classes by trial number (CLASSES)
     for alpha in ('5', '30'):
         assert (f'alpha {alpha} deg: 8 trials, lifted (left the table) 5 (62 %), off the '
-                f'table at the end 2, success 3, lifted but DAM failed 2, failure 3; '
-                ) in summary
+                f'table at the end 2, success 3 (1 of them never left the table), lifted but '
+                f'DAM failed 2, failure 3 (1 of them did leave the table); ') in summary
     assert 'sufficient condition: no k_theta is guaranteed' in result.summary[2]
     assert '4 trial(s) where the ground truth' in summary
 

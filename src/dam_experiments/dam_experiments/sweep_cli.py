@@ -36,6 +36,7 @@ from typing import Any
 
 from dam_common.command_line import CommandLineParser
 from dam_common.quantities import ANGLE, LENGTH, argument, in_degrees
+from dam_common.words import counted
 from dam_experiments.errors import SweepError
 from dam_experiments.sweep import (
     MAX_FRICTION_ANGLE_DEG,
@@ -48,7 +49,13 @@ from dam_experiments.sweep import (
 )
 from dam_experiments.sweep_axes import parse_axis
 from dam_experiments.sweep_lock import SweepLocked
-from dam_experiments.sweep_table import CELLS_FILE, PARAMS_FILE, TABLE_FILE, TrialTable
+from dam_experiments.sweep_table import (
+    CELLS_FILE,
+    PARAMS_FILE,
+    TABLE_FILE,
+    TrialTable,
+    outcome_counts,
+)
 
 PROG = 'sweep'
 #: Longest wait for the first worker of a ``--scheduler`` cluster [s].
@@ -333,9 +340,10 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
              'this process' if workers == 1 else f'{workers} local worker processes')
     objects = (f'{len(sweep.objects)} objects x ' if len(sweep.objects) > 1 else
                f'object {sweep.objects[0]}, ' if sweep.objects else '')
-    print(f'{PROG}: {n} trials ({objects}{len(sweep.friction_angles_deg)} friction angles x '
+    print(f'{PROG}: {counted(n, "trial")} ({objects}'
+          f'{counted(len(sweep.friction_angles_deg), "friction angle")} x '
           f'{len(sweep.k_theta)} k_theta x {len(sweep.delta_theta_p_deg)} delta_theta_p x '
-          f'{sweep.repeats} repeats) into {args.out}', flush=True)
+          f'{counted(sweep.repeats, "repeat")}) into {args.out}', flush=True)
     if done or table.dropped:
         print(f'{PROG}: resuming: {done} done, {len(pending)} to run'
               + (f' ({table.dropped} incomplete, malformed or repeated row(s) dropped)'
@@ -370,7 +378,7 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     wall0 = time.monotonic()
     try:
         if pending:
-            print(f'{PROG}: running {len(pending)} trials on {where}', flush=True)
+            print(f'{PROG}: running {counted(len(pending), "trial")} on {where}', flush=True)
             if client is not None:
                 try:
                     run_on_dask(client, pending, sweep, config, on_result)
@@ -381,7 +389,8 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
                     table.close()
                     sys.stderr.write(
                         f'{PROG}: the Dask cluster at {args.scheduler} failed: '
-                        f'{type(exc).__name__}: {exc}; {len(table.rows)} of {n} trials are '
+                        f'{type(exc).__name__}: {exc}; {len(table.rows)} of '
+                        f'{counted(n, "trial")} are '
                         f'kept in {args.out / TABLE_FILE}, run the same command again to '
                         f'finish the rest\n')
                     return 1
@@ -392,7 +401,7 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     except KeyboardInterrupt:
         bar.close()
         table.close()
-        print(f'{PROG}: interrupted: {len(table.rows)} of {n} trials done, kept in '
+        print(f'{PROG}: interrupted: {len(table.rows)} of {counted(n, "trial")} done, kept in '
               f'{args.out / TABLE_FILE}; run the same command again to finish the rest',
               flush=True)
         return 130
@@ -402,14 +411,14 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     if costs:
         wall = sum(c[0] for c in costs) / len(costs)
         cpu = sum(c[1] for c in costs) / len(costs)
-        print(f'{PROG}: {len(costs)} trials in {elapsed:.1f} s; per trial {wall:.2f} s wall, '
+        print(f'{PROG}: {counted(len(costs), "trial")} in {elapsed:.1f} s; per trial '
+              f'{wall:.2f} s wall, '
               f'{cpu:.2f} s CPU (mean)', flush=True)
-    outcomes = [r['outcome'] for r in table.rows.values()]
+    outcomes = [(r['outcome'], r['lifted'] == '1') for r in table.rows.values()]
     held = sum(int(r['off_table_at_end']) for r in table.rows.values())
-    print(f'{PROG}: {len(table.rows)} of {n} rows in {args.out / TABLE_FILE}: lifted (left '
-          f'the table) {lifted}, off the table at the end {held}, '
-          + ', '.join(f'{o} {outcomes.count(o)}' for o in
-                      ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE')), flush=True)
+    print(f'{PROG}: {len(table.rows)} of {counted(n, "row")} in {args.out / TABLE_FILE}: lifted '
+          f'(left the table) {lifted}, off the table at the end {held}, '
+          + outcome_counts(outcomes), flush=True)
     if failures:
         spec, error = failures[0]
         sys.stderr.write(f'{PROG}: {len(failures)} trial(s) failed (first: trial {spec.index}: '

@@ -48,6 +48,7 @@ import numpy as np
 
 from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
+from dam_common.words import counted
 from dam_experiments.errors import SweepPlotError
 from dam_experiments.sweep import config_digest
 from dam_experiments.sweep_results import (
@@ -59,7 +60,7 @@ from dam_experiments.sweep_results import (
     output_path,
     read_sweep,
 )
-from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
+from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE, outcome_counts
 
 PROG = 'sweep_plot'
 #: Picture written into DIR when ``-o`` is not given.
@@ -286,7 +287,7 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
             ax.set_yscale('log')
         ax.set_xlim(0.0, x_max)
         ax.set_ylim(*y_lim)
-        ax.set_title(rf'$\alpha$ = {alpha:g} deg ({len(trials)} trials)', fontsize=10)
+        ax.set_title(rf'$\alpha$ = {alpha:g} deg ({counted(len(trials), "trial")})', fontsize=10)
         ax.set_xlabel(X_LABEL)
         ax.set_ylabel(Y_LABEL)
         ax.tick_params(labelbottom=True, labelleft=True)
@@ -297,7 +298,8 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
     if mappable is not None:
         fig.colorbar(mappable, ax=panels[:len(alphas)], label=P_LIFT_LABEL, shrink=0.9)
     n = len(data.trials)
-    done = f'{n} trials' if n == data.n_planned else f'{n} of {data.n_planned} trials'
+    done = (counted(n, 'trial') if n == data.n_planned else
+            f'{n} of {counted(data.n_planned, "trial")}')
     per_cell = f', {data.repeats} per cell' if probability else ''
     shown = data.object_label
     fig.suptitle(f'{data.directory.name}: {shown + ", " if shown else ""}{done}{per_cell}: '
@@ -309,6 +311,11 @@ def sweep_figure(data: SweepData, boundaries: Sequence[Any], log_k: bool,
 # The summary and the whole command
 
 
+#: The summary's words for the outcomes.
+_OUTCOME_WORDS = {'SUCCESS': 'success', 'LIFTED_DAM_FAILED': 'lifted but DAM failed',
+                  'FAILURE': 'failure'}
+
+
 def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> list[str]:
     """The text summary: the sweep, then per friction angle the trials, how many lifted
     (ground truth) and how many were off the table at the end (format 2 on), the outcome
@@ -316,7 +323,7 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
     n = len(data.trials)
     shown = data.object_label
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{n} of '
-             f'{data.n_planned} trials, {data.repeats} per '
+             f'{counted(data.n_planned, "trial")}, {data.repeats} per '
              f'cell, k_theta axis {"log" if log_k else "linear"}'
              + (f' ({data.skipped} incomplete row(s) left out)' if data.skipped else '')]
     word = ('lifted (left the table)' if data.lift_off_recorded
@@ -326,17 +333,16 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
         lifted = sum(t.lifted for t in trials)
         held = (f', off the table at the end {sum(bool(t.off_table_at_end) for t in trials)}'
                 if data.lift_off_recorded else '')
-        counts = {o: sum(t.outcome == o for t in trials) for o in OUTCOMES}
         bounds = []
         for name, field in (('sufficient condition', 'sufficient'), ('CSM', 'csm')):
             low = _lowest(b, field)
             missing = 'is guaranteed' if field == 'sufficient' else 'lifts'
             bounds.append(f'{name} lowest k_theta* {low[0]:.3g} N*m/rad at {low[1]:.3g} deg'
                           if low else f'{name}: no k_theta {missing}')
-        lines.append(f'  alpha {alpha:g} deg: {len(trials)} trials, {word} {lifted} '
-                     f'({100.0 * lifted / len(trials):.0f} %){held}, success {counts["SUCCESS"]}, '
-                     f'lifted but DAM failed {counts["LIFTED_DAM_FAILED"]}, failure '
-                     f'{counts["FAILURE"]}; ' + '; '.join(bounds))
+        counts = outcome_counts(((t.outcome, bool(t.lifted)) for t in trials), _OUTCOME_WORDS)
+        lines.append(f'  alpha {alpha:g} deg: {counted(len(trials), "trial")}, {word} {lifted} '
+                     f'({100.0 * lifted / len(trials):.0f} %){held}, {counts}; '
+                     + '; '.join(bounds))
     odd = sum(t.disagrees for t in data.trials)
     if odd:
         lines.append(f'{PROG}: {odd} trial(s) where the ground truth (lifted: left the table) '

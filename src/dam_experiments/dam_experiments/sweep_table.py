@@ -358,3 +358,37 @@ def cell_summary(rows: Iterable[Mapping[str, str]]) -> list[dict[str, str]]:
             'worst_case_margin_n': first['worst_case_margin_n'],
             'csm_lift': first['csm_lift'], 'csm_margin_n': first['csm_margin_n']})
     return out
+
+
+#: The controller's outcomes that say "lifted" (the object held off the table).
+LIFTED_OUTCOMES = ('SUCCESS', 'LIFTED_DAM_FAILED')
+
+
+def outcome_counts(trials: Iterable[tuple[str, bool]],
+                   names: Mapping[str, str] | None = None) -> str:
+    """The outcome counts of ``trials`` ((outcome, lifted) pairs, ``lifted`` the ground truth:
+    the object left the table), with the trials whose ground truth disagrees with their
+    outcome said beside their count, so that the line adds up:
+    ``'SUCCESS 3, LIFTED_DAM_FAILED 1, FAILURE 4 (1 of them did leave the table)'``.
+
+    Parameters
+    ----------
+    trials : (outcome, lifted) per trial.
+    names : the words for each outcome (default: its name).
+    """
+    pairs = list(trials)
+    parts = []
+    for outcome in ('SUCCESS', 'LIFTED_DAM_FAILED', 'FAILURE'):
+        mine = [lifted for o, lifted in pairs if o == outcome]
+        text = f'{(names or {}).get(outcome, outcome)} {len(mine)}'
+        if outcome in LIFTED_OUTCOMES:
+            odd = sum(not lifted for lifted in mine)
+            why = 'never left the table'
+        else:
+            odd = sum(bool(lifted) for lifted in mine)
+            why = 'did leave the table'
+        if odd:
+            text += f' ({"it" if len(mine) == 1 else f"{odd} of them"} {why})'
+        parts.append(text)
+    return ', '.join(parts)
+
