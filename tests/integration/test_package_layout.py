@@ -179,7 +179,7 @@ ROSDEP_KEYS = {
 #: ROS packages imported as Python modules (their name is their key).
 ROS_MODULES = {'rclpy', 'rcl_interfaces', 'std_msgs', 'sensor_msgs', 'std_srvs',
                'diagnostic_msgs', 'geometry_msgs', 'builtin_interfaces', 'rosgraph_msgs',
-               'action_msgs', 'ament_index_python'}
+               'action_msgs', 'ament_index_python', 'tf2_msgs'}
 
 
 def imported_modules(package: str) -> set[str]:
