@@ -554,3 +554,42 @@ def test_one_of_everything_is_said_in_the_singular(tmp_path: Path,
     assert ('sweep: 1 trial (object cylinder, 1 friction angle x 1 k_theta x 1 delta_theta_p x '
             '1 repeat)') in out
     assert '1 of 1 row in ' in out and '1 trials' not in out and '1 repeats' not in out
+
+
+def test_the_local_cluster_serves_no_dashboard_unless_asked(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Dask's LocalCluster started a dashboard nobody asked for: a second sweep said ``Port
+    8787 is already in use``. Without ``--dashboard`` the scheduler takes a free loopback port
+    (8787 is held here while the cluster starts) and serves no dashboard."""
+    import socket
+    import urllib.error
+    import urllib.request
+    import warnings
+
+    from distributed import LocalCluster
+
+    from dam_experiments.sweep_cli import local_cluster_options
+
+    holder = socket.socket()
+    try:
+        holder.bind(('', 8787))
+        holder.listen()
+    except OSError:  # something else holds it already: the same condition
+        pass
+    try:
+        with warnings.catch_warnings(record=True) as caught, caplog.at_level('INFO'):
+            warnings.simplefilter('always')
+            with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                              **local_cluster_options(None)) as cluster:
+                port = cluster.scheduler.http_server.port
+                try:
+                    status = urllib.request.urlopen(f'http://127.0.0.1:{port}/status',
+                                                    timeout=30).status
+                except urllib.error.HTTPError as exc:
+                    status = exc.code
+    finally:
+        holder.close()
+    said = [str(w.message) for w in caught] + caplog.messages
+    assert not any('already in use' in text for text in said), said
+    assert port != 8787 and status == 404, (port, status)  # no dashboard page
+    assert local_cluster_options(':8787') == {'dashboard_address': ':8787'}

@@ -4,12 +4,13 @@
 
     ros2 run dam_experiments sweep --friction-angles 5deg 30deg --k-theta 0.05:20:24:log \\
         --delta-theta-p 5deg:60deg:12 --out DIR [--objects NAME ...] [--repeats N] \\
-        [--workers N] [--scheduler ADDRESS]
+        [--workers N] [--scheduler ADDRESS] [--dashboard [ADDRESS]]
 
 Runs every trial of :class:`~dam_experiments.sweep.SweepSpec` (:func:`~dam_experiments.sweep.
 run_trial`) on all local cores (a Dask ``LocalCluster`` of one single-threaded worker process
 per core; ``--workers 1`` runs them in this process, without Dask) or on a Dask cluster
-(``--scheduler tcp://HOST:PORT``), shows progress with the time left, and writes
+(``--scheduler tcp://HOST:PORT``); the local cluster serves Dask's dashboard only with
+``--dashboard [ADDRESS]`` (default ``:8787``); shows progress with the time left, and writes
 ``DIR/trials.csv``, ``DIR/sweep.json`` and ``DIR/cells.csv``
 (:mod:`dam_experiments.sweep_table`). Ctrl-C (SIGINT) or SIGTERM stops it with the finished
 trials kept; the same command again runs only the missing ones.
@@ -134,6 +135,9 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
                    help='local worker processes (default: one per core); 1: in this process')
     r.add_argument('--scheduler', default=None, metavar='ADDRESS',
                    help='run on the Dask cluster of this scheduler (tcp://HOST:PORT)')
+    r.add_argument('--dashboard', nargs='?', const=':8787', default=None, metavar='ADDRESS',
+                   help="serve the local cluster's Dask dashboard at ADDRESS (default :8787; "
+                        'without the option no dashboard and no port of its own)')
     r.add_argument('--quiet', action='store_true', help='no progress bar')
     return p.parse_args(argv)
 
@@ -397,7 +401,8 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
             elif workers == 1:
                 _run_stoppable(pending, sweep, config, on_result)
             else:
-                _run_local_cluster(workers, pending, sweep, config, on_result)
+                _run_local_cluster(workers, pending, sweep, config, on_result,
+                                   dashboard=args.dashboard)
     except KeyboardInterrupt:
         bar.close()
         table.close()
@@ -429,8 +434,19 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
     return 0
 
 
+def local_cluster_options(dashboard: str | None) -> dict[str, Any]:
+    """The ``LocalCluster`` options for the dashboard: at ``dashboard`` when asked for, else
+    none. Dask's scheduler serves HTTP even without its dashboard, at port 8787 by default
+    (a second sweep said ``Port 8787 is already in use``): without one it is given a free
+    port of the loopback interface."""
+    if dashboard is not None:
+        return {'dashboard_address': dashboard}
+    return {'dashboard_address': None,
+            'scheduler_kwargs': {'dashboard': False, 'dashboard_address': '127.0.0.1:0'}}
+
+
 def _run_local_cluster(workers: int, pending: Sequence[TrialSpec], sweep: SweepSpec,
-                       config: Any, on_result: OnResult) -> None:
+                       config: Any, on_result: OnResult, dashboard: str | None = None) -> None:
     from distributed import Client, LocalCluster  # noqa: PLC0415 - slow import
 
     # The worker processes inherit an ignored SIGINT: Ctrl-C in a terminal reaches the whole
@@ -441,10 +457,13 @@ def _run_local_cluster(workers: int, pending: Sequence[TrialSpec], sweep: SweepS
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.CRITICAL)
+                               silence_logs=logging.CRITICAL,
+                               **local_cluster_options(dashboard))
     finally:
         signal.signal(signal.SIGINT, previous)
     with cluster, Client(cluster) as client:
+        if dashboard is not None:
+            print(f'{PROG}: Dask dashboard at {client.dashboard_link}', flush=True)
         run_on_dask(client, pending, sweep, config, on_result)
 
 
