@@ -249,3 +249,21 @@ def test_pip_keys_outside_the_database_are_defined_in_rosdep_yaml() -> None:
         pip_name = key[len('python3-'):-len('-pip')]
         for platform in ('debian', 'ubuntu'):
             assert rules[platform]['pip']['packages'] == [pip_name], (key, platform)
+
+
+def test_tf2_msgs_is_the_standard_type() -> None:
+    """/tf and /tf_static carry tf2_msgs/msg/TFMessage with Jazzy's own type hash, whether it
+    comes from the system or from interfaces/ (RViz, Foxglove and ros2 bag match on it)."""
+    import json
+
+    import tf2_msgs
+    from rosbags.typesys import Stores, get_typestore
+
+    module = Path(tf2_msgs.__file__).resolve()
+    prefix = next(p for p in module.parents if (p / 'share' / 'tf2_msgs' / 'msg').is_dir())
+    description = json.loads((prefix / 'share' / 'tf2_msgs' / 'msg' / 'TFMessage.json')
+                             .read_text(encoding='utf-8'))
+    [ours] = [h['hash_string'] for h in description['type_hashes']
+              if h['type_name'] == 'tf2_msgs/msg/TFMessage']
+    jazzy = get_typestore(Stores.ROS2_JAZZY).hash_rihs01('tf2_msgs/msg/TFMessage')
+    assert ours == jazzy
