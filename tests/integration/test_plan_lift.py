@@ -224,7 +224,7 @@ def test_a_signal_during_a_long_plan_stops_the_server_promptly(signum: str) -> N
 
 
 def test_check_lift_answers_while_a_first_plan_builds_its_nodes() -> None:
-    """/plan_lift runs on an executor thread of its own: a plan with a new 2.3 mm tolerance
+    """/plan_lift runs on a thread of its own: a plan with a new 2.3 mm tolerance
     (11 position nodes, seconds of work) does not hold up /check_lift, which the controller
     gives 2 s."""
     import time
