@@ -1,5 +1,6 @@
-"""The README's (or, moved, docs/'s) rate of /joint_states is each backend's configured one (issue 34: it said
-"/joint_states (500 Hz)", the UDP link's rate, where the Dynamixel backend publishes at 250)."""
+"""The README's (or, moved, docs/'s) rate of /joint_states is each backend's configured one
+(issue 34: it said "/joint_states (500 Hz)", the UDP link's rate, where the Dynamixel backend
+publishes at 250)."""
 
 from __future__ import annotations
 
