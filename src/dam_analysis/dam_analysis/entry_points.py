@@ -7,6 +7,7 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.shutdown import run_client_entry, run_node_entry
 
 #: Exit status of a client stopped by SIGINT or SIGTERM before its answer
@@ -29,6 +30,7 @@ def plan_lift() -> None:
     run_client_entry('dam_analysis.plan_lift_client', CLIENT_INTERRUPTED)
 
 
+@quiet_when_output_closed
 def csm_dependence() -> None:
     """``ros2 run dam_analysis csm_dependence``: SIGINT or SIGTERM at any moment, start-up
     included, ends it with one line and status 130."""

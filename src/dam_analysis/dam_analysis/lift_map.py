@@ -38,6 +38,7 @@ import numpy as np
 from dam_analysis.analysis import LiftAnalyzer, unreachable_object
 from dam_analysis.errors import NoSolutionError
 from dam_analysis.regions import Boundaries
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
@@ -336,6 +337,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def entry_point() -> None:
     sys.exit(main())
 

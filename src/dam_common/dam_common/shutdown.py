@@ -31,6 +31,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
+from dam_common.closed_output import quiet_when_output_closed
+
 #: The signals that ask a node to stop.
 STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM)
 
@@ -181,6 +183,7 @@ def catch_signals(interrupt_startup: bool = False) -> ShutdownRequest:
     return SHUTDOWN
 
 
+@quiet_when_output_closed
 def run_node_entry(module: str, own_help: bool = False) -> None:
     """Entry point of a node executable: catch SIGINT and SIGTERM, then import ``module`` and
     call its ``main()`` (which runs :func:`~dam_common.node.run_node`). A signal during the
@@ -189,7 +192,8 @@ def run_node_entry(module: str, own_help: bool = False) -> None:
 
     ``-h`` or ``--help`` (outside ``--ros-args``) prints the node's usage, parameters and
     topics (:mod:`dam_common.node_help`) and exits with status 0 before anything of ROS
-    starts, unless the node parses its own options (``own_help``: the recorder)."""
+    starts, unless the node parses its own options (``own_help``: the recorder). A closed
+    standard output ends it with status 141, no traceback (:mod:`dam_common.closed_output`)."""
     if not own_help:
         from dam_common.node_help import answer_help  # noqa: PLC0415 - no rclpy
 
@@ -210,6 +214,7 @@ def run_node_entry(module: str, own_help: bool = False) -> None:
         return  # before the node took the signals over (e.g. while parsing arguments)
 
 
+@quiet_when_output_closed
 def run_client_entry(module: str, interrupted_status: int) -> None:
     """Entry point of a command-line client: catch SIGINT and SIGTERM, import ``module``, call
     its ``main()`` and exit with the status it returns.
@@ -218,7 +223,8 @@ def run_client_entry(module: str, interrupted_status: int) -> None:
     anything of ROS (from then on a signal only records the request, and the client's waits
     end on it) and returns ``interrupted_status`` when a stop was requested. A signal during
     the import, or in ``main()`` before that (parsing the arguments), ends the process with
-    ``interrupted_status`` at once; either way no traceback.
+    ``interrupted_status`` at once; either way no traceback. A closed standard output (``|
+    head``) ends it with status 141, no traceback (:mod:`dam_common.closed_output`).
     """
     catch_signals(interrupt_startup=True)
     try:

@@ -12,6 +12,8 @@ import importlib
 import signal
 import sys
 
+from dam_common.closed_output import quiet_when_output_closed
+
 #: Exit status of a command stopped by SIGINT or SIGTERM (128 + SIGINT, the shell's).
 INTERRUPTED = 130
 
@@ -39,6 +41,7 @@ class InterruptOnSignals:
         raise KeyboardInterrupt
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def _run(module: str, prog: str) -> None:
     with InterruptOnSignals() as signals:
         try:

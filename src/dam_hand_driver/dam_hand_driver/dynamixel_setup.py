@@ -49,10 +49,12 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence  # not typing: one import less before the signals are caught
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.shutdown import SHUTDOWN, StartupInterrupted
 from dam_hand_driver.dynamixel_setup_exit import EXIT_INTERRUPTED, refuse
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command (module docstring); returns the exit status.
 

@@ -7,9 +7,11 @@ loads.
 
 from __future__ import annotations
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.hand_urdf import hand_urdf
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def main() -> None:
     """``hand_urdf [CONFIG]``: print the URDF of the configured hand (for
     ``robot_state_publisher``'s ``robot_description`` parameter)."""

@@ -22,6 +22,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_common.progress import Progress
 from dam_recorder.errors import DamRecorderError
@@ -208,6 +209,7 @@ def run_export(args: argparse.Namespace) -> int:
     return 0
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``bag`` with ``argv`` (default: the process's arguments); return the exit status."""
     args = build_parser().parse_args(sys.argv[1:] if argv is None else list(argv))

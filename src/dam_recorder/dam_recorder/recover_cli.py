@@ -16,6 +16,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_recorder.completeness import describe
 from dam_recorder.errors import RecoveryError
@@ -44,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@quiet_when_output_closed  # `| head`: status 141, no traceback
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(sys.argv[1:] if argv is None else list(argv))
     try:

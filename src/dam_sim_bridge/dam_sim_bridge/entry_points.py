@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.shutdown import StartupInterrupted, catch_signals, run_node_entry
 
 
@@ -17,6 +18,7 @@ def sim_bridge() -> None:
     run_node_entry('dam_sim_bridge.sim_bridge_node')
 
 
+@quiet_when_output_closed
 def dynamixel_bus() -> None:
     """``dynamixel_bus``: the emulated Dynamixel bus (not a node; see
     :func:`dam_sim_bridge.dynamixel_bus_program.main`). A signal at any moment ends it with

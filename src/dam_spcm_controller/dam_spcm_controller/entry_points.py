@@ -7,6 +7,7 @@ that a signal during start-up is a request to stop like any other
 
 from __future__ import annotations
 
+from dam_common.closed_output import quiet_when_output_closed
 from dam_common.shutdown import catch_signals, run_node_entry
 
 
@@ -15,6 +16,7 @@ def spcm_controller() -> None:
     run_node_entry('dam_spcm_controller.controller_node')
 
 
+@quiet_when_output_closed
 def dam_grasp() -> None:
     """``ros2 run dam_spcm_controller dam_grasp``: the grasp client."""
     catch_signals()
