@@ -72,6 +72,7 @@ def test_an_object_outside_the_library_is_refused_by_name(package: str, executab
     ('dam_hand_driver', 'hand_driver', 'thread_priority:=high', 'thread_priority'),
     ('dam_sim_bridge', 'sim_bridge', 'thread_priority:=-3', 'thread_priority'),
     ('dam_hand_driver', 'dam_state_publisher', 'publish_frequency:=-1.0', 'publish_frequency'),
+    ('dam_hand_driver', 'dam_state_publisher', 'publish_frequency:=0.0', 'publish_frequency'),
     ('dam_hand_driver', 'dam_state_publisher', 'robot_state:=maybe', 'robot_state'),
 ])
 def test_a_bad_parameter_override_is_refused_by_name(package: str, executable: str,

@@ -64,7 +64,7 @@ def test_hand_and_object_frames_match_pybullet() -> None:
         description.publish(String(data='<robot><joint name="j" type="floating"><parent '
                                         'link="a"/><child link="b"/></joint></robot>'))
         exe = installed_executable('dam_hand_driver', 'dam_state_publisher')
-        with node_process([exe, '--ros-args', '-p', 'publish_frequency:=0.0']) as node:
+        with node_process([exe, '--ros-args', '-p', 'publish_frequency:=200.0']) as node:
             assert client.spin_until(lambda: "type 'floating'" in node.output(), WAIT_S), \
                 node.output()
             assert node.alive()
