@@ -112,6 +112,20 @@ def test_layout_names_only_recorded_topics_and_existing_fields(path: Path) -> No
     for panel in layout['configById'].values():
         for topic in panel.get('topics', {}):
             assert topic in DEFAULT_TOPICS, f'the 3D panel shows {topic}, not recorded'
+        for layer in panel.get('layers', {}).values():
+            if layer.get('sourceType') == 'topic':  # a URDF layer reads a std_msgs/String
+                assert layer['topic'] in DEFAULT_TOPICS, layer
+                assert types[layer['topic']].__name__ == 'String', layer
+
+
+@pytest.mark.parametrize('path', LAYOUTS, ids=lambda p: p.name)
+def test_the_3d_panel_draws_the_hand_from_the_recorded_description(path: Path) -> None:
+    layout = json.loads(path.read_text(encoding='utf-8'))
+    layers = [layer for panel in layout['configById'].values()
+              for layer in panel.get('layers', {}).values()]
+    assert {'layerId': 'foxglove.Urdf', 'sourceType': 'topic',
+            'topic': '/robot_description'}.items() <= next(
+                layer for layer in layers if layer['layerId'] == 'foxglove.Urdf').items()
 
 
 @pytest.mark.parametrize('path', LAYOUTS, ids=lambda p: p.name)
