@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Bring the DAM suite up in the background (plain shell, no launch files):
 #   check_lift_server, hand_driver (which starts the PyBullet stand-in when no hand answers),
-#   spcm_controller and dam_state_publisher (/tf and /tf_static of the hand and the object). Returns when every node serves, or fails (non-zero) with the fatal
-#   line of the node that died, after stopping what it started. No fixed limit decides how
+#   spcm_controller and dam_state_publisher (/tf and /tf_static of the hand and the object).
+#   Returns when every node serves, or fails (non-zero) with the fatal line of the node that
+#   died, after stopping what it started. No fixed limit decides how
 #   long the nodes may take on a loaded machine: it waits while they progress.
 #
 #   bash scripts/bringup.sh [--backend auto|sim|hardware|dynamixel] [--port DEV] [--gui]
