@@ -351,3 +351,26 @@ def test_bad_input_raises_the_messages_of_the_check_functions(analyzer, k_in, dp
     with pytest.raises(InputError) as got:
         analyzer.check_lift(k_in, dp_in, alpha_in)
     assert str(got.value) == str(expected.value)
+
+
+def test_fingers_on_one_branch_share_their_spcm_state(config):
+    """The cylinder's three fingers follow one SPCM branch, so check_lift solves it once per
+    angle; the answers equal those solved finger by finger, bit for bit (unequal angles
+    too). A hexagonal bar's section is mirrored for finger 1: its branch is its own."""
+    from dam_analysis.analysis import LiftAnalyzer
+
+    shared = LiftAnalyzer(config).build()
+    assert shared._same_branch == [0, 0, 0]
+    alone = LiftAnalyzer(config).build()
+    alone._same_branch = [0, 1, 2]
+    rng = np.random.default_rng(3)
+    for i in range(200):
+        k = list(rng.uniform(0.1, 15.0, 3))
+        dp = [float(rng.uniform(0.0, 1.1))] * 3 if i % 2 else list(rng.uniform(0.0, 1.1, 3))
+        a, b = shared.check_lift(k, dp, 0.09), alone.check_lift(k, dp, 0.09)
+        assert repr((a.worst_case_margin, a.csm_margin, a.delta_theta_s.tolist(),
+                     a.csm_path_margin, a.branch_message)) == \
+            repr((b.worst_case_margin, b.csm_margin, b.delta_theta_s.tolist(),
+                  b.csm_path_margin, b.branch_message))
+    hex_bar = LiftAnalyzer(config.with_object('hex_bar')).build()
+    assert hex_bar._same_branch[0] == 0 and hex_bar._same_branch[1:] != [0, 0]

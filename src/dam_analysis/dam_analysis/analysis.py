@@ -189,6 +189,7 @@ class LiftAnalyzer:
         self._k_n = float(self.model.contact_stiffness[0])
         self._rolling: RollingCheck | None = None
         self._branch_ends: list[float] = []
+        self._same_branch: list[int] = []
         self._csm_path_verdict: CsmPathVerdict | None = None
 
     @property
@@ -198,6 +199,9 @@ class LiftAnalyzer:
         if self._table is None:
             table = PathTable(self.model, build_paths(self.model, self._path_step))
             self._branch_ends = [path.valid_until for path in table.paths]
+            keys = [path.same_branch_key() for path in table.paths]
+            #: per finger, the first finger whose branch is the same (plane_state once)
+            self._same_branch = [keys.index(key) for key in keys]
             self._csm_path_verdict = CsmPathVerdict(table, self._ratios, self._k_t)
             self._table = table
         return self._table
@@ -277,8 +281,13 @@ class LiftAnalyzer:
         """
         k, dp, alpha = self._validate_floats(k_theta, delta_theta_p, friction_angle)
         paths = self.table.paths
-        states = [path.plane_state(d) if d <= end else None
-                  for path, d, end in zip(paths, dp, self._branch_ends, strict=True)]
+        states: list[tuple[float, float, float, float, float, bool] | None] = []
+        for i, (path, d, end, same) in enumerate(zip(paths, dp, self._branch_ends,
+                                                     self._same_branch, strict=True)):
+            if same < i and dp[same] == d:  # a finger on the same branch at the same angle
+                states.append(states[same])
+            else:
+                states.append(path.plane_state(d) if d <= end else None)
         mu = math.tan(alpha)
         ca, sa = math.cos(alpha), math.sin(alpha)
         k_t = self._k_t

@@ -266,6 +266,14 @@ class SpcmPath:
                         float(g.base_height), float(g.link_radius),
                         float(g.object_radius + g.link_radius))
 
+    def same_branch_key(self) -> tuple:
+        """Everything :meth:`plane_state` reads: two paths with equal keys give equal states
+        (the fingers of a symmetric hand around a circle share one). A non-circular section
+        may be mirrored for one finger: such a path's key is its own."""
+        shape = 'circle' if self.geometry.is_circle else id(self)
+        return (shape, self._consts, self._limits, self.theta_s0, self.valid_until, self._tail,
+                self.delta_theta_p.tobytes(), self.theta_s.tobytes())  # (NaN beyond the end)
+
     def _problem(self, theta_s: float, delta_theta_p: float) -> str | None:
         """:func:`posture_problem` of this finger at ``delta_theta_p`` [rad]."""
         model = self.model
