@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dam_common.command_line import CommandLineParser
+from dam_common.picture import picture_path
 from dam_common.quantities import ANGLE, argument, in_degrees, number_argument
 from dam_common.ros_args import strip_ros_args
 
@@ -29,8 +30,9 @@ DEFAULT_K_T = (10.0, 30.0, 100.0, 300.0, 1e3, 1e5)
 def build_parser() -> argparse.ArgumentParser:
     p = CommandLineParser(prog=PROG, description='Draw the CSM lift boundary for several '
                                                  'tangential stiffnesses and friction angles.')
-    p.add_argument('-o', '--out', type=Path, default=Path('csm_dependence.png'),
-                   metavar='FILE.png', help='the figure (default csm_dependence.png)')
+    p.add_argument('-o', '--out', type=picture_path, default=Path('csm_dependence.png'),
+                   metavar='FILE', help='the figure, its format by its extension (.png, .pdf, '
+                                        '.svg, ...; default csm_dependence.png)')
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration (default: DAM_CONFIG or the installed config/dam.yaml)')
     p.add_argument('--object', default='', metavar='NAME', help='object of the library')
@@ -93,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         ax.legend(fontsize=8)
     fig.tight_layout()
     try:
-        fig.savefig(options.out, format='png', dpi=110)
+        fig.savefig(options.out, dpi=110)  # the format its extension names
     except OSError as exc:
         print(f'{PROG}: cannot write {options.out}: {exc}', file=sys.stderr)
         return 1

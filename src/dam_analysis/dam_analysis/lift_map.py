@@ -42,6 +42,7 @@ from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.picture import picture_path
 from dam_common.progress import Progress
 from dam_common.quantities import ANGLE, argument, in_degrees
 from dam_common.ros_args import strip_ros_args
@@ -65,8 +66,10 @@ def build_parser() -> argparse.ArgumentParser:
                         required=True, metavar='ANGLE',
                         help='friction angles alpha, 0 <= alpha < 90 deg (5deg, 0.09rad; '
                              'bare: rad)')
-    parser.add_argument('--out', type=Path, default=Path('lift_map.png'), metavar='PNG',
-                        help='output image (default: %(default)s)')
+    parser.add_argument('--out', type=picture_path, default=Path('lift_map.png'),
+                        metavar='FILE',
+                        help='output picture, its format by its extension (.png, .pdf, .svg, '
+                             '.jpg, ...; default: %(default)s)')
     parser.add_argument('--csv', type=Path, default=None, metavar='CSV',
                         help='output table of the boundaries (default: --out with .csv)')
     parser.add_argument('--n-delta-theta-p', type=int, default=200, metavar='N',
@@ -273,7 +276,8 @@ def plot_map(path: Path, friction_angles_deg: Sequence[float],
              boundaries: Sequence[Boundaries], k_max: float, delta_theta_p_max: float,
              object_text: str = '', ceiling: np.ndarray | None = None,
              torque_limit: float = math.nan, branch_end_deg: float = math.inf) -> None:
-    """Draw the map (:func:`draw_map`) with its title; save it to ``path`` (PNG).
+    """Draw the map (:func:`draw_map`) with its title; save it to ``path`` (the format its
+    extension names: :mod:`dam_common.picture`).
 
     Parameters
     ----------
@@ -290,7 +294,7 @@ def plot_map(path: Path, friction_angles_deg: Sequence[float],
     title = 'Lift regions (hatched: sufficient condition holds within the torque limit)'
     ax.set_title(f'{title}\n{object_text}' if object_text else title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, format='png')
+    fig.savefig(path)  # the format its extension names (dam_common.picture)
     plt.close(fig)
 
 

@@ -42,6 +42,7 @@ from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_common.config import load_config
 from dam_common.errors import ConfigError
+from dam_common.picture import picture_path
 from dam_common.quantities import ANGLE, LENGTH, argument
 from dam_common.ros_args import strip_ros_args
 
@@ -89,8 +90,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--constant-mass', action='store_true',
                         help='keep the configured mass (default: scale it with the '
                              'cross-section, same density and length)')
-    parser.add_argument('--out', type=Path, default=Path('scale_map.png'), metavar='PNG',
-                        help='output image (default: %(default)s)')
+    parser.add_argument('--out', type=picture_path, default=Path('scale_map.png'),
+                        metavar='FILE',
+                        help='output picture, its format by its extension (.png, .pdf, .svg, '
+                             '.jpg, ...; default: %(default)s)')
     parser.add_argument('--csv', type=Path, default=None, metavar='CSV',
                         help='output table (default: --out with .csv)')
     parser.add_argument('--config', type=Path, default=None, metavar='YAML',
@@ -171,7 +174,7 @@ def plot_study(path: Path, study: ScaleStudy) -> None:
     ax.grid(True, which='both', alpha=0.3)
     ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))  # outside the curves
     fig.tight_layout()
-    fig.savefig(path, format='png')
+    fig.savefig(path)  # the format its extension names (dam_common.picture)
     plt.close(fig)
 
 

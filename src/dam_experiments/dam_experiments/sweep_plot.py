@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from dam_common.command_line import CommandLineParser
+from dam_common.picture import picture_path
 from dam_common.ros_args import strip_ros_args
 from dam_common.words import counted
 from dam_experiments.errors import SweepPlotError
@@ -483,8 +484,9 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
                     'Prints a summary per friction angle.')
     p.add_argument('directory', type=Path, metavar='DIR',
                    help=f'a sweep --out directory ({TABLE_FILE}, {PARAMS_FILE})')
-    p.add_argument('-o', '--output', type=Path, default=None, metavar='FILE',
-                   help=f'picture, PNG, PDF or SVG by its suffix (default: DIR/{DEFAULT_OUTPUT}, '
+    p.add_argument('-o', '--output', type=picture_path, default=None, metavar='FILE',
+                   help=f'picture, PNG, PDF, SVG, JPG ... by its suffix (another is refused; '
+                        f'default: DIR/{DEFAULT_OUTPUT}, '
                         f'with --object DIR/fig7_NAME.png)')
     p.add_argument('--config', type=Path, default=None, metavar='YAML',
                    help='configuration of the boundaries: the sweep\'s (default: DAM_CONFIG or '

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
+from dam_common.picture import picture_path
 from dam_common.progress import Progress
 from dam_recorder.errors import DamRecorderError
 
@@ -74,8 +75,9 @@ def build_parser() -> argparse.ArgumentParser:
                     '(episode metadata, or the action feedback). What the bag lacks is listed '
                     'in the picture.')
     plot.add_argument('bag', metavar='BAG', help='the bag directory')
-    plot.add_argument('-o', '--output', metavar='FILE', type=Path,
-                      help='picture to write; the suffix picks the format (.png, .pdf, .svg); '
+    plot.add_argument('-o', '--output', metavar='FILE', type=picture_path,
+                      help='picture to write; the suffix picks the format (.png, .pdf, .svg, '
+                           '.jpg, ...; another is refused); '
                            'default <bag name>.png in the current directory')
     plot.add_argument('--dpi', type=int, default=110, help='resolution of a PNG (default 110)')
     _selection_options(plot, 'the only one; of several, the last (the others are named)')
