@@ -284,9 +284,12 @@ def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefi
     assert (cut.outcome, cut.complete) == ('SUCCESS', False)
     assert cut.missing == ('/dam/episode: no EVENT_ENDED of the goal in the bag',
                            '/joint_states: ' + INCOMPLETE[1]['detail'])
-    # An incomplete success is no success.
-    assert info.totals == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1, 'INCOMPLETE': 1}
-    assert list(info.totals) == ['SUCCESS', 'FAILURE', 'ABORTED', 'INCOMPLETE']
+    # Every episode counts in its outcome (the totals counted an incomplete one only as
+    # INCOMPLETE: a directory of incomplete episodes had no outcome at all); how many of
+    # each are incomplete is said beside.
+    assert info.totals == {'SUCCESS': 3, 'FAILURE': 1, 'ABORTED': 1}
+    assert list(info.totals) == ['SUCCESS', 'FAILURE', 'ABORTED']
+    assert info.incomplete_totals == {'SUCCESS': 1}
     assert info.errors == []
     text = format_episodes(info)
     lines = text.splitlines()
@@ -307,10 +310,13 @@ def test_directory_of_episodes_table_and_totals(tmp_path: Path, typestore, prefi
         == ['  2026_11_29-18_10_05_success_incomplete:',
             '    /dam/episode: no EVENT_ENDED of the goal in the bag',
             '    /joint_states: ' + INCOMPLETE[1]['detail']]
-    assert lines[-4:] == ['  SUCCESS            2', '  FAILURE            1',
-                          '  ABORTED            1', '  INCOMPLETE         1']
+    assert lines[-5:] == ['totals (every episode by its outcome):',
+                          '  SUCCESS            3  (1 of them INCOMPLETE)',
+                          '  FAILURE            1', '  ABORTED            1',
+                          '  INCOMPLETE         1  (counted above by their outcome)']
     data = episodes_json(info)
-    assert data['totals'] == {'SUCCESS': 2, 'FAILURE': 1, 'ABORTED': 1, 'INCOMPLETE': 1}
+    assert data['totals'] == {'SUCCESS': 3, 'FAILURE': 1, 'ABORTED': 1}
+    assert data['incomplete'] == {'SUCCESS': 1}
     assert data['episodes'][1]['lift_guaranteed'] is False
     assert data['episodes'][4]['complete'] is False
 

@@ -176,7 +176,9 @@ def test_truncated_episodes_are_marked_incomplete_with_what_they_lack(tmp_path: 
     assert rows[whole.name][6:8] == ['SUCCESS', 'yes']
     assert rows[killed.name][6:8] == ['SUCCESS', 'NO']
     assert rows[stopped.name][6:8] == ['UNKNOWN', 'NO']
-    assert '  SUCCESS            1\n  INCOMPLETE         2' in table.stdout
+    assert ('  SUCCESS            2  (1 of them INCOMPLETE)\n'
+            '  UNKNOWN            1  (it is INCOMPLETE)\n'
+            '  INCOMPLETE         2  (counted above by their outcome)') in table.stdout
     one = subprocess.run([bag, 'info', str(killed)], capture_output=True, text=True,
                          timeout=60)
     assert one.returncode == 0, one.stderr

@@ -58,8 +58,8 @@ def build_parser() -> argparse.ArgumentParser:
                     'complete and what it lacks, and the grasps /dam/status shows. For a '
                     'directory of episode bags: one row per episode (start, durations, '
                     'outcome, complete, k_theta, delta_theta_p, lift guaranteed), what the '
-                    'incomplete ones lack and the totals per outcome (an incomplete episode '
-                    'counts as INCOMPLETE).')
+                    'incomplete ones lack and the totals per outcome (every episode by its '
+                    'outcome, and how many of them are INCOMPLETE).')
     info.add_argument('bag', metavar='BAG', help='a bag directory or a directory of bags')
     info.add_argument('--json', action='store_true',
                       help='print JSON instead of text (non-finite numbers as "nan", "inf")')

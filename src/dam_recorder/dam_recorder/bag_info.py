@@ -286,19 +286,28 @@ class EpisodesInfo:
 
     @property
     def totals(self) -> dict[str, int]:
-        """Episodes per outcome, in :data:`OUTCOME_ORDER` (other names after); an incomplete
-        episode counts as ``INCOMPLETE`` whatever outcome it names. Ordinary bags have no
-        outcome and are not counted."""
-        counts = Counter('INCOMPLETE' if r.complete is False else r.outcome
-                         for r in self.episodes)
-        order = [o for o in OUTCOME_ORDER if o in counts]
-        order += sorted(o for o in counts if o not in OUTCOME_ORDER)
-        return {o: counts[o] for o in order}
+        """Episodes per outcome, every episode by the outcome it names (an incomplete one too:
+        :attr:`incomplete_totals` says how many of each are incomplete), in
+        :data:`OUTCOME_ORDER` (other names after). Ordinary bags have no outcome and are not
+        counted."""
+        return _in_order(Counter(r.outcome for r in self.episodes))
+
+    @property
+    def incomplete_totals(self) -> dict[str, int]:
+        """Incomplete episodes per outcome they name, in the order of :attr:`totals`."""
+        return _in_order(Counter(r.outcome for r in self.episodes if r.complete is False))
 
     @property
     def errors(self) -> list[str]:
         """The messages of the episodes that could not be read."""
         return [r.error for r in self.rows if r.error]
+
+
+def _in_order(counts: Counter[str]) -> dict[str, int]:
+    """``counts`` in :data:`OUTCOME_ORDER`, other names after, sorted."""
+    order = [o for o in OUTCOME_ORDER if o in counts]
+    order += sorted(o for o in counts if o not in OUTCOME_ORDER)
+    return {o: counts[o] for o in order}
 
 
 def topic_stats(name: str, type_name: str, times_ns: np.ndarray) -> TopicStats:

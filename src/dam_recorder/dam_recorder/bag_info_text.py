@@ -196,8 +196,15 @@ def format_episodes(info: EpisodesInfo) -> str:
             for r in incomplete:
                 lines.append(f'  {r.name}:')
                 lines += [f'    {line}' for line in r.missing] or ['    (not recorded)']
-        lines += ['', 'totals:']
-        lines += [f'  {outcome:<18} {count}' for outcome, count in info.totals.items()]
+        lines += ['', 'totals (every episode by its outcome):']
+        incomplete = info.incomplete_totals
+        for outcome, count in info.totals.items():
+            cut = incomplete.get(outcome, 0)
+            lines.append(f'  {outcome:<18} {count}' + (
+                f'  ({"it is" if count == 1 else f"{cut} of them"} INCOMPLETE)' if cut else ''))
+        if incomplete:
+            lines.append(f'  {"INCOMPLETE":<18} {sum(incomplete.values())}  (counted above by '
+                         'their outcome)')
     if bags:
         rows = [[r.name, local_time(r.start_ns), _num(r.bag_duration_s, '.3f'),
                  _num(r.message_count, 'd'), _num(r.topic_count, 'd')] for r in bags]
@@ -240,6 +247,8 @@ def bag_info_json(info: BagInfo) -> dict[str, Any]:
 
 
 def episodes_json(info: EpisodesInfo) -> dict[str, Any]:
-    """``info`` for ``--json``: the rows and the totals per outcome."""
+    """``info`` for ``--json``: the rows, the totals per outcome (every episode) and the
+    incomplete episodes per outcome."""
     return {'path': str(info.path), 'episodes': jsonable(info.episodes),
-            'bags': jsonable(info.bags), 'totals': info.totals}
+            'bags': jsonable(info.bags), 'totals': info.totals,
+            'incomplete': info.incomplete_totals}
