@@ -52,7 +52,9 @@ gui : bool, read-only
 use_sim_time : bool, fixed at start-up
     Run in simulated time (above) and publish ``/clock``.
 publish_clock : bool, read-only
-    Publish ``/clock`` from the simulated time also in real-time mode.
+    Publish ``/clock`` from the simulated time; default ``use_sim_time`` (so ``ros2 param get``
+    says true whenever the node publishes ``/clock``); true also publishes it in real-time
+    mode; false with ``use_sim_time`` true is refused at start-up.
 pose_rate_hz : double [Hz], in [1, 1000]
     Rate of ``/sim/object_pose``, ``/sim/object_table_contact`` (and ``/clock``); may be
     changed at run time.
@@ -179,10 +181,16 @@ class SimBridgeNode(Node):
                 description='open the PyBullet window (needs a display)',
                 read_only=True)).value) or gui_flag
         self._sim_time = bool(self.get_parameter('use_sim_time').value)
+        # Its value is what the node does: with use_sim_time it publishes /clock, so the
+        # default follows use_sim_time (it said false while /clock came from this node).
         self._publish_clock = bool(self.declare_parameter(
-            'publish_clock', False, ParameterDescriptor(
-                description='publish /clock from the simulated time (always on with '
-                            'use_sim_time)', read_only=True)).value) or self._sim_time
+            'publish_clock', self._sim_time, ParameterDescriptor(
+                description='publish /clock from the simulated time (true with '
+                            'use_sim_time)', read_only=True)).value)
+        if self._sim_time and not self._publish_clock:
+            raise SimBridgeError('publish_clock:=false with use_sim_time:=true: in simulated '
+                                 'time the stand-in is the clock and publishes /clock (leave '
+                                 'publish_clock out)')
         self._pose_rate_hz = float(self.declare_parameter(
             'pose_rate_hz', 100.0, ParameterDescriptor(
                 description='rate of /sim/object_pose, /sim/object_table_contact and '
