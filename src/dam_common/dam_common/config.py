@@ -28,8 +28,13 @@ from dam_common.cross_section import Circle, CrossSection, Ellipse
 from dam_common.dynamixel_config import DynamixelConfig, parse_dynamixel
 from dam_common.echo import brief_repr
 from dam_common.errors import ConfigError
-from dam_common.polygon_section import ConvexPolygon, check_convex_polygon, regular_polygon
-from dam_common.strict_yaml import safe_load_unique
+from dam_common.polygon_section import (
+    MAX_VERTICES,
+    ConvexPolygon,
+    check_convex_polygon,
+    regular_polygon,
+)
+from dam_common.strict_yaml import check_yaml_size, safe_load_unique
 
 #: The joint roles of every finger, from the base (paper Fig. 6: compliant, locked, position).
 JOINT_ROLES: tuple[str, str, str] = ('compliant', 'locked', 'position')
@@ -389,6 +394,7 @@ def load_config(path: str | os.PathLike[str] | None = None,
 
 def _read_yaml(cfg_path: Path) -> Any:
     try:
+        check_yaml_size(cfg_path.stat().st_size, str(cfg_path))  # before reading it all
         text = cfg_path.read_text(encoding='utf-8')
     except OSError as exc:
         raise ConfigError(f'cannot read configuration file {str(cfg_path)!r}: {exc}') from exc
@@ -505,7 +511,7 @@ def _hand(node: _Node) -> HandConfig:
 
 
 #: Most vertices a convex polygon in the object library may have.
-_MAX_POLYGON_VERTICES = 256
+_MAX_POLYGON_VERTICES = MAX_VERTICES
 _SHAPE_KEYS = {
     'circle': {'radius_m'},
     'ellipse': {'semi_axes_m'},

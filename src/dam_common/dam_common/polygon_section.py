@@ -16,6 +16,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from dam_common.cross_section import CrossSection, check_length
+from dam_common.echo import brief_repr
+
+#: Most vertices a convex polygon may have (a column's section, not a mesh).
+MAX_VERTICES = 256
 
 
 class ConvexPolygon(CrossSection):
@@ -207,12 +211,19 @@ def check_convex_polygon(vertices: Sequence[Sequence[float]] | np.ndarray) -> np
     ValueError
         See :class:`ConvexPolygon`.
     """
+    count = len(vertices) if hasattr(vertices, '__len__') else 0
+    if count > MAX_VERTICES:  # before converting them all
+        raise ValueError(f'vertices: {count} vertices, at most {MAX_VERTICES}')
     try:
         v = np.array(vertices, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f'vertices: expected a list of (x, z) pairs, got {vertices!r}') from exc
+        raise ValueError(f'vertices: expected a list of (x, z) pairs, got '
+                         f'{brief_repr(vertices)}') from exc
     if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 3:
-        raise ValueError(f'vertices: expected at least 3 (x, z) pairs, got {vertices!r}')
+        raise ValueError(f'vertices: expected at least 3 (x, z) pairs, got '
+                         f'{brief_repr(vertices)}')
+    if v.shape[0] > MAX_VERTICES:  # the checks below loop over them in Python
+        raise ValueError(f'vertices: {v.shape[0]} vertices, at most {MAX_VERTICES}')
     if not np.isfinite(v).all():
         k = int(np.flatnonzero(~np.isfinite(v).all(axis=1))[0])
         raise ValueError(f'vertices[{k}]: expected finite numbers, got {v[k].tolist()!r}')
