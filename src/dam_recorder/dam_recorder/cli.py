@@ -41,7 +41,7 @@ with a std_msgs/Header, else its receive time (on the simulated clock with use_s
 A write error (a full or read-only file
 system, the bag directory removed) is logged once, the bag closed with what is on disk and the
 recorder exits with status 74. After a SIGKILL run `ros2 run dam_recorder recover DIR`.
-Every option is also a parameter of the node (see the README, section Recording)."""
+Every option is also a parameter of the node (see docs/recording.md, "Use")."""
 
 
 def _number(kind: type, *, low: float = 0.0, high: float = math.inf, off: bool = False,
