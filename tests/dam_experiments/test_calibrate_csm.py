@@ -66,6 +66,14 @@ def test_a_determined_friction_angle_is_written_and_an_undetermined_k_t_is_not(
     np.testing.assert_array_equal(merged.contact.contact_stiffness_n_per_m,
                                   CONFIG.contact.contact_stiffness_n_per_m)
     assert '# k_t is not determined' in text
+    # the searched range is said per angle (it is recorded +- 20 deg, clipped: 15 deg gives
+    # [0.25, 35] deg, 5 deg [0.25, 25], 30 deg [10, 50])
+    from dam_experiments.calibrate_csm import report_lines
+
+    [line] = [x for x in report_lines(result) if x.startswith('friction angle recorded')]
+    assert line.startswith('friction angle recorded 15 deg: searched in [0.25, 35] deg '
+                           '(recorded +- 20 deg within [0.25, 80] deg), fitted '), line
+    assert report_lines(result)[0].startswith(f'{result.fit.cells} grasps, ')
 
 
 def test_values_that_do_not_help_check_lift_are_not_written(tmp_path: Path) -> None:

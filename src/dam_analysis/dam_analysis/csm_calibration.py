@@ -163,8 +163,15 @@ def friction_groups(cells: GraspCells) -> list[tuple[float, np.ndarray]]:
             for a in np.unique(angles)]
 
 
+#: A recorded friction angle's search: this far on either side of it [rad] ...
+ALPHA_HALF_WIDTH = math.radians(20.0)
+#: ... within these bounds [rad]: so the searched range differs per angle (5 deg: [0.25, 25]
+#: deg; 30 deg: [10, 50] deg), and ``calibrate_csm`` says it per angle.
+ALPHA_SEARCH_BOUNDS = (math.radians(0.25), math.radians(80.0))
+
+
 def margin_cube(cells: GraspCells, margins: CellMargins, fit_friction_angle: bool = True,
-                alpha_half_width: float = math.radians(20.0),
+                alpha_half_width: float = ALPHA_HALF_WIDTH,
                 alpha_step: float = math.radians(0.25),
                 log_kt_range: tuple[float, float] = DEFAULT_LOG_KT_RANGE,
                 log_kt_step: float = 0.25, verdict: str = 'path') -> MarginCube:
@@ -179,8 +186,8 @@ def margin_cube(cells: GraspCells, margins: CellMargins, fit_friction_angle: boo
     cache: dict[tuple[float, float], np.ndarray] = {}
     for angle, index in friction_groups(cells):
         if fit_friction_angle:
-            lo = max(math.radians(0.25), angle - alpha_half_width)
-            hi = min(math.radians(80.0), angle + alpha_half_width)
+            lo = max(ALPHA_SEARCH_BOUNDS[0], angle - alpha_half_width)
+            hi = min(ALPHA_SEARCH_BOUNDS[1], angle + alpha_half_width)
             grid = np.arange(lo, hi + 0.5 * alpha_step, alpha_step)
         else:
             grid = np.array([angle])

@@ -37,8 +37,10 @@ from typing import Any
 
 import numpy as np
 
+from dam_analysis.csm_calibration import ALPHA_HALF_WIDTH, ALPHA_SEARCH_BOUNDS
 from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
+from dam_common.words import counted
 from dam_experiments.csm_calibration_run import (
     DEFAULT_FOLDS,
     Calibration,
@@ -147,20 +149,28 @@ def cells_from_bags(paths: Sequence[Path], config: Any, object_name: str | None
     cells = GraspCells(friction_angle=arr[:, 0], k_theta=arr[:, 1], delta_theta_p=arr[:, 2],
                        object_mass=np.full(len(rows), config.object.mass_kg),
                        lifted=arr[:, 3])
-    return cells, config, f'{len(bags)} episode bag(s)', skipped
+    return cells, config, counted(len(bags), 'episode bag'), skipped
+
+
+#: How a recorded friction angle's search range is made (it differs per angle).
+_SEARCH = (f'recorded +- {math.degrees(ALPHA_HALF_WIDTH):g} deg within '
+           f'[{math.degrees(ALPHA_SEARCH_BOUNDS[0]):g}, {math.degrees(ALPHA_SEARCH_BOUNDS[1]):g}]'
+           ' deg')
 
 
 def report_lines(result: Calibration) -> list[str]:
     """The printed summary of a calibration."""
     fit = result.fit
-    lines = [f'{fit.cells} grasp(s), verdict {result.verdict!r}, {fit.level:.0%} '
+    lines = [f'{counted(fit.cells, "grasp")}, verdict {result.verdict!r}, {fit.level:.0%} '
              f'profile-likelihood intervals (ends to the grid step: 0.25 deg, 0.25 decade)']
     for rec, iv in zip(fit.recorded_friction_angle, fit.friction_angle, strict=True):
         if not fit.fitted_friction_angle:
             lines.append(f'friction angle {math.degrees(rec):g} deg: as recorded (not fitted)')
             continue
-        lines.append(f'friction angle recorded {math.degrees(rec):g} deg: fitted '
-                     f'{interval_text(iv, scale=180.0 / math.pi)} deg ({iv.status})')
+        lines.append(f'friction angle recorded {math.degrees(rec):g} deg: searched in '
+                     f'[{math.degrees(iv.grid_low):.4g}, {math.degrees(iv.grid_high):.4g}] deg '
+                     f'({_SEARCH}), fitted {interval_text(iv, scale=180.0 / math.pi)} deg '
+                     f'({iv.status})')
     kt = fit.log10_tangential_stiffness
     lines.append(f'tangential stiffness k_t: fitted {interval_text(kt, log10=True)} N/m '
                  f'({kt.status}); configured {result.configured_tangential_stiffness:.4g} N/m')
@@ -182,7 +192,8 @@ def report_lines(result: Calibration) -> list[str]:
             width = math.degrees(iv.high - iv.low)
             n = _group_size(result, rec)
             lines.append(f'friction angle {math.degrees(rec):g} deg: interval width '
-                         f'{width:.3g} deg from {n} grasps; of the same design, a width of 2 deg '
+                         f'{width:.3g} deg from {counted(n, "grasp")}; of the same design, a '
+                         'width of 2 deg '
                          f'needs about {grasps_for_width(n, width, 2.0):.0f} grasps, of 1 deg '
                          f'about {grasps_for_width(n, width, 1.0):.0f}')
     lines.append(f'/check_lift (end verdict) agrees with {result.end_agreement_configured} of '
