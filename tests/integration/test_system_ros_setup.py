@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -277,6 +278,20 @@ def test_overlay_is_built_on_the_system_prefix(setup_output: str, repo_copy: Pat
     # colcon chains the system prefix (its local_setup.bash) into the overlay's setup.bash, as
     # it does /opt/ros/jazzy.
     assert f'COLCON_CURRENT_PREFIX="{fake_prefix}"' in (install / 'setup.bash').read_text()
+    # Progress while it works: a line per package colcon starts and finishes, with its time.
+    for pkg in sorted(d.parent.name for d in (REPO_ROOT / 'src').glob('*/package.xml')):
+        assert f'    Starting >>> {pkg}' in setup_output
+        assert re.search(rf'^    Finished <<< {pkg} \[[0-9.]+s\]$', setup_output, re.M), pkg
+
+
+def test_setup_says_what_pip_is_doing(setup_output: str) -> None:
+    # One line per package pip collects and a count of what it installed, each with the
+    # seconds since the step began, and the expected duration before it starts.
+    assert 'about 2 minutes on an idle machine' in setup_output
+    collected = re.findall(r'^    \[ *\d+ s\] collecting (\S+)', setup_output, re.M)
+    assert any(name.startswith('rosbags==') for name in collected), collected
+    installed = re.search(r'^    \[ *\d+ s\] installed (\d+) packages$', setup_output, re.M)
+    assert installed and int(installed.group(1)) >= len(collected) > 0
 
 
 def test_env_sh_imports_rclpy_from_the_system_and_ours_from_the_overlay(
