@@ -7,6 +7,7 @@ DIR`` writes the same signals as ``.npz`` files for inspection.
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 from pathlib import Path
@@ -238,3 +239,23 @@ def test_the_section_fit_over_one_symmetry_period_equals_the_full_turn(cfg: DamC
                           math.pi / 3.0) == pytest.approx(0.0, abs=1e-9)
     with pytest.raises(FitInterrupted):
         estimate_section(geometry, positions, stop=lambda: True)
+
+
+def test_the_table_prints_both_rises_and_says_which_is_which(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """One grasp had two rises, the joints' estimate (run.sh: 9.8 mm) and the stand-in's
+    (bag plot: 8.09 mm), each printed alone; the table prints both, named."""
+    out = tmp_path / 'grid.csv'
+    assert main(['--k-theta', '10', '--delta-theta-p', '10deg', '--out', str(out)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    header = next(line for line in printed if line.lstrip().startswith('object'))
+    assert header.split()[-6:] == ['rise', 'max', 'est', 'suff', 'csm', 'reason']
+    assert ("(rise, max: the stand-in's, at the end and highest; est: the rise estimated "
+            'from the joints; -: not estimated)') in printed
+    [row] = list(csv.DictReader(out.open(encoding='utf-8')))
+    assert row['outcome'] == 'SUCCESS' and row['estimated_rise_mm']
+    line = next(line for line in printed if line.startswith('cylinder'))
+    rise, _, est = line.split()[8:11]
+    assert rise == f'{float(row["lift_final_mm"]):.1f}mm'
+    assert est == f'{float(row["estimated_rise_mm"]):.1f}mm'
+    assert printed[-1] == f'wrote 1 row to {out}'  # not "1 rows"

@@ -132,6 +132,7 @@ def test_the_estimate_is_taken_where_the_message_has_it() -> None:
     assert estimate.orientation == 'quaternion (x 0, y 0.1, z 0, w 0.995)'
     lines = object_lines(ObjectTruth(1.0, 2.0, False, None, None, None), estimate)
     assert lines == [
+        'object rise: 1.00 mm (stand-in), 4.20 mm estimated from the joints',  # both, named
         'object rise (stand-in ground truth, /sim/object_pose, from the first pose): at the '
         'end 1.00 mm, highest 2.00 mm',
         'left the table (stand-in ground truth, /sim/object_table_contact): not recorded',

@@ -219,6 +219,11 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
         # recorder's reader queues hold one message (queue_depth 1), so beside the burners
         # joint states are dropped on the way (gaps in their sequence numbers)
         assert re.search(r'^result: [A-Z_]+ \(', run.stdout, re.M), output
+        if 'mm, left the table (estimated from the joint angles)' in run.stdout:
+            # both rises of the grasp, each named: it printed the joints' estimate alone,
+            # and bag plot the stand-in's
+            assert re.search(r'object rise: \d+\.\d\d mm \(stand-in\), \d+\.\d\d mm '
+                             r'estimated from the joints', run.stdout), output
         assert run.returncode == 5, output
         assert 'exit status 5: the episode bag is INCOMPLETE' in run.stderr, output
         controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')

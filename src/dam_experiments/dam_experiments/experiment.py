@@ -46,6 +46,7 @@ import numpy as np
 from dam_common.command_line import CommandLineParser
 from dam_common.device_protocol import JointMode as WireMode
 from dam_common.quantities import ANGLE, argument, in_degrees
+from dam_common.words import counted
 from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
 from dam_spcm_controller.classification import (
@@ -428,9 +429,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _main(args, sink)
     except KeyboardInterrupt:
         done = sink[0].count if sink else 0
-        kept = (f'; {done} rows written to {args.out}' if done and args.out is not None
+        kept = (f'; {counted(done, "row")} written to {args.out}' if done and args.out is not None
                 else '')
-        sys.stderr.write(f'dam_experiment: interrupted after {done} grasps{kept}\n')
+        sys.stderr.write(f'dam_experiment: interrupted after {counted(done, "grasp")}{kept}\n')
         return 130
     finally:
         for each in sink:
@@ -491,8 +492,11 @@ def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
     width = max(6, *(len(c.object.name) for c in configs))
     header = (f'{"object":>{width}} {"alpha":>6} {"k_theta":>8} {"dp":>6} {"phase":>8} '
               f'{"outcome":>17} {"lifted":>6} {"at end":>6} {"rise":>7} {"max":>7} '
-              f'{"suff":>5} {"csm":>5}  reason')
+              f'{"est":>7} {"suff":>5} {"csm":>5}  reason')
     print(header)
+    # two rises of one grasp, each named (they differ: the joints' estimate is not the world)
+    print('(rise, max: the stand-in\'s, at the end and highest; est: the rise estimated from '
+          'the joints; -: not estimated)')
     overrides: dict[str, bool] = {
         'envelope_constant_torque': args.envelope == 'constant-torque'}
     if args.impedance is not None:
@@ -500,7 +504,7 @@ def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
     for each, analyzer in zip(configs, analyzers, strict=True):
         _run_object(each, analyzer, args, alphas, overrides, width, sink[0])
     if args.out is not None:
-        print(f'wrote {sink[0].count} rows to {args.out}')
+        print(f'wrote {counted(sink[0].count, "row")} to {args.out}')
     return 0
 
 
@@ -530,7 +534,10 @@ def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[flo
                           f'{r.outcome.name:>17} {"yes" if r.lifted else "no":>6} '
                           f'{"off" if r.off_table_at_end else "on":>6} '
                           f'{r.lift_final * 1e3:5.1f}mm '
-                          f'{r.lift_max * 1e3:5.1f}mm {suff:>5} {csm:>5}  '
+                          f'{r.lift_max * 1e3:5.1f}mm '
+                          + (f'{r.estimated_rise * 1e3:5.1f}mm '
+                             if math.isfinite(r.estimated_rise) else f'{"-":>7} ')
+                          + f'{suff:>5} {csm:>5}  '
                           f'{(r.failure_reason or r.joint_reason)[:70]}', flush=True)
                     if args.fixtures is not None:
                         stem = f'dam_{name}_a{math.degrees(alpha):g}_k{k:g}_dp{dp:g}.npz'
