@@ -70,7 +70,8 @@ def cells_from_sweep(directory: Path, config: Any, object_name: str | None
         notes.append(f'the configuration {str(config.source)!r} is not the sweep\'s (its '
                      f'config_sha256 differs): the analysis is this configuration\'s')
     if len(whole.trials) < whole.n_planned:
-        notes.append(f'the sweep holds {len(whole.trials)} of its {whole.n_planned} trials')
+        notes.append(f'the sweep holds {len(whole.trials)} of its '
+                     f'{counted(whole.n_planned, "trial")}')
     if whole.lifted_note is not None:
         notes.append(whole.lifted_note)
     data = one_object(whole, object_name)
@@ -194,10 +195,12 @@ def report_lines(result: Calibration) -> list[str]:
             lines.append(f'friction angle {math.degrees(rec):g} deg: interval width '
                          f'{width:.3g} deg from {counted(n, "grasp")}; of the same design, a '
                          'width of 2 deg '
-                         f'needs about {grasps_for_width(n, width, 2.0):.0f} grasps, of 1 deg '
+                         f'needs about {counted(round(grasps_for_width(n, width, 2.0)), "grasp")}'
+                         ', of 1 deg '
                          f'about {grasps_for_width(n, width, 1.0):.0f}')
     lines.append(f'/check_lift (end verdict) agrees with {result.end_agreement_configured} of '
-                 f'{result.cells} grasps as configured, {result.end_agreement_overlay} with the '
+                 f'{counted(result.cells, "grasp")} as configured, '
+                 f'{result.end_agreement_overlay} with the '
                  f'fitted values: '
                  + ('the overlay holds them' if result.overlay_helps
                     else 'no better, the overlay holds none'))

@@ -25,6 +25,7 @@ from dam_analysis.csm_calibration import (
     margin_cube,
 )
 from dam_analysis.csm_outcomes import CellMargins, GraspCells
+from dam_common.words import counted
 from dam_experiments.errors import SweepPlotError
 
 DEFAULT_FOLDS = 5
@@ -260,7 +261,7 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
         lines.append('# the friction angle is not determined by these grasps: the configured '
                      'value stays.')
     lines.append(f'# /check_lift (end verdict) agrees with {calibration.end_agreement_configured}'
-                 f' of the {calibration.cells} grasps as configured, with '
+                 f' of the {counted(calibration.cells, "grasp")} as configured, with '
                  f'{calibration.end_agreement_overlay} with the fitted values'
                  + ('.' if helps else ': no better, so none is written.'))
     if calibration.verdict == 'path':

@@ -143,8 +143,8 @@ def parse_axis(field_name: str, tokens: Sequence[str], *, lower: float,
             if low_bad or high_bad:
                 lo = '(' if lower_open else '['
                 hi = ')' if upper_open else ']'
-                raise SweepError(f'{field_name}: {v:g}{" " + unit if unit else ""} (from '
-                                 f'{token!r}) is outside {lo}{lower:g}, {upper:g}{hi}')
+                raise SweepError(f'{field_name}: {v:.4g}{" " + unit if unit else ""} (from '
+                                 f'{token!r}) is outside {lo}{lower:.4g}, {upper:.4g}{hi}')
             if v in seen:
                 raise SweepError(f'{field_name}: {v:g} is given twice (from {token!r})')
             seen.add(v)

@@ -32,6 +32,7 @@ import numpy as np
 
 from dam_common.command_line import CommandLineParser
 from dam_common.ros_args import strip_ros_args
+from dam_common.words import counted
 from dam_experiments.errors import SweepPlotError
 from dam_experiments.sweep_plot import (
     CSM_LABEL,
@@ -185,11 +186,12 @@ def summary_lines(report: SweepReport) -> list[str]:
     data = report.data
     shown = data.object_label
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{report.n_present} of '
-             f'{data.n_planned} trials, '
+             f'{counted(data.n_planned, "trial")}, '
              f'{data.repeats} per cell' + ('' if report.complete else ' (incomplete)')]
     for a in report.angles:
         lines.append(
-            f'  alpha {a.friction_angle_deg:g} deg: {a.n_cells} cells, {a.n_lifting} lifting; '
+            f'  alpha {a.friction_angle_deg:g} deg: {counted(a.n_cells, "cell")}, '
+            f'{a.n_lifting} lifting; '
             f'false guarantees {a.n_false_guarantees}; CSM agreement '
             f'{share(a.n_agree, a.n_cells)}'
             + ('' if a.n_path_agree is None else

@@ -26,6 +26,7 @@ from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
 from dam_common.picture import picture_path
 from dam_common.progress import Progress
+from dam_common.words import counted
 from dam_recorder.errors import DamRecorderError
 
 PROG = 'bag'
@@ -206,8 +207,8 @@ def run_export(args: argparse.Namespace) -> int:
                                        end_s=args.end)
             print(f'{args.bag}: {selection.description}')
         for exported in export_bag(args.bag, args.output, topics, selection):
-            print(f'{exported.path}: {exported.rows} rows, {len(exported.columns)} columns '
-                  f'({exported.topic})')
+            print(f'{exported.path}: {counted(exported.rows, "row")}, '
+                  f'{counted(len(exported.columns), "column")} ({exported.topic})')
     return 0
 
 

@@ -10,6 +10,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from dam_common.words import counted
 from dam_recorder.bag_info import OPEN_HINT, STATUS_TOPIC, BagInfo, EpisodesInfo, is_open
 from dam_recorder.completeness import Completeness, describe
 from dam_recorder.episode import Episode, format_floats
@@ -97,7 +98,7 @@ def episode_lines(episode: Episode, bag_start_ns: int | None = None) -> list[str
                      f'(worst-case margin {_margin(c.worst_case_margin)}), contact stiffness '
                      f'model {_yes(c.csm_lift)} (margin {_margin(c.csm_margin)})')
     config = 'none' if episode.config_text is None else \
-        f'{len(episode.config_text.splitlines())} lines'
+        counted(len(episode.config_text.splitlines()), 'line')
     lines.append(f'  config: {config}; version: {episode.version or "none"}')
     return lines
 
@@ -146,7 +147,8 @@ def format_bag_info(info: BagInfo) -> str:
                      f'trimmed {info.trimmed.get(name, 0)}')
     if info.backlog is not None:
         lines.append(f'backlog:    max {info.backlog["max_s"]:.3f} s, mean '
-                     f'{info.backlog["mean_s"]:.3f} s over {info.backlog["messages"]} messages '
+                     f'{info.backlog["mean_s"]:.3f} s over '
+                     f'{counted(info.backlog["messages"], "message")} '
                      '(from receipt to the bag)')
     lines.append('')
     lines += episode_lines(info.episode, start) if info.episode else ['episode:    none']

@@ -18,6 +18,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from dam_common.words import counted
 from dam_recorder.bag_info import Grasp
 from dam_recorder.errors import BagReadError
 
@@ -128,7 +129,8 @@ def select(grasps: Sequence[Grasp], bag_start_ns: int, bag_end_ns: int, *,
         end = bag_start_ns + int(round(min(high, duration_s) * 1e9))
         inside = [i for i, g in enumerate(grasps) if start <= g.start_ns <= end]
         outcome = grasps[inside[0]].outcome if len(inside) == 1 else None
-        notes = [f'the window holds {len(inside)} of the bag\'s {count} grasps'] if count else []
+        notes = ([f'the window holds {len(inside)} of the bag\'s {counted(count, "grasp")}']
+                 if count else [])
         return Selection(start, end, None, count, outcome,
                          f'{(start - bag_start_ns) * 1e-9:.3f} s to '
                          f'{(end - bag_start_ns) * 1e-9:.3f} s', notes)
@@ -136,7 +138,7 @@ def select(grasps: Sequence[Grasp], bag_start_ns: int, bag_end_ns: int, *,
         return Selection(bag_start_ns, bag_end_ns, 1 if count else None, count,
                          grasps[0].outcome if count else None, 'the whole bag')
     start, end = grasp_window(grasps, count - 1, bag_start_ns, bag_end_ns)
-    notes = [f'the bag holds {count} grasps; shown: the last. The others:',
+    notes = [f'the bag holds {counted(count, "grasp")}; shown: the last. The others:',
              *[f'  {line}' for line in listing[:-1]],
              'choose one with --episode N, or a window with --start S --end S']
     return Selection(start, end, count, count, grasps[-1].outcome,

@@ -90,6 +90,7 @@ from dam_common.echo import brief_repr
 from dam_common.node import run_node
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
+from dam_common.words import counted
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
 from dam_recorder.bag_reading import (
     DROPPED_KEY,
@@ -977,8 +978,9 @@ class RecorderNode(Node):
             self._on_write_error(exc)
         count = sum(t.message_count for t in writer.topics)
         unwritten = sum(writer.unwritten.values())
-        text = (f'closed {writer.bag_dir}: {count} messages on {len(writer.topics)} topics in '
-                f'{len(writer.files)} file(s); {self._losses(unwritten)}')
+        text = (f'closed {writer.bag_dir}: {counted(count, "message")} on '
+                f'{counted(len(writer.topics), "topic")} in '
+                f'{counted(len(writer.files), "file")}; {self._losses(unwritten)}')
         if writer.failure is None:
             (self.get_logger().warning if self._lost() else self.get_logger().info)(
                 text)

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 from dam_common.closed_output import quiet_when_output_closed
 from dam_common.command_line import CommandLineParser
+from dam_common.words import counted
 from dam_recorder.completeness import describe
 from dam_recorder.errors import RecoveryError
 from dam_recorder.recovery import recover_bag
@@ -63,12 +64,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             state = 'rebuilt, with losses' if lost else 'rebuilt'
         else:
             state = 'rebuilt'
-        print(f'{file.path}: {file.message_count} messages ({state})')
+        print(f'{file.path}: {counted(file.message_count, "message")} ({state})')
         for problem in file.problems:
             print(f'  {file.path}: {problem}')
     for topic in report.topics:
         print(f'  {topic.name}: {topic.message_count} ({topic.type})')
-    print(f'{report.bag_dir}: {report.message_count} messages; metadata.yaml written')
+    print(f'{report.bag_dir}: {counted(report.message_count, "message")}; metadata.yaml '
+          'written')
     verdict, path = report.episode, report.path or report.bag_dir
     if verdict is not None:
         # 'episode OUTCOME: PATH' alone on its line, as the recorder logs a closed episode.

@@ -43,6 +43,7 @@ from mcap.reader import make_reader
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from dam_common.words import counted
 from dam_recorder.bag_writer import (
     STORAGE_SUFFIXES,
     add_connection,
@@ -255,7 +256,7 @@ class _Topics:
                 count = self.old_counts.get(name)
                 if count != self.by_name[name].message_count:
                     self.problems.append(
-                        f'{METADATA_FILE}: topic {name} counted {count!r} messages, the data '
+                        f'{METADATA_FILE}: topic {name}: message count {count!r}, the data '
                         f'files hold {self.by_name[name].message_count}')
             elif _TYPE_NAME.match(old.type):
                 self.by_name[name] = TopicInfo(name, old.type, old.type_hash, old.offered_qos)
@@ -273,7 +274,7 @@ def _lost_text(salvage: Salvage, lost: dict[int, int]) -> str:
     for channel_id, count in sorted(lost.items()):
         channel = salvage.channels.get(channel_id)
         parts.append(f'{count} of {channel.topic if channel else f"channel {channel_id}"}')
-    return f'{sum(lost.values())} messages lost ({", ".join(parts)})'
+    return f'{counted(sum(lost.values()), "message")} lost ({", ".join(parts)})'
 
 
 def _file_problems(salvage: Salvage) -> list[str]:
@@ -316,7 +317,8 @@ def _recover_mcap(path: Path, topics: _Topics) -> tuple[FileReport, FileInfo]:
         counts[topic.name] = counts.get(topic.name, 0) + 1
         info.add(message.log_time)
     if orphans:
-        problems.append(f'{orphans} messages of channels whose record is lost are left out')
+        problems.append(f'{counted(orphans, "message")} of channels whose record is lost are '
+                        'left out')
     for topic, _ in channels.values():
         topic.message_count += counts.get(topic.name, 0)
     if salvage.intact and not problems:
