@@ -5,6 +5,12 @@
 #                                        # test beside them), then the integration tests
 #   bash scripts/test.sh -k config -x    # extra arguments go to pytest
 #   bash scripts/test.sh tests/dam_common -q   # only these paths (they replace the default)
+#   bash scripts/test.sh --quick         # the quick tier for development: the unit tests only
+#                                        # (about 3 minutes on 2 cores; no DDS timing, no
+#                                        # system-ROS setup)
+#
+# The integration tests run on DAM_TEST_WORKERS processes side by side (default 2), each
+# on a domain and UDP ports of its own, a whole test file per process.
 #
 # Each run reserves its own ROS_DOMAIN_ID (a lock file per id), so parallel runs on one
 # machine never see each other's nodes; discovery stays on this machine (LOCALHOST).
@@ -26,6 +32,12 @@ dam_reserve_ros_domain
 echo "==> Running tests (ROS_DOMAIN_ID=$ROS_DOMAIN_ID, discovery $ROS_AUTOMATIC_DISCOVERY_RANGE)"
 
 cd "$REPO_ROOT"
+quick=false
+args=()
+for arg in "$@"; do
+  if [ "$arg" = --quick ]; then quick=true; else args+=("$arg"); fi
+done
+set -- ${args[@]+"${args[@]}"}
 # Test paths given on the command line replace the default set (every test).
 paths_given=false
 for arg in "$@"; do
@@ -48,7 +60,9 @@ fi
 # Every test, in two phases (each prints pytest's summary line):
 # 1. the unit tests (pure cores, installed executables without DDS timing) on every core,
 #    while the system-ROS setup test (two pip installs and a build in a copy) runs beside them;
-# 2. the integration tests over DDS with real-time nodes, one at a time.
+# 2. the integration tests over DDS with real-time nodes, two test files at a time (each
+#    worker on a ROS_DOMAIN_ID and UDP ports of its own), then those that load the machine
+#    with six CPU burners (marker exclusive) alone.
 system_ros=tests/integration/test_system_ros_setup.py
 # Unit tests that measure real time wait for phase 2 (the build beside phase 1 takes the CPU).
 realtime_unit=(
@@ -58,32 +72,62 @@ unit=(tests/dam_* tests/integration/test_package_layout.py tests/integration/tes
 for pkg_tests in src/*/test; do
   if [ -d "$pkg_tests" ]; then unit+=("$pkg_tests"); fi
 done
-echo "==> Phase 1: unit tests, and $system_ros beside them"
-system_ros_log=$(mktemp)
-run_pytest "$system_ros" "$@" >"$system_ros_log" 2>&1 &
-system_ros_pid=$!
 deselect=()
 for t in "${realtime_unit[@]}"; do deselect+=(--deselect "$t"); done
 # The unit tests on every core (pytest-xdist); those that talk DDS in the test process share
 # one worker (--dist loadgroup), so they never see each other's topics.
 workers=$(nproc 2>/dev/null || echo 2)
+if [ "$quick" = true ]; then
+  echo "==> Quick tier: the unit tests only (no integration tests, no system-ROS setup test)"
+  run_pytest -n "$workers" --dist loadgroup "${unit[@]}" "${deselect[@]}" "$@"
+  status=$?
+  [ "$status" = 5 ] && { echo "test.sh: pytest collected no tests" >&2; exit 1; }
+  exit "$status"
+fi
+phase_start=$SECONDS
+echo "==> Phase 1: unit tests, and $system_ros beside them"
+system_ros_log=$(mktemp)
+run_pytest "$system_ros" "$@" >"$system_ros_log" 2>&1 &
+system_ros_pid=$!
 run_pytest -n "$workers" --dist loadgroup "${unit[@]}" "${deselect[@]}" "$@"
 unit_status=$?
 wait "$system_ros_pid"
 system_ros_status=$?
 cat "$system_ros_log"
 rm -f "$system_ros_log"
-echo "==> Phase 2: integration tests"
+echo "==> Phase 1 took $((SECONDS - phase_start)) s"
+phase_start=$SECONDS
+# The integration tests, a whole file per worker (its module's nodes stay its own), the
+# longest files first so that the two workers end together (measured: these five take
+# half the phase).
+integration_workers=${DAM_TEST_WORKERS:-2}
+echo "==> Phase 2: integration tests on $integration_workers workers"
 integration=()
-for t in tests/integration/test_*.py; do
-  case " ${unit[*]} $system_ros " in *" $t "*) ;; *) integration+=("$t") ;; esac
+for t in tests/integration/test_recorder.py tests/integration/test_shutdown_signals.py \
+  tests/integration/test_bringup_scripts.py tests/integration/test_malformed_requests.py \
+  tests/integration/test_dam_grasp.py tests/integration/test_*.py; do
+  case " ${unit[*]} $system_ros ${integration[*]} " in
+    *" $t "*) ;;
+    *) integration+=("$t") ;;
+  esac
 done
-run_pytest --durations=12 "${realtime_unit[@]}" "${integration[@]}" "$@"
+parallel=()
+if [ "$integration_workers" -gt 1 ]; then
+  parallel=(-n "$integration_workers" --dist loadfile)
+fi
+run_pytest ${parallel[@]+"${parallel[@]}"} --durations=12 -m "not exclusive" \
+  "${integration[@]}" "${realtime_unit[@]}" "$@"
 integration_status=$?
+# Tests that load the machine on purpose (six CPU burners) run alone afterwards: beside them a
+# grasp of another test would be overloaded, which is not what that test is about.
+echo "==> Phase 2, the tests that load the machine (marker exclusive), alone"
+run_pytest -m exclusive "${integration[@]}" "$@"
+exclusive_status=$?
+echo "==> Phase 2 took $((SECONDS - phase_start)) s"
 set -e
 status=0
 collected=0
-for s in "$unit_status" "$system_ros_status" "$integration_status"; do
+for s in "$unit_status" "$system_ros_status" "$integration_status" "$exclusive_status"; do
   case "$s" in
     0) collected=1 ;;
     5) ;;

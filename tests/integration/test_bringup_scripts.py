@@ -174,6 +174,7 @@ def test_bringup_returns_serving_and_stop_stops_it(tmp_path: Path) -> None:
                          re.M), up.stdout
 
 
+@pytest.mark.exclusive  # six burners: never beside another test's grasp (scripts/test.sh)
 def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path) -> None:
     """Issue #32: on a loaded machine ``run.sh`` gave up after 60 s ("bringup.sh: not ready
     after 60 s: /check_lift has not answered") while check_lift_server was still starting.

@@ -134,7 +134,7 @@ def test_pair_inside_the_sufficient_region_lifts(stack: _Grasper, lockstep,
 
     released = stack.client.call(Trigger, '/spcm_controller/release', Trigger.Request(),
                                  timeout=120.0)  # seconds simulated; slower under load
-    assert released.success, released.message
+    assert released.success, (released.message, stack.controller.output()[-3000:])
     assert stack.client.call(Trigger, '/hand_driver_sim/reset', Trigger.Request()).success
     stack.client.call(Trigger, '/hand_driver/reset', Trigger.Request())
     t_reset = time.monotonic()

@@ -61,6 +61,7 @@ def _counts(custom: dict[str, str], key: str) -> dict[str, int]:
     return json.loads(custom.get(key, '{}'))
 
 
+@pytest.mark.exclusive  # six burners: never beside another test's grasp (scripts/test.sh)
 def test_a_starved_recorder_stops_within_its_bound_and_counts_what_it_did_not_write(
         tmp_path: Path) -> None:
     out = tmp_path / 'grasps'
