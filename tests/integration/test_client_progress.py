@@ -1,5 +1,5 @@
 """plan_lift says on stderr that it waits, every DAM_PROGRESS_S seconds, while its server
-works (the README's example plans for about a minute)."""
+works (the example in docs/lift_analysis.md plans for about a minute)."""
 
 from __future__ import annotations
 

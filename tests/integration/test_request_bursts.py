@@ -119,8 +119,8 @@ def test_a_burst_of_goals_and_cancels_from_one_client_is_answered(stack) -> None
 
 def test_a_burst_of_goals_and_cancels_from_five_clients_is_answered(stack) -> None:
     """Every goal accepted, and refused with its reason within the 2 s of issue #32 (at load 4
-    it took 0.23 to 0.36 s, bursts 2 s apart). The clients keep every reply (README,
-    "Grasping"): with rclpy's default depth of 10, five clients of one node lost replies of
+    it took 0.23 to 0.36 s, bursts 2 s apart). The clients keep every reply
+    (docs/grasping.md): with rclpy's default depth of 10, five clients of one node lost replies of
     such a burst at load 4 (38 of 49 results), and at no load right after another burst."""
     took = _goal_burst(stack, 5)
     assert took < GOAL_ANSWER_BOUND_S, f'the refusals took {took:.2f} s'
