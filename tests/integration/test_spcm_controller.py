@@ -250,7 +250,6 @@ def test_bad_goals_end_with_their_reason(stack) -> None:
     from action_msgs.msg import GoalStatus
 
     from dam_interfaces.action import DamGrasp
-
     from dam_interfaces.msg import HandCommand
 
     h, ctl, _plant = stack
