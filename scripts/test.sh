@@ -79,8 +79,10 @@ for t in "${realtime_unit[@]}"; do deselect+=(--deselect "$t"); done
 workers=$(nproc 2>/dev/null || echo 2)
 if [ "$quick" = true ]; then
   echo "==> Quick tier: the unit tests only (no integration tests, no system-ROS setup test)"
+  phase_start=$SECONDS
   run_pytest -n "$workers" --dist loadgroup "${unit[@]}" "${deselect[@]}" "$@"
   status=$?
+  echo "==> Quick tier took $((SECONDS - phase_start)) s"
   [ "$status" = 5 ] && { echo "test.sh: pytest collected no tests" >&2; exit 1; }
   exit "$status"
 fi

@@ -60,7 +60,10 @@ def test_dam_experiment_keeps_the_grasps_done_when_interrupted(tmp_path: Path) -
     assert all(None not in row.values() and row['outcome'] for row in rows)  # whole rows
     done = f'interrupted after {len(rows)} grasps; {len(rows)} rows written to {out}'
     assert done in stderr, stderr
-    printed = [line for line in stdout.splitlines()[1:] if line.strip()]
+    # the table's header and its legend line, then one line per grasp
+    lines = stdout.splitlines()
+    assert lines[1].startswith('(rise, max:'), lines[:2]
+    printed = [line for line in lines[2:] if line.strip()]
     assert len(printed) == len(rows)  # each grasp printed is a row of the file
 
 
