@@ -200,3 +200,35 @@ def test_an_incompatible_publisher_is_logged_once_per_topic_and_counted(context,
     err = capfd.readouterr().err
     assert err.count('offers a QoS incompatible with this subscription') == 1, err
     assert 'RELIABILITY' in err and topic in err, err
+
+
+def test_drained_grows_only_once_every_queued_message_was_handed_over(context) -> None:
+    """``drained`` tells a watchdog that a starved thread has caught up: while the callback
+    is held up, messages queue and the count stays; once it grows, every message that was
+    queued before has reached the callback."""
+    owner = rclpy.create_node('intake_owner', context=context)
+    talker = rclpy.create_node('intake_talker', context=context)
+    topic = _topic()
+    got: list[int] = []
+    hold = threading.Event()
+
+    def on_message(msg: Int64) -> None:
+        hold.wait(30.0)  # the first message holds the thread up
+        got.append(msg.data)
+
+    intake = SubscriptionThread(owner, 'numbers')
+    intake.create_subscription(Int64, topic, on_message, 100)
+    intake.start()
+    try:
+        _publish_until_matched(talker, topic, 50)
+        time.sleep(0.3)  # well beyond the thread's wait (POLL_S): it is held in the callback
+        before = intake.drained
+        assert got == []
+        hold.set()
+        assert _wait(lambda: intake.drained > before)
+        assert got == list(range(50))  # all of them, handed over before the count grew
+    finally:
+        hold.set()
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()

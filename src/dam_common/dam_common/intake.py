@@ -86,6 +86,10 @@ class SubscriptionThread:
         #: Publishers seen offering an incompatible type.
         self.incompatible_type = 0
         self._warned: set[str] = set()
+        #: How many times the thread found the queue empty after taking (and calling back
+        #: for) every message in it: once this grows, every message that arrived before has
+        #: been handed to the callback.
+        self.drained = 0
 
     @property
     def node_name(self) -> str:
@@ -154,6 +158,7 @@ class SubscriptionThread:
                     while not self._stop.is_set():
                         taken = sub.handle.take_message(sub.msg_type, sub.raw)
                         if taken is None:
+                            self.drained += 1
                             break
                         self._call(callback, taken[0])
         except Exception as exc:  # noqa: BLE001 - e.g. the context went away meanwhile

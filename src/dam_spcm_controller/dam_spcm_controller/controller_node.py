@@ -256,7 +256,8 @@ class SpcmControllerNode(Node):
         self._last_state_clock = 0.0
         self._stall_timeout_s = float(self._config.sim.stall_timeout_s)
         self._commands_published = (0, 0)  # (count, header stamp of the last one [ns])
-        self._silence_suspected = False
+        #: ``_intake.drained`` when a silence was first seen (None: none seen)
+        self._silence_seen_at: int | None = None
         self._last_pos = np.zeros(self._layout.n_joints)
         self._last_eff = np.zeros(self._layout.n_joints)
         self._last_cmd: JointCommand | None = None
@@ -395,6 +396,27 @@ class SpcmControllerNode(Node):
         sim = self._clock_watch.steady_now_s() - self._last_state_clock
         return (sim, 's of simulated time') if sim > timeout else None
 
+    def _confirmed_silence(self) -> tuple[float, str] | None:
+        """:meth:`_silence`, once the joint-state thread has emptied its queue since the
+        silence was first seen and it still holds; ``None`` until then.
+
+        A starved process takes its joint states late: its clock (``/clock``, 100 Hz) may run
+        ahead of the joint states (500 Hz) still queued for the thread, which is no silence.
+        A publisher that really stopped is confirmed within the thread's next wait
+        (:data:`dam_common.intake.POLL_S` of wall time at most).
+        """
+        silence = self._silence()
+        if silence is None:
+            self._silence_seen_at = None
+            return None
+        drained = self._intake.drained
+        if self._silence_seen_at is None:
+            self._silence_seen_at = drained
+            return None
+        if drained <= self._silence_seen_at:
+            return None  # the thread has not looked at its queue since: wait for it
+        return silence
+
     def _on_joint_state(self, msg: JointState) -> None:
         wall = time.monotonic()
         now = self._control_time(msg, wall)
@@ -503,6 +525,7 @@ class SpcmControllerNode(Node):
             self._release_done = Future()
             self._publishing = True
             self._state_timed_out = False
+            self._silence_seen_at = None
             self._outcome = DamGrasp.Result.OUTCOME_UNKNOWN  # the grasp is over: releasing
             done = self._release_done
         self.get_logger().info('releasing: torques to zero, then opening the hand')
@@ -513,7 +536,7 @@ class SpcmControllerNode(Node):
             if done.done():
                 return
             if self._last_control_time - release_start > timeout or \
-                    self._silence() is not None:
+                    self._confirmed_silence() is not None:
                 self._end_release(False)
 
         timer = create_steady_timer(self, 0.01, poll)
@@ -602,16 +625,10 @@ class SpcmControllerNode(Node):
             if not self._seq.phase.active or self._state_timed_out:
                 return
             timeout = self._values['state_timeout']
-            silence = self._silence()
+            silence = self._confirmed_silence()
             if silence is None:
-                self._silence_suspected = False
                 return
             silent, unit = silence
-            if not self._silence_suspected:
-                # After a stall of this process the timer runs before the joint states that
-                # queued meanwhile: confirm the silence on the next tick, once they are taken.
-                self._silence_suspected = True
-                return
             reason = (f'/joint_states silent for {silent:.3f} {unit} (state_timeout '
                       f'{timeout:g} s) during phase {_phase_name(self._seq.phase)}'
                       f'{self._clock_faults()}')
@@ -995,6 +1012,7 @@ class SpcmControllerNode(Node):
             self._seq = DamSequence(self._params)
             self._last_phase = self._seq.phase
             self._state_timed_out = False
+            self._silence_seen_at = None
             try:
                 self._seq.start(k, dp)
             except (InputError, StateError) as exc:
