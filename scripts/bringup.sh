@@ -66,7 +66,13 @@ object=""
 timeout=${DAM_BRINGUP_TIMEOUT:-none}
 state_publisher=dam
 user_args=()  # --params-file and --ros-args of the caller, for every node
+seen_options=" "  # an option given twice is refused (docs/units.md); these may repeat:
 while [ $# -gt 0 ]; do
+  case "$1" in
+    --params-file | --ros-args | -h | --help) ;;
+    --*) [[ "$seen_options" != *" $1 "* ]] || usage_error "$1 given twice"
+      seen_options+="$1 " ;;
+  esac
   case "$1" in
     --backend) [ $# -ge 2 ] || usage_error "--backend needs auto, sim, hardware or dynamixel"
       backend=$2; shift 2 ;;

@@ -61,7 +61,13 @@ need_value() {
   [ $# -ge 3 ] && [ -n "$2" ] && [[ "$2" != --* ]] || usage_error "$1 needs $what"
 }
 ros_args=()  # the caller's --ros-args, for every node
+seen_options=" "  # an option given twice is refused (docs/units.md); these may repeat:
 while [ $# -gt 0 ]; do
+  case "$1" in
+    --params-file | --ros-args | -h | --help) ;;
+    --*) [[ "$seen_options" != *" $1 "* ]] || usage_error "$1 given twice"
+      seen_options+="$1 " ;;
+  esac
   case "$1" in
     --params-file)
       [ $# -ge 2 ] || { echo "run.sh: --params-file needs a file (see --help)" >&2; exit 2; }

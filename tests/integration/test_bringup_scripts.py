@@ -56,6 +56,7 @@ def _started_pids(stdout: str) -> dict[str, int]:
      "bringup.sh: --state-publisher must be dam, system or none, got 'rviz' (see --help)"),
     (['--state-publisher'],
      'bringup.sh: --state-publisher needs dam, system or none (see --help)'),
+    (['--backend', 'foo'], 'bringup.sh: --backend given twice (see --help)'),
 ])
 def test_bringup_refuses_a_bad_state_publisher_before_anything_starts(
         tmp_path: Path, args: list[str], says: str) -> None:
@@ -368,6 +369,7 @@ def test_run_sh_checks_the_pair_before_anything_starts(tmp_path: Path, args: lis
     (['--port', '/dev/null'], 'run.sh: --port is for --backend dynamixel'),
     (['--timeout'], 'run.sh: --timeout needs a number of seconds or none (see --help)'),
     (['--frobnicate'], "run.sh: unknown argument '--frobnicate' (see --help)"),
+    (['--k-theta', '5', '--k-theta', '6'], 'run.sh: --k-theta given twice (see --help)'),
 ])
 def test_run_sh_refuses_bad_arguments_with_the_usage_status(tmp_path: Path, args: list[str],
                                                             says: str) -> None:
