@@ -62,7 +62,7 @@ fi
 #    while the system-ROS setup test (two pip installs and a build in a copy) runs beside them;
 # 2. the integration tests over DDS with real-time nodes, two test files at a time (each
 #    worker on a ROS_DOMAIN_ID and UDP ports of its own), then those that load the machine
-#    with six CPU burners (marker exclusive) alone.
+#    (marker exclusive: six CPU burners, storms of driver starts) alone.
 system_ros=tests/integration/test_system_ros_setup.py
 # Unit tests that measure real time wait for phase 2 (the build beside phase 1 takes the CPU).
 realtime_unit=(
@@ -120,8 +120,9 @@ fi
 run_pytest ${parallel[@]+"${parallel[@]}"} --durations=12 -m "not exclusive" \
   "${integration[@]}" "${realtime_unit[@]}" "$@"
 integration_status=$?
-# Tests that load the machine on purpose (six CPU burners) run alone afterwards: beside them a
-# grasp of another test would be overloaded, which is not what that test is about.
+# Tests that load the machine on purpose (six CPU burners, storms of driver starts with a 2 s
+# exit bound) run alone afterwards: beside another test's stack they would be overloaded, or
+# overload it, which is not what either test is about.
 echo "==> Phase 2, the tests that load the machine (marker exclusive), alone"
 run_pytest -m exclusive "${integration[@]}" "$@"
 exclusive_status=$?

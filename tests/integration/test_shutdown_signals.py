@@ -148,6 +148,8 @@ def test_sim_bridge_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
     _assert_all_clean(_storm(lambda _t: [exe], tmp_path, 3.0, 'sim_bridge', with_config=True))
 
 
+@pytest.mark.exclusive  # two starts at a time, each a driver with its stand-in: beside
+# another test's stack the 2 s exit bound measures the machine (scripts/test.sh)
 def test_hand_driver_and_its_standin_stop_cleanly_at_any_moment(tmp_path: Path) -> None:
     exe = str(installed_executable('dam_hand_driver', 'hand_driver'))
     trials = _storm(lambda _t: [exe, '--ros-args', '-p', 'backend:=sim'], tmp_path, 3.5,
@@ -157,6 +159,8 @@ def test_hand_driver_and_its_standin_stop_cleanly_at_any_moment(tmp_path: Path) 
     assert sum('RUNNING ON THE SIMULATOR' in t.output for t in trials) >= 10
 
 
+@pytest.mark.exclusive  # two starts at a time, each a driver with its stand-in: beside
+# another test's stack the 2 s exit bound measures the machine (scripts/test.sh)
 def test_hand_driver_on_the_dynamixel_bus_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
     """backend dynamixel: the driver, the emulated bus it starts and the SDK's port, with
     torque switched off on the way out."""
