@@ -29,8 +29,8 @@ from grasp_testing import config_with_free_ports
 from dam_common.realtime import die_with_parent
 from ros_testing import installed_executable, node_process
 
-# In real time, as real servos: their Bus Watchdogs (0.1 s) trip when the driver is starved
-# as beside another worker's stack, which is what a lab's hand must do; so alone
+# In real time, as real servos (0.1 s Bus Watchdogs on the wall clock): beside another
+# worker's stack the driver was once in ERROR where ACTIVE is awaited; so alone
 # (scripts/test.sh, marker exclusive).
 pytestmark = [pytest.mark.integration, pytest.mark.exclusive]
 
