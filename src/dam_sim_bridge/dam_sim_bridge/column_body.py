@@ -11,12 +11,12 @@ This module is pure (math and numpy).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dam_common.cross_section import CrossSection
+from dam_common.forward_kinematics import quaternion_multiply
 
 if TYPE_CHECKING:
     from dam_common.config import ObjectConfig
@@ -35,18 +35,7 @@ def resting_quaternion(obj: ObjectConfig) -> tuple[float, float, float, float]:
     down = (-math.sin(math.pi / 4.0), 0.0, 0.0, math.cos(math.pi / 4.0))
     turn = (0.0, 0.0, math.sin(heading / 2.0), math.cos(heading / 2.0))
     principal = (0.0, 0.0, math.sin(beta / 2.0), math.cos(beta / 2.0))
-    return _quaternion_product(_quaternion_product(turn, down), principal)
-
-
-def _quaternion_product(p: Sequence[float], q: Sequence[float]
-                        ) -> tuple[float, float, float, float]:
-    """Hamilton product ``p q`` of quaternions (x, y, z, w): the rotation ``q``, then ``p``."""
-    px, py, pz, pw = p
-    qx, qy, qz, qw = q
-    return (pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-            pw * qw - px * qx - py * qy - pz * qz)
+    return quaternion_multiply(quaternion_multiply(turn, down), principal)
 
 
 def prism_vertices(section: CrossSection, length_m: float, faces: int, beta: float = 0.0
