@@ -6,6 +6,7 @@ import threading
 import time
 import uuid
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 
@@ -52,6 +53,25 @@ def _wait(predicate, timeout: float = 10.0) -> bool:
             return True
         time.sleep(0.01)
     return predicate()
+
+
+@contextmanager
+def _numbers_intake(context, on_message, depth: int
+                    ) -> Iterator[tuple[SubscriptionThread, object, str]]:
+    """A started intake of Int64 on a fresh topic, its owner's talker node and the topic;
+    stopped and destroyed afterwards."""
+    owner = rclpy.create_node('intake_owner', context=context)
+    talker = rclpy.create_node('intake_talker', context=context)
+    topic = _topic()
+    intake = SubscriptionThread(owner, 'numbers')
+    intake.create_subscription(Int64, topic, on_message, depth)
+    intake.start()
+    try:
+        yield intake, talker, topic
+    finally:
+        intake.stop()
+        talker.destroy_node()
+        owner.destroy_node()
 
 
 def test_every_message_reaches_the_callback_in_order_in_the_intake_thread(context) -> None:
@@ -113,9 +133,6 @@ def test_the_owners_remapping_applies_and_the_owners_executor_takes_nothing(cont
 
 
 def test_a_raising_callback_is_logged_and_the_intake_goes_on(context) -> None:
-    owner = rclpy.create_node('intake_owner', context=context)
-    talker = rclpy.create_node('intake_talker', context=context)
-    topic = _topic()
     got: list[int] = []
 
     def on_message(msg: Int64) -> None:
@@ -123,17 +140,10 @@ def test_a_raising_callback_is_logged_and_the_intake_goes_on(context) -> None:
             raise ValueError(f'odd {msg.data}')
         got.append(msg.data)
 
-    intake = SubscriptionThread(owner, 'numbers')
-    intake.create_subscription(Int64, topic, on_message, 20)
-    intake.start()
-    try:
+    with _numbers_intake(context, on_message, 20) as (_intake, talker, topic):
         _publish_until_matched(talker, topic, 20)
         assert _wait(lambda: len(got) == 10), got
         assert got == list(range(0, 20, 2))
-    finally:
-        intake.stop()
-        talker.destroy_node()
-        owner.destroy_node()
 
 
 def test_stop_ends_the_thread_at_once_and_removes_the_subscription(context) -> None:
@@ -206,9 +216,6 @@ def test_drained_grows_only_once_every_queued_message_was_handed_over(context) -
     """``drained`` tells a watchdog that a starved thread has caught up: while the callback
     is held up, messages queue and the count stays; once it grows, every message that was
     queued before has reached the callback."""
-    owner = rclpy.create_node('intake_owner', context=context)
-    talker = rclpy.create_node('intake_talker', context=context)
-    topic = _topic()
     got: list[int] = []
     hold = threading.Event()
 
@@ -216,19 +223,14 @@ def test_drained_grows_only_once_every_queued_message_was_handed_over(context) -
         hold.wait(30.0)  # the first message holds the thread up
         got.append(msg.data)
 
-    intake = SubscriptionThread(owner, 'numbers')
-    intake.create_subscription(Int64, topic, on_message, 100)
-    intake.start()
     try:
-        _publish_until_matched(talker, topic, 50)
-        time.sleep(0.3)  # well beyond the thread's wait (POLL_S): it is held in the callback
-        before = intake.drained
-        assert got == []
-        hold.set()
-        assert _wait(lambda: intake.drained > before)
-        assert got == list(range(50))  # all of them, handed over before the count grew
+        with _numbers_intake(context, on_message, 100) as (intake, talker, topic):
+            _publish_until_matched(talker, topic, 50)
+            time.sleep(0.3)  # well beyond the thread's wait (POLL_S): held in the callback
+            before = intake.drained
+            assert got == []
+            hold.set()
+            assert _wait(lambda: intake.drained > before)
+            assert got == list(range(50))  # all of them, handed over before the count grew
     finally:
-        hold.set()
-        intake.stop()
-        talker.destroy_node()
-        owner.destroy_node()
+        hold.set()  # a failed assertion leaves the thread held: let it end
