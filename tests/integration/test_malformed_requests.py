@@ -33,6 +33,7 @@ VALID = {
     'spcm_controller': ('envelope_torque', 0.04),
     'hand_driver': ('use_sim_time', False),
     'hand_driver_sim': ('pose_rate_hz', 50.0),
+    'dam_state_publisher': ('use_sim_time', False),  # its own parameters are read-only
 }
 REQUESTS_PER_NODE = 400
 #: Requests sent before the oldest must be answered: below the services' default queue depth.
@@ -42,7 +43,7 @@ IN_FLIGHT = 5
 @pytest.fixture(scope='module')
 def nodes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """Every node of the suite: the analysis server, the driver with its stand-in
-    (``hand_driver_sim``), the controller."""
+    (``hand_driver_sim``), the controller, the state publisher."""
     config = config_with_free_ports(tmp_path_factory.mktemp('fuzz'))
     env = {'DAM_CONFIG': str(config)}
     with ExitStack() as es:
@@ -54,6 +55,8 @@ def nodes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
                  '-p', 'backend:=sim', '-p', 'gui:=false'], env)),  # as bringup.sh does
             'spcm_controller': es.enter_context(node_process(
                 [installed_executable('dam_spcm_controller', 'spcm_controller')], env)),
+            'dam_state_publisher': es.enter_context(node_process(
+                [installed_executable('dam_hand_driver', 'dam_state_publisher')], env)),
         }
         client = RosClient()
         es.callback(client.close)

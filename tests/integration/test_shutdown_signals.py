@@ -143,6 +143,11 @@ def test_check_lift_server_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
     _assert_all_clean(_storm(lambda _t: [exe], tmp_path, 2.5, 'check_lift_server'))
 
 
+def test_state_publisher_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
+    exe = str(installed_executable('dam_hand_driver', 'dam_state_publisher'))
+    _assert_all_clean(_storm(lambda _t: [exe], tmp_path, 2.5, 'dam_state_publisher'))
+
+
 def test_sim_bridge_stops_cleanly_at_any_moment(tmp_path: Path) -> None:
     exe = str(installed_executable('dam_sim_bridge', 'sim_bridge'))
     _assert_all_clean(_storm(lambda _t: [exe], tmp_path, 3.0, 'sim_bridge', with_config=True))
