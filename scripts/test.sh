@@ -6,7 +6,7 @@
 #   bash scripts/test.sh -k config -x    # extra arguments go to pytest
 #   bash scripts/test.sh tests/dam_common -q   # only these paths (they replace the default)
 #   bash scripts/test.sh --quick         # the quick tier for development: the unit tests only
-#                                        # (about 3 minutes on 2 cores; no DDS timing, no
+#                                        # (about 2.5 minutes on 2 cores; no DDS timing, no
 #                                        # system-ROS setup)
 #
 # The integration tests run on DAM_TEST_WORKERS processes side by side (default 2), each
@@ -117,8 +117,8 @@ parallel=()
 if [ "$integration_workers" -gt 1 ]; then
   parallel=(-n "$integration_workers" --dist loadfile)
 fi
-# Beside a second worker a test that fails is run once more (R in the summary, with the
-# first failure's reason); one that fails twice fails the run.
+# Beside a second worker a test that fails is run once more (R, and a RERUN line naming it
+# in the summary); one that fails twice fails the run.
 run_pytest ${parallel[@]+"${parallel[@]}"} --durations=12 -m "not exclusive" --reruns 1 \
   "${integration[@]}" "${realtime_unit[@]}" "$@"
 integration_status=$?
