@@ -128,7 +128,7 @@ def _bare_physics(sim_time_s: float, n: int) -> list[float]:
     """Wall time [s] of a fresh world (same model) stepping ``sim_time_s`` with no
     controller: construction and bare ``stepSimulation`` calls, ``n`` times."""
     from dam_common.config import load_config
-    from dam_experiments.sweep import quiet_stdout
+    from dam_experiments.quiet_stdout import quiet_stdout
     from dam_sim_bridge.world import HandWorld
 
     config = load_config()

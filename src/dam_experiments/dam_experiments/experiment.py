@@ -47,6 +47,7 @@ from dam_common.command_line import CommandLineParser
 from dam_common.device_protocol import JointMode as WireMode
 from dam_common.quantities import ANGLE, argument, in_degrees
 from dam_common.words import counted
+from dam_experiments.quiet_stdout import quiet_stdout
 from dam_hand_driver.slew import CommandSlew
 from dam_sim_bridge.world import HandWorld
 from dam_spcm_controller.classification import (
@@ -511,8 +512,6 @@ def _main(args: argparse.Namespace, sink: list[_RowSink]) -> int:
 def _run_object(config, analyzer, args: argparse.Namespace, alphas: Sequence[float],
                 overrides: dict[str, bool], width: int, sink: _RowSink) -> None:
     """The grid of one object: its rows printed and written to ``sink``."""
-    from dam_experiments.sweep import quiet_stdout  # noqa: PLC0415
-
     name = config.object.name
     with quiet_stdout():  # PyBullet's 'argv[0]=' line, amid the table
         world = HandWorld(config)

@@ -30,17 +30,12 @@ spaced logarithms); angles in degrees.
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import dataclasses
 import hashlib
 import json
 import math
-import os
-import sys
-import threading
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +43,7 @@ import numpy as np
 
 from dam_common.polygon_section import ConvexPolygon
 from dam_experiments.errors import SweepError
+from dam_experiments.quiet_stdout import quiet_stdout
 
 #: Largest friction angle a trial may get after jitter [deg] (``tan`` stays finite).
 MAX_FRICTION_ANGLE_DEG = 89.0
@@ -404,32 +400,6 @@ def analyzer_for(config: Any) -> Any:
 
         _ANALYZERS[key] = LiftAnalyzer(config)
     return _ANALYZERS[key]
-
-
-_STDOUT_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def quiet_stdout() -> Iterator[None]:
-    """Send what C code writes to file descriptor 1 to /dev/null meanwhile: PyBullet prints
-    ``argv[0]=`` at every connection, a line per trial in the middle of the progress bar.
-    One thread at a time (a Dask worker may run trials in threads)."""
-    with _STDOUT_LOCK:
-        try:
-            sys.stdout.flush()
-            saved = os.dup(1)
-        except (OSError, ValueError, AttributeError):  # no usable stdout: nothing to protect
-            yield
-            return
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        try:
-            os.dup2(devnull, 1)
-            yield
-        finally:
-            ctypes.CDLL(None).fflush(None)  # what C buffered goes to /dev/null too
-            os.dup2(saved, 1)
-            os.close(saved)
-            os.close(devnull)
 
 
 def _fmt(value: float, digits: int = 6) -> str:
