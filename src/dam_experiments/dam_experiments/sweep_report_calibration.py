@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dam_experiments.csm_calibration_run import Calibration, calibrate, interval_text
+from dam_experiments.sweep_report_cells import column_boundary
 
 #: The disagreement categories of the fitted CSM (key, title, boundary, simulation lifts).
 FITTED_CATEGORIES = (
@@ -30,8 +31,9 @@ class CalibrationSection:
     ----------
     calibration : the fit and its agreements (one calibration cell per trial).
     categories : section 4's categories for the fitted CSM's verdict (``Category``).
-    columns : per friction angle, the ``ColumnBoundary`` of every ``delta_theta_p`` column
-        against the fitted CSM's boundary (section 2's definitions).
+    columns : per friction angle, the
+        :class:`~dam_experiments.sweep_report_cells.ColumnBoundary` of every
+        ``delta_theta_p`` column against the fitted CSM's boundary (section 2's definitions).
     """
 
     calibration: Calibration
@@ -53,13 +55,13 @@ def calibration_section(data: Any, config: Any, cells: Sequence[Any],
                         make_category: Callable[..., Any], folds: int) -> CalibrationSection:
     """Fit the CSM to the sweep ``data`` and class the fitted verdict's disagreements.
 
-    ``cells`` are the report's ``CellRow`` objects, ``make_category(key, title, boundary,
-    sim_lifts, cells)`` builds a section 4 category.
+    ``cells`` are the report's :class:`~dam_experiments.sweep_report_cells.CellRow`
+    objects, ``make_category(key, title, boundary, sim_lifts, cells)`` builds a section 4
+    category.
     """
     import dataclasses  # noqa: PLC0415
 
     from dam_experiments.calibrate_csm import cells_of_sweep  # noqa: PLC0415
-    from dam_experiments.sweep_report import column_boundary  # noqa: PLC0415
 
     grasps, config = cells_of_sweep(data, config)
     result = calibrate(grasps, config, folds=min(folds, grasps.size))

@@ -13,7 +13,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from dam_experiments.sweep_report import LIFT_PROBABILITY, Category, SweepReport
+from dam_experiments.sweep_report import Category, SweepReport
+from dam_experiments.sweep_report_cells import LIFT_PROBABILITY
 from dam_experiments.sweep_report_rows import (
     CHECKS_LIFTING,
     CHECKS_NOT_LIFTING,
