@@ -22,8 +22,9 @@ from pathlib import Path
 
 import pytest
 import yaml
+from recorder_testing import episode_recording
 
-from ros_testing import RosClient, fixture_command, installed_executable, node_process
+from ros_testing import installed_executable
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'dam_recorder'))
 from bag_readers import read_with_mcap, read_with_rosbags  # noqa: E402
@@ -34,41 +35,6 @@ PRE_ROLL_S = 1.5
 POST_ROLL_S = 1.0
 RATE_HZ = 200.0
 TOPICS = ('/joint_states', '/diagnostics', '/dam/episode', '/sim/object_pose')
-
-
-def _wait_for(proc, texts, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not all(t in proc.output() for t in texts):
-        assert proc.alive(), proc.output()
-        assert time.monotonic() < deadline, f'no {texts} within {timeout} s:\n{proc.output()}'
-        time.sleep(0.05)
-
-
-class _Events:
-    """Publishes /dam/episode events as the controller does (reliable, volatile)."""
-
-    def __init__(self, client: RosClient) -> None:
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-
-        from dam_interfaces.msg import GraspEpisode
-
-        self.client = client
-        self.type = GraspEpisode
-        self.pub = client.node.create_publisher(GraspEpisode, '/dam/episode', QoSProfile(
-            depth=10, reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.VOLATILE))
-        self.started: dict[str, float] = {}
-
-    def send(self, goal_id: str, event: int) -> None:
-        msg = self.type(event=event, goal_id=goal_id, object='cylinder')
-        msg.header.stamp = self.client.node.get_clock().now().to_msg()
-        if event == self.type.EVENT_STARTED:
-            self.started[goal_id] = time.monotonic()
-            msg.config_yaml = 'task: {}\n'
-        else:
-            msg.outcome, msg.outcome_name, msg.message = 1, 'SUCCESS', 'fixture grasp done'
-            msg.duration = time.monotonic() - self.started[goal_id]
-        self.pub.publish(msg)
 
 
 def _custom(bag: Path) -> dict[str, str]:
@@ -90,41 +56,29 @@ def _closed(out: Path, count: int, timeout: float = 30.0) -> list[Path]:
 def test_truncated_episodes_are_marked_incomplete_with_what_they_lack(tmp_path: Path) -> None:
     out = tmp_path / 'grasps'
     goals = [uuid.uuid4().hex for _ in range(3)]
-    with node_process([installed_executable('dam_recorder', 'recorder'), '--episodes',
-                       '-o', str(out), '--pre-roll', str(PRE_ROLL_S), '--post-roll',
-                       str(POST_ROLL_S), *TOPICS]) as recorder, \
-            node_process(fixture_command('stream_publisher.py', '--joint-states', '--rate',
-                                         str(RATE_HZ))) as joints, \
-            node_process(fixture_command('stream_publisher.py', '--object-pose', '--rate',
-                                         '100')) as pose:
-        client = RosClient()
-        try:
-            events = _Events(client)
-            _wait_for(recorder, [f'recording {t} ' for t in TOPICS])
-            # The recorder's own subscription and its taker's both match.
-            assert client.spin_until(lambda: events.pub.get_subscription_count() >= 2, 30.0)
-            client.spin_until(lambda: False, PRE_ROLL_S + 0.5)  # a whole pre-roll of streams
-            # 1. Every stream alive to the end.
-            events.send(goals[0], 0)
-            client.spin_until(lambda: False, 2.0)
-            events.send(goals[0], 1)
-            # 2. The joint states' publisher (with its count) killed mid-episode.
-            client.spin_until(lambda: False, POST_ROLL_S + 0.5)
-            events.send(goals[1], 0)
-            client.spin_until(lambda: False, 1.5)
-            joints.process.send_signal(signal.SIGKILL)
-            joints.process.wait(timeout=10.0)
-            client.spin_until(lambda: False, 3.5)
-            events.send(goals[1], 1)
-            _closed(out, 2)
-            # 3. The recorder stopped mid-grasp.
-            events.send(goals[2], 0)
-            client.spin_until(lambda: False, 1.0)
-            recorder.process.send_signal(signal.SIGINT)
-            assert recorder.process.wait(timeout=20.0) == 0, recorder.output()
-            assert pose.alive()
-        finally:
-            client.close()
+    with episode_recording(out, TOPICS, str(PRE_ROLL_S), str(POST_ROLL_S), [
+            ('--joint-states', '--rate', str(RATE_HZ)), ('--object-pose', '--rate', '100')]
+            ) as (recorder, (joints, pose), client, events):
+        client.spin_until(lambda: False, PRE_ROLL_S + 0.5)  # a whole pre-roll of streams
+        # 1. Every stream alive to the end.
+        events.send(goals[0], 0)
+        client.spin_until(lambda: False, 2.0)
+        events.send(goals[0], 1)
+        # 2. The joint states' publisher (with its count) killed mid-episode.
+        client.spin_until(lambda: False, POST_ROLL_S + 0.5)
+        events.send(goals[1], 0)
+        client.spin_until(lambda: False, 1.5)
+        joints.process.send_signal(signal.SIGKILL)
+        joints.process.wait(timeout=10.0)
+        client.spin_until(lambda: False, 3.5)
+        events.send(goals[1], 1)
+        _closed(out, 2)
+        # 3. The recorder stopped mid-grasp.
+        events.send(goals[2], 0)
+        client.spin_until(lambda: False, 1.0)
+        recorder.process.send_signal(signal.SIGINT)
+        assert recorder.process.wait(timeout=20.0) == 0, recorder.output()
+        assert pose.alive()
         log = recorder.output()
 
     bags = {json.loads(_custom(b)['dam_episode.summary'])['goal_id']: b

@@ -10,18 +10,15 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import uuid
 from pathlib import Path
 
 import pytest
 import yaml
+from recorder_testing import episode_recording
 
 from dam_recorder.mcap_salvage import salvage_mcap
-from ros_testing import RosClient, fixture_command, installed_executable, node_process
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_recorder_incomplete import _Events, _wait_for  # noqa: E402
+from ros_testing import installed_executable
 
 pytestmark = pytest.mark.integration
 
@@ -43,28 +40,18 @@ def test_a_killed_episode_is_open_until_recover_labels_it_by_what_it_holds(
     out = tmp_path / 'grasps'
     goal = uuid.uuid4().hex
     # A long post-roll: the episode is still open when the recorder is killed after the end.
-    with node_process([installed_executable('dam_recorder', 'recorder'), '--episodes',
-                       '-o', str(out), '--pre-roll', '1.0', '--post-roll', '30', *TOPICS]
-                      ) as recorder, \
-            node_process(fixture_command('stream_publisher.py', '--joint-states', '--rate',
-                                         '200')):
-        client = RosClient()
-        try:
-            events = _Events(client)
-            _wait_for(recorder, [f'recording {t} ' for t in TOPICS])
-            assert client.spin_until(lambda: events.pub.get_subscription_count() >= 2, 30.0)
-            client.spin_until(lambda: False, 1.5)
-            events.send(goal, 0)
-            client.spin_until(lambda: False, 2.0)
-            events.send(goal, 1)
-            # The end releases what the episode held back; a chunk is written out every
-            # second (chunk_interval): kill it once the ENDED event is on disk.
-            assert client.spin_until(lambda: _events_on_disk(out) >= 2, 60.0), \
-                recorder.output()
-            recorder.process.send_signal(signal.SIGKILL)
-            recorder.process.wait(timeout=10.0)
-        finally:
-            client.close()
+    with episode_recording(out, TOPICS, '1.0', '30', [('--joint-states', '--rate', '200')]
+                           ) as (recorder, _streams, client, events):
+        client.spin_until(lambda: False, 1.5)
+        events.send(goal, 0)
+        client.spin_until(lambda: False, 2.0)
+        events.send(goal, 1)
+        # The end releases what the episode held back; a chunk is written out every
+        # second (chunk_interval): kill it once the ENDED event is on disk.
+        assert client.spin_until(lambda: _events_on_disk(out) >= 2, 60.0), \
+            recorder.output()
+        recorder.process.send_signal(signal.SIGKILL)
+        recorder.process.wait(timeout=10.0)
     [opened] = list(out.iterdir())
     assert opened.name.endswith('_recording'), opened.name
 

@@ -23,33 +23,18 @@ from pathlib import Path
 
 import pytest
 import yaml
+from recorder_testing import episode_recording
 
-from ros_testing import (
-    RosClient,
-    cpu_burners,
-    fixture_command,
-    installed_executable,
-    node_process,
-)
+from ros_testing import cpu_burners
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'dam_recorder'))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bag_readers import read_with_mcap, read_with_rosbags  # noqa: E402
-from test_recorder_incomplete import _Events  # noqa: E402
 
 pytestmark = pytest.mark.integration
 
 TOPICS = ('/joint_states', '/diagnostics', '/dam/episode')
 #: What the recorder promises: stop_write_time (2 s) of writing, then closing.
 STOP_BOUND_S = 10.0
-
-
-def _wait_for(proc, texts, timeout: float = 120.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not all(t in proc.output() for t in texts):
-        assert proc.alive(), proc.output()
-        assert time.monotonic() < deadline, f'no {texts} within {timeout} s:\n{proc.output()}'
-        time.sleep(0.05)
 
 
 def _episode_closed(out: Path) -> bool:
@@ -66,36 +51,28 @@ def test_a_starved_recorder_stops_within_its_bound_and_counts_what_it_did_not_wr
         tmp_path: Path) -> None:
     out = tmp_path / 'grasps'
     goal = uuid.uuid4().hex
-    recorder_cmd = ['nice', '-n', '19', str(installed_executable('dam_recorder', 'recorder')),
-                    '--episodes', '-o', str(out), '--pre-roll', '1', '--post-roll', '5',
-                    *TOPICS, '--ros-args', '-p', 'max_backlog_bytes:=3000000']
-    with node_process(recorder_cmd) as recorder, \
-            node_process(fixture_command('stream_publisher.py', '--joint-states', '--rate',
-                                         '2000')):
-        client = RosClient()
-        try:
-            events = _Events(client)
-            _wait_for(recorder, [f'recording {t} ' for t in TOPICS])
-            assert client.spin_until(lambda: events.pub.get_subscription_count() >= 2, 60.0)
-            with cpu_burners(6):
-                client.spin_until(lambda: False, 1.5)
-                events.send(goal, 0)
-                client.spin_until(lambda: False, 8.0)
-                events.send(goal, 1)
-                client.spin_until(lambda: False, 1.0)
-                recorder.process.send_signal(signal.SIGINT)
-                asked = time.monotonic()
-                closed_after = None
-                while recorder.alive() and time.monotonic() - asked < 60.0:
-                    if closed_after is None and _episode_closed(out):
-                        closed_after = time.monotonic() - asked
-                    time.sleep(0.02)
-                status = recorder.process.poll()
-                took = time.monotonic() - asked
+    with episode_recording(out, TOPICS, '1', '5', [('--joint-states', '--rate', '2000')],
+                           prefix=('nice', '-n', '19'),
+                           ros_args=('--ros-args', '-p', 'max_backlog_bytes:=3000000'),
+                           start_timeout_s=120.0, match_timeout_s=60.0
+                           ) as (recorder, _streams, client, events):
+        with cpu_burners(6):
+            client.spin_until(lambda: False, 1.5)
+            events.send(goal, 0)
+            client.spin_until(lambda: False, 8.0)
+            events.send(goal, 1)
+            client.spin_until(lambda: False, 1.0)
+            recorder.process.send_signal(signal.SIGINT)
+            asked = time.monotonic()
+            closed_after = None
+            while recorder.alive() and time.monotonic() - asked < 60.0:
                 if closed_after is None and _episode_closed(out):
-                    closed_after = took
-        finally:
-            client.close()
+                    closed_after = time.monotonic() - asked
+                time.sleep(0.02)
+            status = recorder.process.poll()
+            took = time.monotonic() - asked
+            if closed_after is None and _episode_closed(out):
+                closed_after = took
         log = recorder.output()
     assert status == 0, log
     # The recorder closes its episode within the bound from the moment it sees the stop
