@@ -318,7 +318,7 @@ def test_the_report_classes_trials_by_lift_off(tmp_path: Path) -> None:
                         '--n-delta-theta-p', '5']) == 0
     text = out.read_text(encoding='utf-8')
     section = text.split('## 5.', 1)[1]
-    assert 'The 3 trial(s) where they differ' in section
+    assert 'The 3 trials where they differ' in section
     odd = [line for line in section.splitlines() if line.startswith('| 5 | ')
            and ('SUCCESS' in line or 'FAILURE' in line)]
     assert len(odd) == 3

@@ -178,7 +178,7 @@ def test_markers_per_trial_and_the_boundaries(marker_sweep: Path, config: Any,
                 f'table at the end 2, success 3 (1 of them never left the table), lifted but '
                 f'DAM failed 2, failure 3 (1 of them did leave the table); ') in summary
     assert 'sufficient condition: no k_theta is guaranteed' in result.summary[2]
-    assert '4 trial(s) where the ground truth' in summary
+    assert '4 trials where the ground truth' in summary
 
 
 def test_repeats_give_a_lift_probability_per_cell(repeat_sweep: Path, config: Any,

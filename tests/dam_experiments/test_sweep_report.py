@@ -260,11 +260,11 @@ def test_the_synthetic_document_states_them(synthetic_report: SweepReport) -> No
                             '(2 of 3 columns; no CSM boundary in 1)')
     assert _share(rows['5'][7]) == (1, 2, 50.0) and _share(rows['30'][7]) == (1, 1, 100.0)
     assert _share(rows['5'][8]) == (5, 8, 62.5) and _share(rows['30'][8]) == (13, 13, 100.0)
-    assert '**3 false guarantee(s)**' in text
+    assert '**3 false guarantees**' in text
     assert text.count('never rose; controller failure in rolling_up') == 2
     assert 'The sufficient condition has no solution at this friction angle' in text
     assert text.count('has no solution at this friction angle') == 1  # alpha 30 only
-    assert '1 trial(s) of guaranteed cells that lift' in text
+    assert '1 trial of guaranteed cells that lift' in text
     assert _category_counts(text) == {
         'CSM lifts, simulation does not': [4, 5, 9],
         'simulation lifts, CSM does not': [0, 3, 3],
@@ -285,7 +285,7 @@ def test_an_incomplete_sweep_says_so_at_the_top(tmp_path: Path, config: Any,
     text = render_markdown(report, 'cmd')
     head = text.split('## The sweep', 1)[0]
     assert '**Incomplete sweep: 30 of 84 trials are present.**' in head
-    assert '1 row(s) cut short' in head
+    assert '1 row cut short' in head
     assert [a.friction_angle_deg for a in report.angles] == [5.0]
 
 

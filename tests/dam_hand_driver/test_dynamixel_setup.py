@@ -341,7 +341,7 @@ def test_fix_clears_return_delay_time_and_sets_the_configured_baud_rate(cfg: Dam
             assert table(bus, j, 'return_delay_time') == 0
             assert table(bus, j, 'baud_rate') == 6  # 4 Mbit/s (e-manual)
             assert table(bus, j, 'torque_enable') == 0
-    assert '9 servo(s) at 4000000 bit/s with Return Delay Time 0' in out
+    assert '9 servos at 4000000 bit/s with Return Delay Time 0' in out
 
 
 # -------------------------------------------------------------------------------------------

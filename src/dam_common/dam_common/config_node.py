@@ -39,7 +39,8 @@ class ConfigNode:
         mapping = self.require_mapping()
         unknown = sorted(str(k) for k in mapping if k not in allowed)
         if unknown:
-            raise self.error(f'unknown key(s) {unknown} (allowed: {sorted(allowed)})')
+            keys = 'key' if len(unknown) == 1 else 'keys'
+            raise self.error(f'unknown {keys} {unknown} (allowed: {sorted(allowed)})')
 
     def child(self, key: str) -> ConfigNode:
         mapping = self.require_mapping()

@@ -139,7 +139,7 @@ def cells_from_bags(paths: Sequence[Path], config: Any, object_name: str | None
         raise SweepPlotError(f'the bags hold grasps of {len(objects)} objects '
                              f'({", ".join(sorted(objects))}): choose one with --object NAME')
     if not rows:
-        raise SweepPlotError(f'no grasp with a lift outcome in {len(bags)} bag(s) '
+        raise SweepPlotError(f'no grasp with a lift outcome in {counted(len(bags), "bag")} '
                              f'({skipped} left out: aborted, rejected or unknown)')
     if objects:
         try:
@@ -322,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         folds = 0 if folds < 2 else folds
         for note in notes:
             sys.stderr.write(f'{PROG}: note: {note}\n')
-        sys.stderr.write(f'{PROG}: fitting {cells.size} grasp(s) of {config.object.name} '
+        sys.stderr.write(f'{PROG}: fitting {counted(cells.size, "grasp")} of {config.object.name} '
                          f'(a few minutes for a few hundred)\n')
         sys.stderr.flush()
         result = calibrate(cells, config, verdict=args.verdict,
@@ -337,7 +337,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write(f'{PROG}: {" ".join(str(exc).split())}\n')
         return 2
     if skipped:
-        print(f'{PROG}: left out {skipped} episode(s) whose outcome says nothing of a lift')
+        print(f'{PROG}: left out {counted(skipped, "episode")} '
+              'whose outcome says nothing of a lift')
     print('\n'.join(f'{PROG}: {line}' for line in report_lines(result)))
     print(f'{PROG}: wrote {output}', flush=True)
     return 0

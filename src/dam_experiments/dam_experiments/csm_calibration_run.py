@@ -241,7 +241,7 @@ def overlay(calibration: Calibration, config: Any, source: str, object_name: str
     lines = [
         '# CSM calibration overlay (calibrate_csm): merge it over the configuration with',
         '# load_config(path, [THIS]) or check_lift_server --ros-args -p config_overlay:=THIS.',
-        f'# Fitted from {source}, object {object_name!r}: {fit.cells} grasp(s), verdict '
+        f'# Fitted from {source}, object {object_name!r}: {counted(fit.cells, "grasp")}, verdict '
         f'{calibration.verdict!r}, {fit.level:.0%} profile-likelihood intervals.',
         f'# k_t [N/m]: {interval_text(kt, log10=True)} ({kt.status}).',
     ]

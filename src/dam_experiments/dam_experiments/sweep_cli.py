@@ -350,7 +350,7 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
           f'{counted(sweep.repeats, "repeat")}) into {args.out}', flush=True)
     if done or table.dropped:
         print(f'{PROG}: resuming: {done} done, {len(pending)} to run'
-              + (f' ({table.dropped} incomplete, malformed or repeated row(s) dropped)'
+              + (f' ({counted(table.dropped, "incomplete, malformed or repeated row")} dropped)'
                  if table.dropped else ''),
               flush=True)
     if sweep.repeats > 1 and not sweep.perturbations.any:
@@ -426,7 +426,8 @@ def _run(args: argparse.Namespace, sweep: SweepSpec, config: Any, table: TrialTa
           + outcome_counts(outcomes), flush=True)
     if failures:
         spec, error = failures[0]
-        sys.stderr.write(f'{PROG}: {len(failures)} trial(s) failed (first: trial {spec.index}: '
+        sys.stderr.write(f'{PROG}: {counted(len(failures), "trial")} '
+                         f'failed (first: trial {spec.index}: '
                          f'{error!r}); their rows are missing, a rerun retries them\n')
         return 1
     print(f'{PROG}: wrote {args.out / TABLE_FILE}, {args.out / CELLS_FILE} and '

@@ -326,7 +326,7 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
     lines = [f'{PROG}: {data.directory}: {shown + ", " if shown else ""}{n} of '
              f'{counted(data.n_planned, "trial")}, {data.repeats} per '
              f'cell, k_theta axis {"log" if log_k else "linear"}'
-             + (f' ({data.skipped} incomplete row(s) left out)' if data.skipped else '')]
+             + (f' ({counted(data.skipped, "incomplete row")} left out)' if data.skipped else '')]
     word = ('lifted (left the table)' if data.lift_off_recorded
             else 'lifted (format 1: the old rise rule)')
     for alpha, b in zip(data.friction_angles_deg, boundaries, strict=True):
@@ -346,7 +346,8 @@ def summary_lines(data: SweepData, boundaries: Sequence[Any], log_k: bool) -> li
                      + '; '.join(bounds))
     odd = sum(t.disagrees for t in data.trials)
     if odd:
-        lines.append(f'{PROG}: {odd} trial(s) where the ground truth (lifted: left the table) '
+        lines.append(f'{PROG}: {counted(odd, "trial")} '
+                     'where the ground truth (lifted: left the table) '
                      f'disagrees with the controller\'s outcome')
     return lines
 

@@ -197,7 +197,8 @@ def summary_lines(report: SweepReport) -> list[str]:
             + ('' if a.n_path_agree is None else
                f', path verdict {share(a.n_path_agree, a.n_cells)}')
             + f'; boundary distance median '
-            f'{decades(a.median_distance_dec)} decades over {a.n_compared} column(s), within '
+            f'{decades(a.median_distance_dec)} decades over '
+            f'{counted(a.n_compared, "column")}, within '
             f'one k step {a.n_within_step}; lifting without a guarantee '
             f'{share(a.n_missed, a.n_lifting)}'
             + ('' if a.sufficient_exists else '; no stiffness is guaranteed'))

@@ -13,6 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from dam_common.words import counted
 from dam_experiments.sweep_report import Category, SweepReport
 from dam_experiments.sweep_report_cells import LIFT_PROBABILITY
 from dam_experiments.sweep_report_rows import (
@@ -129,7 +130,7 @@ def _header(report: SweepReport, command: str, figures: Mapping[str, str]) -> li
                   f'present.** The numbers are those of the trials present; a cell counts the '
                   f'trials it has.', '']
     if data.skipped:
-        lines += [f'{data.skipped} row(s) cut short (being written) were left out.', '']
+        lines += [f'{counted(data.skipped, "row")} cut short (being written) left out.', '']
     if data.table_format == 1:
         lines += ['**A table of format 1: its `lifted` is the old rule**, the object centre at '
                   'least the lift height up at the end, not that the object left the table '
@@ -143,7 +144,7 @@ def _header(report: SweepReport, command: str, figures: Mapping[str, str]) -> li
         lines += ['**The configuration of the analysis is not the sweep\'s** (its SHA-256 '
                   'differs from `sweep.json`\'s `config_sha256`): the boundaries, the lift '
                   'height and the limits below are another configuration\'s.', '']
-    opts = (f'max time {spec.max_time_s:g} s, latency {spec.latency_cycles} cycle(s), '
+    opts = (f'max time {spec.max_time_s:g} s, latency {counted(spec.latency_cycles, "cycle")}, '
             f'trajectory duration '
             + ('configured' if spec.trajectory_duration_s is None
                else f'{spec.trajectory_duration_s:g} s')
@@ -306,7 +307,7 @@ def _controller(report: SweepReport) -> list[str]:
     odd = [t for t in trials if (t.outcome in CLASSED_LIFTED) != t.lifted]
     if not odd:
         return lines + ['No trial where they differ.', '']
-    lines += [f'The {len(odd)} trial(s) where they differ'
+    lines += [f'The {counted(len(odd), "trial")} where they differ'
               + (f' (the first {MAX_LISTED_CELLS})' if len(odd) > MAX_LISTED_CELLS else '')
               + ': the rise the stand-in measured against the controller\'s estimate.', '']
     header = ('alpha [deg]', 'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'repeat', 'outcome',
@@ -334,9 +335,9 @@ def _false_guarantees(report: SweepReport) -> list[str]:
              'the contact forces stay within the friction cones. Every exception is a finding.',
              '']
     if not n_cells:
-        lines.append(f'**None**: all {n_guaranteed} guaranteed cell(s) lift.')
+        lines.append(f'**None**: every guaranteed cell lifts ({n_guaranteed}).')
     else:
-        lines.append(f'**{n_cells} false guarantee(s)**: {share(n_cells, n_guaranteed)} '
+        lines.append(f'**{counted(n_cells, "false guarantee")}**: {share(n_cells, n_guaranteed)} '
                      f'guaranteed cells do not lift. Their trials that did not lift:')
         lines.append('')
         header = ('alpha [deg]', 'k_theta [N*m/rad]', 'delta_theta_p [deg]', 'p_lift',
@@ -349,7 +350,8 @@ def _false_guarantees(report: SweepReport) -> list[str]:
                 for f in report.false_guarantees]
         lines += _table(header, rows)
     if report.n_guaranteed_unlifted_trials:
-        lines += ['', f'Besides, {report.n_guaranteed_unlifted_trials} trial(s) of guaranteed '
+        lines += ['', f'Besides, {counted(report.n_guaranteed_unlifted_trials, "trial")} '
+                      'of guaranteed '
                       f'cells that lift (p_lift >= {LIFT_PROBABILITY:g}) did not lift.']
     return lines + ['']
 
@@ -365,7 +367,7 @@ def _boundary_distance(report: SweepReport, figures: Mapping[str, str]) -> list[
             f'{share(a.n_agree, a.n_cells)} cells'
             + ('' if a.n_path_agree is None else
                f' (path verdict {share(a.n_path_agree, a.n_cells)})')
-            + f'; {a.n_compared} column(s) compared, median '
+            + f'; {counted(a.n_compared, "column")} compared, median '
             f'|d| {decades(a.median_distance_dec)} decades, median d '
             f'{decades(a.median_signed_dec)} decades, within one k step '
             f'{share(a.n_within_step, a.n_compared)}; censored: no lift '
@@ -398,7 +400,8 @@ def _missed(report: SweepReport) -> list[str]:
                 ' The sufficient condition has no solution at this friction angle: no '
                 'stiffness is guaranteed to lift at any delta_theta_p in '
                 f'[0, {report.dense_right_deg:g}] deg.')
-        lines.append(f'* alpha {a.friction_angle_deg:g} deg: {a.n_lifting} lifting cell(s) '
+        lines.append(f'* alpha {a.friction_angle_deg:g} deg: '
+                     f'{counted(a.n_lifting, "lifting cell")} '
                      f'of {a.n_cells}; without a guarantee {share(a.n_missed, a.n_lifting)}; '
                      f'guaranteed cells {a.n_guaranteed}.{note}')
     return lines + ['']
@@ -413,7 +416,7 @@ def _category_lines(c: Category, report: SweepReport) -> list[str]:
         return lines + ['No cell.', '']
     explained = n - c.unexplained
     lines += [
-        f'* {len(c.cells)} cell(s); {n} trial(s) of them {side}.',
+        f'* {counted(len(c.cells), "cell")}; {counted(n, "trial")} of them {side}.',
         f'* Mean rise at the end {g(c.mean_rise_final_mm)} mm, mean largest rise '
         f'{g(c.mean_rise_max_mm)} mm (lift height {lim.lift_height_mm:g} mm).',
         '* What the object did: ' + ', '.join(f'{k} {v}' for k, v in c.rises) + '.',
@@ -433,7 +436,8 @@ def _category_lines(c: Category, report: SweepReport) -> list[str]:
             for x in c.cells[:MAX_LISTED_CELLS]]
     lines += _table(header, rows)
     if len(c.cells) > MAX_LISTED_CELLS:
-        lines += ['', f'... and {len(c.cells) - MAX_LISTED_CELLS} more cell(s) (the figure '
+        lines += ['', f'... and {counted(len(c.cells) - MAX_LISTED_CELLS, "more cell")} '
+                      '(the figure '
                       f'shows every cell).']
     return lines + ['']
 

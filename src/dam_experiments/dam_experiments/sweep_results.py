@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from dam_common.words import counted
 from dam_experiments.errors import SweepError, SweepPlotError
 from dam_experiments.sweep import SweepSpec
 from dam_experiments.sweep_table import PARAMS_FILE, TABLE_FILE
@@ -446,7 +447,8 @@ def read_sweep(directory: str | os.PathLike[str]) -> SweepData:
         raise SweepPlotError(f'{table}: cannot read it ({exc})') from None
     if not trials:
         raise SweepPlotError(f'{table} holds no trials (only its header)' if not skipped else
-                             f'{table} holds no complete trial ({skipped} row(s) cut short)')
+                             f'{table} holds no complete trial ({counted(skipped, "row")} '
+                             'cut short)')
     return SweepData(root, spec, parameters, tuple(trials), skipped, table_format)
 
 

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from dam_common.dynamixel_config import BAUD_RATES, MODELS
 from dam_common.shutdown import SHUTDOWN
+from dam_common.words import counted
 from dam_hand_driver import dynamixel_port
 from dam_hand_driver.dynamixel_goals import signed
 from dam_hand_driver.dynamixel_setup_exit import EXIT_OK, PROG
@@ -333,7 +334,7 @@ def scan_bus(bus: Bus, baud_rates: Sequence[int], say: Callable[[str], None]) ->
         answered[rate] = tuple(confirmed)
         if bad:
             garbled.append(rate)
-        say(f'{rate} bit/s: ' + (f'{len(confirmed)} servo(s), ID {id_ranges(confirmed)}'
+        say(f'{rate} bit/s: ' + (f'{counted(len(confirmed), "servo")}, ID {id_ranges(confirmed)}'
                                  if confirmed
                                  else 'no servo')
             + (' (some answers were garbled: two servos with one ID, or noise)' if bad else ''))
@@ -426,7 +427,7 @@ def run_fix(ctx: Context, bus: Bus, target: int) -> int:
             failures.append(f'{label} still has Return Delay Time {delay}')
     if failures:
         raise SetupError('; '.join(failures))
-    ctx.say(f'{len(changed)} servo(s) at {target} bit/s with Return Delay Time 0 (torque '
+    ctx.say(f'{counted(len(changed), "servo")} at {target} bit/s with Return Delay Time 0 (torque '
             f'off); check with: {PROG} scan --port {ctx.port}')
     if target != ctx.dxl.baud_rate:
         ctx.say(f'note: set dynamixel.baud_rate: {target} in the configuration (it says '

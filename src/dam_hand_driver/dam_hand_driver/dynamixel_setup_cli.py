@@ -28,6 +28,7 @@ from dam_common.config import default_config_path, load_config
 from dam_common.dynamixel_config import POSITION_RAD_PER_COUNT
 from dam_common.errors import ConfigError
 from dam_common.shutdown import SHUTDOWN
+from dam_common.words import counted
 from dam_hand_driver import dynamixel_port
 from dam_hand_driver.dynamixel_setup_bus import (
     BAUD_RATE_CODES,
@@ -210,7 +211,7 @@ def run_scan(ctx: Context, bus: Bus) -> int:
         ctx.say('note: an ID answered at several baud rates: a real servo answers at its own '
                 'only, so several servos share that ID, or this port ignores the baud rate (a '
                 'pseudo-terminal)')
-    ctx.say(f'{len(result.servos)} servo(s):')
+    ctx.say(f'{counted(len(result.servos), "servo")}:')
     for line in servo_table(result.servos, ctx.joints()):
         ctx.say(line)
     notes = rate_notes(result, ctx.port, dynamixel_port.usb_latency_timer_ms(ctx.port),

@@ -53,6 +53,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from dam_common.words import counted
 from dam_recorder.errors import EpisodeError
 
 #: ``custom_data`` keys: ``"true"`` or ``"false"``; the JSON list of :class:`Missing`.
@@ -213,7 +214,7 @@ def completeness_from_custom_data(custom_data: Mapping[str, Any]) -> Completenes
         missing.append(Missing(**item))
     if (flag == 'true') == bool(missing):
         raise EpisodeError(f'{COMPLETE_KEY} is {flag} but {MISSING_KEY} lists '
-                           f'{len(missing)} item(s)')
+                           f'{counted(len(missing), "item")}')
     return Completeness(flag == 'true', tuple(missing))
 
 
@@ -421,7 +422,8 @@ def _judge_dropped(name: str, account: _TopicAccount, lost: int) -> list[Missing
     by_sequence = account.dropped >= lost
     how = ("gaps in the publisher's sequence numbers" if by_sequence
            else 'reported lost by the middleware')
-    return [Missing('dropped', name, f'{dropped} message(s) dropped on the way to the recorder '
+    return [Missing('dropped', name, f'{counted(dropped, "message")} '
+                                     'dropped on the way to the recorder '
                     f'({how})', expected=len(account.stamps) + dropped,
                     recorded=len(account.stamps), short=dropped,
                     basis='sequence numbers' if by_sequence else 'middleware report')]
@@ -432,14 +434,16 @@ def _judge_recorder_losses(name: str, account: _TopicAccount) -> list[Missing]:
     recorded = len(account.stamps)
     if account.shed:
         missing.append(Missing(
-            'backlog_dropped', name, f'{account.shed} message(s) dropped by the recorder: its '
+            'backlog_dropped', name, f'{counted(account.shed, "message")} '
+                                     'dropped by the recorder: its '
             'backlog was full (it got too little CPU time to write what arrived; '
             'max_backlog_bytes)', expected=recorded + account.shed, recorded=recorded,
             short=account.shed, basis='recorder count'))
     if account.unwritten:
         missing.append(Missing(
-            'not_written', name, f'{account.unwritten} message(s) received before the recorder '
-            'was stopped were not written: its stop time (stop_write_time) ran out',
+            'not_written', name, f'{counted(account.unwritten, "message")} received before '
+            f'the recorder was stopped {"was" if account.unwritten == 1 else "were"} not '
+            'written: its stop time (stop_write_time) ran out',
             expected=recorded + account.unwritten, recorded=recorded, short=account.unwritten,
             basis='recorder count'))
     return missing

@@ -58,6 +58,7 @@ from typing import Any, NamedTuple
 
 from rosbags.interfaces import Qos
 
+from dam_common.words import counted
 from dam_recorder.backlog import BACKLOG_KEY, Backlog
 from dam_recorder.bag_reading import DROPPED_KEY, SHED_KEY, STOP_UNWRITTEN_KEY
 from dam_recorder.bag_writer import BagWriter
@@ -500,7 +501,8 @@ class EpisodeRecorder:
             episode.lost))
         if episode.bag.failure is not None:
             episode.missing += (Missing(
-                'unwritten', '', f'{sum(episode.bag.unwritten.values())} message(s) could not '
+                'unwritten', '', f'{counted(sum(episode.bag.unwritten.values()), "message")} '
+                                 'could not '
                 f'be written: {episode.bag.failure.describe()}'),)
         try:
             episode.bag.close()

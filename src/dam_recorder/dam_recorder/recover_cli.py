@@ -83,7 +83,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for line in describe(verdict.missing):
             print(f'  {line}')
         for topic, count in sorted(verdict.undecodable.items()):
-            print(f'  ({count} message(s) of {topic} could not be decoded: not counted)')
+            print(f'  ({counted(count, "message")} of {topic} could not be decoded: not counted)')
         if path == report.bag_dir:
             print(f'(not named as an open episode: {path.name} keeps its name)')
     return 0
