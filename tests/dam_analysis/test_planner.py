@@ -227,3 +227,18 @@ def test_a_stop_request_ends_the_plan_between_two_position_nodes(config) -> None
         planner.plan(ranges, stop=stop)
     assert asked == [0, 1, 2] and len(planner._analyzers) == 2
     assert planner.plan(ranges).found  # the next request plans as usual
+
+
+def test_the_verdict_names_a_bound_between_positions_only_when_there_are_several(
+        config, planner) -> None:
+    """With no position tolerance there is one node and nothing between nodes: the verdict
+    said '0 N less at most between the position nodes' (the review of the last change)."""
+    plan = planner.plan(_ranges(config, planner, tol=0.0))
+    assert plan.found and plan.offsets.size == 1
+    text = plan_verdict(plan)
+    assert 'position' not in text and 'between' not in text
+    assert text.startswith('guaranteed over the ranges: k_theta ')
+    several = dataclasses.replace(plan, offsets=np.linspace(-1e-3, 1e-3, 5),
+                                  position_error_bound=0.002)
+    assert '(worst-case margin 0.01 N, 0.002 N less at most between the position nodes)' in (
+        plan_verdict(several))

@@ -119,9 +119,11 @@ def format_response(response: PlanLift.Response) -> str:
     lines = [f'object                    : {response.object}']
     if response.found:
         pair = _pair(response.k_theta, response.delta_theta_p)
+        # the bound is exactly 0 for one position (no tolerance): nothing lies between positions
+        between = (f' (at most {response.position_error_bound:.2g} N less between positions)'
+                   if response.position_error_bound > 0.0 else '')
         lines.append(f'guaranteed (eq. 18)       : {pair}, worst-case margin '
-                     f'{response.worst_case_margin:+.4g} N (at most '
-                     f'{response.position_error_bound:.2g} N less between positions)')
+                     f'{response.worst_case_margin:+.4g} N{between}')
     else:
         lines.append('guaranteed (eq. 18)       : none')
     if math.isfinite(response.best_worst_case_margin):

@@ -490,10 +490,11 @@ def plan_verdict(plan: PlanResult) -> str:
     """One line: the guaranteed pair, or why there is none and the best available; and when
     the CSM predicts a lift for no pair, that too."""
     if plan.found:
+        between = (f', {plan.position_error_bound:.2g} N less at most between the position '
+                   'nodes' if plan.offsets.size > 1 else '')
         text = (f'guaranteed over the ranges: k_theta {plan.k_theta:.4g} N*m/rad at '
                 f'delta_theta_p {math.degrees(plan.delta_theta_p):.4g} deg (worst-case margin '
-                f'{plan.worst_case_margin:.4g} N, {plan.position_error_bound:.2g} N less at '
-                'most between the position nodes)')
+                f'{plan.worst_case_margin:.4g} N{between})')
     else:
         text = f'no pair is guaranteed over the ranges: {plan.reason}'
         if math.isfinite(plan.best_worst_case_margin):
