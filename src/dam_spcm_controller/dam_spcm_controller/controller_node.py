@@ -29,7 +29,8 @@ Topics and services
 
 Parameters
 ----------
-See :data:`_DOUBLE_PARAMETERS`; plus ``config_file`` (read-only), ``object`` (read-only, a name
+See :data:`~dam_spcm_controller.controller_parameters.DOUBLE_PARAMETERS`; plus
+``config_file`` (read-only), ``object`` (read-only, a name
 of the configuration's ``object.library``, empty: ``object.default``: the object the outcome is
 classified for and ``/check_lift`` is asked about; give the stand-in the same),
 ``require_lift_guarantee``
@@ -73,7 +74,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -87,17 +90,12 @@ from rclpy.task import Future
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
-from dam_analysis.analysis import (
-    LiftAnalyzer,
-    check_delta_theta_p,
-    check_k_theta,
-    unreachable_object,
-)
+from dam_analysis.analysis import LiftAnalyzer, unreachable_object
 from dam_analysis.errors import DamAnalysisError, NoSolutionError
 from dam_common.clock import create_steady_timer
 from dam_common.clock_watch import ClockWatch
 from dam_common.config import load_config
-from dam_common.echo import brief_repr, brief_text
+from dam_common.echo import brief_repr
 from dam_common.intake import SubscriptionThread
 from dam_common.node import (
     STREAM_HISTORY_DEPTH,
@@ -105,7 +103,6 @@ from dam_common.node import (
     declare_object,
     run_node,
 )
-from dam_common.quantities import ANGLE, both_units
 from dam_common.service_qos import SERVICE_QOS, action_server_qos
 from dam_common.shutdown import SHUTDOWN
 from dam_interfaces.action import DamGrasp
@@ -119,8 +116,16 @@ from dam_spcm_controller.classification import (
     classify_from_joints,
 )
 from dam_spcm_controller.commands import JointCommand, JointMode
+from dam_spcm_controller.controller_parameters import (
+    BOOL_PARAMETERS,
+    DOUBLE_PARAMETERS,
+    READ_ONLY,
+    changed_values,
+    sequence_overrides,
+)
 from dam_spcm_controller.episode import EpisodeEvents
 from dam_spcm_controller.errors import InputError, StateError
+from dam_spcm_controller.goal_checks import check_goal, guarantee_refusal
 from dam_spcm_controller.joint_history import JointHistory
 from dam_spcm_controller.object_estimate import FitInterrupted
 from dam_spcm_controller.release import ReleaseMotion
@@ -141,29 +146,6 @@ _OUTCOME_NAME = {DamGrasp.Result.OUTCOME_UNKNOWN: 'UNKNOWN',
                  DamGrasp.Result.OUTCOME_FAILURE: 'FAILURE',
                  DamGrasp.Result.OUTCOME_ABORTED: 'ABORTED',
                  DamGrasp.Result.OUTCOME_REJECTED: 'REJECTED'}
-
-#: name -> (SequenceParams attribute or None, description, lower, upper). Defaults come
-#: from the configuration file.
-_DOUBLE_PARAMETERS: dict[str, tuple[str | None, str, float, float]] = {
-    'damping': ('damping', 'compliant-joint damping d [N*m*s/rad]', 0.0, 1.0),
-    'torque_limit': ('torque_limit', '|tau| limit of every torque command [N*m]', 1e-6, 10.0),
-    'trajectory_duration': ('trajectory_duration',
-                            'position-joint motion time in ROLLING_UP [s]', 0.05, 60.0),
-    'envelope_torque': ('envelope_torque', 'torque of the enveloping grasp [N*m]', 1e-6, 10.0),
-    'contact_torque_threshold': ('contact_torque_threshold',
-                                 'compliant torque that signals contact [N*m]', 1e-6, 10.0),
-    'approach_speed': ('approach_speed', 'pre-shape and closing speed [rad/s]', 1e-3, 10.0),
-    'phase_timeout': ('phase_timeout', 'longest time of any active phase [s]', 0.1, 600.0),
-    'torque_ramp_time': ('torque_ramp_time', 'torque ramp-in/ramp-out time [s]', 0.0, 10.0),
-    'settle_speed': ('settle_speed', 'ENVELOPE settled below this speed [rad/s]', 1e-6, 10.0),
-    'settle_time': ('settle_time', 'ENVELOPE settled this long: DONE [s]', 1e-3, 10.0),
-    'state_timeout': (None, '/joint_states silence that fails a grasp [s]', 1e-3, 10.0),
-    'check_lift_timeout': (None, 'time allowed for the /check_lift answer [s]', 0.0, 60.0),
-    'status_rate': (None, '/dam/status and feedback rate [Hz] (read at start-up)', 0.1, 1000.0),
-}
-_READ_ONLY = {'status_rate'}
-#: The bool parameters (declared with their descriptions in the node).
-_BOOL_PARAMETERS = ('require_lift_guarantee', 'impedance_on_device', 'envelope_constant_torque')
 
 
 def _phase_name(phase: Phase) -> str:
@@ -209,36 +191,27 @@ class SpcmControllerNode(Node):
         self._geometry = HandGeometry.from_config(self._config)
         self._classifier = ClassifierSettings.from_config(self._config)
         defaults = {name: float(getattr(self._base_params, attr))
-                    for name, (attr, *_rest) in _DOUBLE_PARAMETERS.items() if attr}
+                    for name, (attr, *_rest) in DOUBLE_PARAMETERS.items() if attr}
         defaults['state_timeout'] = float(self._config.controller.state_timeout_s)
         defaults['check_lift_timeout'] = 2.0
         defaults['status_rate'] = 20.0
-        for name, (_attr, description, lo, hi) in _DOUBLE_PARAMETERS.items():
+        for name, (_attr, description, lo, hi) in DOUBLE_PARAMETERS.items():
             self.declare_parameter(name, defaults[name], ParameterDescriptor(
-                description=description, read_only=name in _READ_ONLY,
+                description=description, read_only=name in READ_ONLY,
                 floating_point_range=[FloatingPointRange(from_value=lo, to_value=hi,
                                                          step=0.0)]))
-        self.declare_parameter('require_lift_guarantee', False, ParameterDescriptor(
-            description='refuse (k_theta, delta_theta_p) pairs outside the sufficient-lift '
-                        'region reported by /check_lift, and pairs whose guarantee needs more '
-                        'compliant torque than the hand gives'))
-        self.declare_parameter(
-            'impedance_on_device', bool(self._config.controller.impedance_on_device),
-            ParameterDescriptor(
-                description='true: compliant joints in MODE_IMPEDANCE, the device runs the '
-                            'impedance law; false: this node computes their torque'))
-        self.declare_parameter(
-            'envelope_constant_torque', False,
-            ParameterDescriptor(
-                description='true: ENVELOPE closes the fingers with the constant '
-                            'envelope_torque on the compliant joints (the paper, Fig. 6(d)); '
-                            'false: ENVELOPE keeps the SPCM impedance (docs/simulation_grasp.md '
-                            'explains why that is the default)'))
-        self._values = {name: float(self.get_parameter(name).value) for name in _DOUBLE_PARAMETERS}
+        bool_defaults = {
+            'require_lift_guarantee': False,
+            'impedance_on_device': bool(self._config.controller.impedance_on_device),
+            'envelope_constant_torque': False}
+        for name, description in BOOL_PARAMETERS.items():
+            self.declare_parameter(name, bool_defaults[name],
+                                   ParameterDescriptor(description=description))
+        self._values = {name: float(self.get_parameter(name).value) for name in DOUBLE_PARAMETERS}
         #: The bool parameters (require_lift_guarantee, impedance_on_device,
         #: envelope_constant_torque) by name.
         self._flags: dict[str, bool] = {}
-        for name in _BOOL_PARAMETERS:
+        for name in BOOL_PARAMETERS:
             value = self.get_parameter(name).value
             if not isinstance(value, bool):
                 raise InputError(f'{name} must be a bool, got {value!r}')
@@ -326,11 +299,7 @@ class SpcmControllerNode(Node):
     def _make_params(self, values: dict[str, float], flags: dict[str, bool] | None = None
                      ) -> SequenceParams:
         flags = self._flags if flags is None else flags
-        overrides: dict[str, float | bool] = {
-            attr: values[name] for name, (attr, *_r) in _DOUBLE_PARAMETERS.items() if attr}
-        for name in ('impedance_on_device', 'envelope_constant_torque'):
-            overrides[name] = flags[name]  # SequenceParams has both under these names
-        return replace(self._base_params, **overrides)
+        return replace(self._base_params, **sequence_overrides(values, flags))
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         with self._lock:
@@ -339,26 +308,9 @@ class SpcmControllerNode(Node):
                     successful=False,
                     reason=f'a grasp is running (phase {_phase_name(self._seq.phase)}); '
                            'parameters can only be changed while idle')
-            values = dict(self._values)
-            flags = dict(self._flags)
-            for param in params:
-                if param.name in _DOUBLE_PARAMETERS:
-                    value = param.value
-                    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                            or not math.isfinite(float(value)):
-                        return SetParametersResult(
-                            successful=False,
-                            reason=f'{param.name} must be a finite number, got '
-                                   f'{brief_repr(value)}')
-                    values[param.name] = float(value)
-                elif param.name in _BOOL_PARAMETERS:
-                    if not isinstance(param.value, bool):
-                        return SetParametersResult(
-                            successful=False,
-                            reason=f'{param.name} must be a bool, got '
-                                   f'{brief_repr(param.value)}')
-                    flags[param.name] = param.value
             try:
+                values, flags = changed_values(
+                    self._values, self._flags, ((p.name, p.value) for p in params))
                 new_params = self._make_params(values, flags)
             except InputError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
@@ -739,36 +691,15 @@ class SpcmControllerNode(Node):
     # Action
 
     def _validate_goal(self, goal: DamGrasp.Goal) -> tuple[float, float]:
-        """(k_theta of finger 1 [N*m/rad], delta_theta_p [rad]) or raise InputError.
-
-        An empty ``k_theta`` or ``delta_theta_p`` means the configured one (``task:``).
-        """
-        ratios = self._layout.stiffness_ratios
-        n = self._layout.n_fingers
+        """(k_theta of finger 1 [N*m/rad], delta_theta_p [rad]) or raise InputError
+        (:func:`~dam_spcm_controller.goal_checks.check_goal`; empty: the configured ones)."""
         task = self._config.task
-        try:
-            k = check_k_theta(list(goal.k_theta) or [task.k_theta_nm_per_rad], ratios)
-            dp = check_delta_theta_p(list(goal.delta_theta_p) or [task.delta_theta_p_rad], n,
-                                     task.delta_theta_p_max_rad)
-        except DamAnalysisError as exc:  # its quotes of the goal are cut already
-            raise InputError(brief_text(str(exc))) from exc
-        expected = k[0] * ratios / ratios[0]
-        if not np.allclose(k, expected, rtol=1e-9, atol=0.0):
-            raise InputError(f'k_theta {brief_repr(k)} does not follow the configured '
-                             f'stiffness ratios {ratios.tolist()!r}; the controller sets finger '
-                             'i to '
-                             'ratio_i * k_theta')
-        if not np.allclose(dp, dp[0], rtol=0.0, atol=1e-12):
-            raise InputError(f'delta_theta_p {both_units(dp, ANGLE)}: the controller moves every '
-                             'position joint by the same displacement')
-        if dp[0] <= 0.0:
-            raise InputError(f'delta_theta_p must be positive, got {both_units(dp[0], ANGLE)}')
-        k_max = float(self._config.device.max_stiffness_nm_per_rad)
-        if self._flags['impedance_on_device'] and float(np.max(k)) > k_max:
-            raise InputError(f'k_theta {brief_repr(k)} N*m/rad: the device accepts impedance '
-                             f'stiffness up to device.max_stiffness_nm_per_rad = {k_max:g} '
-                             'N*m/rad')
-        return float(k[0]), float(dp[0])
+        on_device = self._flags['impedance_on_device']
+        return check_goal(goal.k_theta, goal.delta_theta_p, self._layout.stiffness_ratios,
+                          task.k_theta_nm_per_rad, task.delta_theta_p_rad,
+                          task.delta_theta_p_max_rad,
+                          float(self._config.device.max_stiffness_nm_per_rad) if on_device
+                          else None)
 
     def _on_goal(self, _goal: DamGrasp.Goal) -> GoalResponse:
         # Every goal is accepted: one that cannot run is aborted at once with
@@ -786,6 +717,22 @@ class SpcmControllerNode(Node):
     def _on_cancel(self, _goal_handle: ServerGoalHandle) -> CancelResponse:
         return CancelResponse.ACCEPT
 
+    async def _poll(self, period_s: float, poll: Callable[[Future], None]) -> Any:
+        """The result of a future that ``poll(future)`` resolves; ``poll`` is called now and
+        every ``period_s`` [s] of steady time until then."""
+        result: Future = Future()
+
+        def tick() -> None:
+            if not result.done():
+                poll(result)
+
+        timer = create_steady_timer(self, period_s, tick)
+        try:
+            tick()
+            return await result
+        finally:
+            self.destroy_timer(timer)
+
     async def _ask_check_lift(self, k: float, dp: float, goal_handle: ServerGoalHandle
                               ) -> CheckLift.Response | None:
         """The /check_lift answer for the pair, or ``None`` if none came within the timeout
@@ -795,55 +742,35 @@ class SpcmControllerNode(Node):
         request.delta_theta_p = [dp]
         request.friction_angle = CheckLift.Request.FRICTION_ANGLE_FROM_CONFIG
         request.object = self._config.object.name
-        answer: Future = Future()
         deadline = time.monotonic() + self._values['check_lift_timeout']
         sent = []
 
-        def on_answer(call: Future) -> None:
-            if not answer.done():
-                answer.set_result(call.result())
-
-        def poll() -> None:
-            if answer.done():
-                return
+        def poll(answer: Future) -> None:
             if not sent and self._check_lift.service_is_ready():
                 call = self._check_lift.call_async(request)
                 sent.append(call)
-                call.add_done_callback(on_answer)
+                call.add_done_callback(
+                    lambda done: answer.done() or answer.set_result(done.result()))
             if (time.monotonic() >= deadline or goal_handle.is_cancel_requested) \
                     and not answer.done():
                 answer.set_result(None)
 
-        timer = create_steady_timer(self, 0.02, poll)
-        try:
-            poll()
-            return await answer
-        finally:
-            self.destroy_timer(timer)
+        return await self._poll(0.02, poll)
 
     async def _fresh_state(self, wait_s: float, goal_handle: ServerGoalHandle | None = None
                            ) -> bool:
         """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``; ``False``
         also when ``goal_handle``'s goal is cancelled meanwhile."""
-        fresh: Future = Future()
         deadline = time.monotonic() + wait_s
 
-        def poll() -> None:
-            if fresh.done():
-                return
-            now = time.monotonic()
+        def poll(fresh: Future) -> None:
             if self._silence() is None:
                 fresh.set_result(True)
-            elif now >= deadline or (goal_handle is not None
-                                     and goal_handle.is_cancel_requested):
+            elif time.monotonic() >= deadline or (goal_handle is not None
+                                                  and goal_handle.is_cancel_requested):
                 fresh.set_result(False)
 
-        timer = create_steady_timer(self, 0.01, poll)
-        try:
-            poll()
-            return bool(await fresh)
-        finally:
-            self.destroy_timer(timer)
+        return bool(await self._poll(0.01, poll))
 
     def _finish(self, goal_handle: ServerGoalHandle, status: str, outcome: int, message: str,
                 t0: _Start, owns_run: bool = True, estimate: Classification | None = None
@@ -976,29 +903,10 @@ class SpcmControllerNode(Node):
             return self._finish(goal_handle, 'abort', aborted,
                                 f'/check_lift cannot answer for this grasp, so it is not '
                                 f'attempted: {answer.message}', t0)
-        if self._flags['require_lift_guarantee']:
-            if answer is None:
-                return self._finish(goal_handle, 'abort', aborted,
-                                    'require_lift_guarantee is set but /check_lift did not '
-                                    'answer in time', t0)
-            if not answer.ok:
-                return self._finish(goal_handle, 'abort', aborted,
-                                    f'require_lift_guarantee is set and /check_lift rejected '
-                                    f'the pair: {answer.message}', t0)
-            if not answer.lift_guaranteed:
-                return self._finish(
-                    goal_handle, 'abort', aborted,
-                    f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
-                    f'{math.degrees(dp):.4g} deg is outside the sufficient-lift region '
-                    f'(worst-case margin {answer.worst_case_margin:.4g} N): {answer.message}',
-                    t0)
-            if not answer.within_torque_limit:
-                return self._finish(
-                    goal_handle, 'abort', aborted,
-                    f'require_lift_guarantee is set and k_theta {k:g} N*m/rad, delta_theta_p '
-                    f'{math.degrees(dp):.4g} deg is guaranteed by eq. 18 only with more '
-                    f'compliant torque than the hand gives ({answer.torque_limit:g} N*m): '
-                    f'{answer.message}', t0)
+        refusal = guarantee_refusal(answer, k, dp) \
+            if self._flags['require_lift_guarantee'] else None
+        if refusal is not None:
+            return self._finish(goal_handle, 'abort', aborted, refusal, t0)
         fresh = await self._fresh_state(_START_STATE_WAIT_S, goal_handle)
         if goal_handle.is_cancel_requested:
             return self._finish(goal_handle, 'canceled', aborted,
