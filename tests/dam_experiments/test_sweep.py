@@ -178,8 +178,10 @@ def test_sweep_round_trips_through_its_dictionary() -> None:
                       trajectory_duration_s=1.0, impedance='device',
                       envelope='constant-torque')
     assert SweepSpec.from_dict(sweep.to_dict()) == sweep
-    with pytest.raises(SweepError, match=r"unknown key\(s\) \['bogus'\]"):
+    with pytest.raises(SweepError, match=r"unknown key \['bogus'\]"):
         SweepSpec.from_dict({**sweep.to_dict(), 'bogus': 1})
+    with pytest.raises(SweepError, match=r"unknown keys \['bogus', 'extra'\]"):
+        SweepSpec.from_dict({**sweep.to_dict(), 'extra': 2, 'bogus': 1})
     assert sweep.sequence_overrides() == {'envelope_constant_torque': True,
                                           'impedance_on_device': True,
                                           'trajectory_duration': 1.0}

@@ -90,7 +90,68 @@ def test_a_gap_in_the_sequence_numbers_counts_as_dropped() -> None:
     writing.write_inbox()
     assert len(writer.written) == 4
     assert recorded['/a'].dropped == 3
-    assert any('3 message(s) of its publisher never reached' in m for _level, m in log.lines)
+    assert any(m.startswith('/a: 3 messages of its publisher never reached the recorder '
+                            '(sequence 2 to 6; 3 in all)') for _level, m in log.lines), log.lines
+
+
+def _pipeline_log(use_sim_time: bool = False) -> tuple[BagWriting, RecordedTopic, _Log]:
+    recorded = {'/a': RecordedTopic('/a', 1, _Whole())}
+    log = _Log()
+    writing = BagWriting(recorded, dict, log, time.time_ns, max_backlog_bytes=10**9,
+                         stop_write_s=2.0, use_sim_time=use_sim_time, discovery_period_s=0.5)
+    writing.writer = _Writer()
+    return writing, recorded['/a'], log
+
+
+def test_counts_of_one_message_are_in_the_singular() -> None:
+    """Every count of messages the writing logs says '1 message' and '2 messages' (it said
+    '1 message(s)'), its verb and pronoun agreeing."""
+    now = time.time_ns()
+    lines = {}
+    for count in (1, 2):
+        # a gap of `count` in the sequence numbers
+        writing, recorded, log = _pipeline_log()
+        take = writing.intake(recorded)
+        recorded.one_publisher = True
+        for sequence in (1, 2 + count):
+            take(b'x', _info(now + sequence, sequence))
+        writing.write_inbox()
+        # a topic found late whose publisher had sent `count` before
+        late, topic, late_log = _pipeline_log()
+        topic.appeared_late = topic.one_publisher = True
+        late.intake(topic)(b'x', _info(now, count + 1))
+        late.write_inbox()
+        # the middleware's loss report
+        writing.lost_reported(recorded, count)
+        writing.write_inbox()
+        # held for the first /clock, then written when it came
+        clocked, topic, clocked_log = _pipeline_log(use_sim_time=True)
+        for i in range(count):
+            clocked.intake(topic)(b'x', _info(now + i, i + 1))
+        clocked.write_inbox()
+        clocked.clock_receipts.add(now - 1, 5 * 10**9)
+        clocked.write_inbox()
+        # held for a /clock that never came
+        unclocked, topic, unclocked_log = _pipeline_log(use_sim_time=True)
+        for i in range(count):
+            unclocked.intake(topic)(b'x', _info(now + i, i + 1))
+        unclocked.write_inbox(final=True)
+        lines[count] = [m for lg in (log, late_log, clocked_log, unclocked_log)
+                        for _level, m in lg.lines]
+    one, two = ('\n'.join(lines[1]), '\n'.join(lines[2]))
+    assert '(s)' not in one + two, one + two
+    assert '/a: 1 message of its publisher never reached the recorder' in one, one
+    assert '/a: 2 messages of its publisher never reached the recorder' in two, two
+    assert 'its publisher sent 1 message before the recorder' in one, one
+    assert '0.5 s); it is not in the bag' in one, one
+    assert 'its publisher sent 2 messages before the recorder' in two, two
+    assert '0.5 s); they are not in the bag' in two, two
+    assert '/a: the middleware reports 1 message lost (1 in all)' in one, one
+    assert '/a: the middleware reports 2 messages lost (2 in all)' in two, two
+    assert '1 message arrived before the first /clock: written now' in one, one
+    assert '2 messages arrived before the first /clock: written now' in two, two
+    assert '1 message written with its receive time' in one, one
+    assert '2 messages written with their receive time' in two, two
 
 
 def test_what_the_stop_leaves_unwritten_is_counted_per_topic() -> None:

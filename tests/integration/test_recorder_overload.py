@@ -122,7 +122,8 @@ def test_a_starved_recorder_stops_within_its_bound_and_counts_what_it_did_not_wr
     assert bag.name.endswith('_incomplete') == bool(missing)
     assert lost_any <= bool(missing)
     # The closing line counts the whole recording (the episode's counts and those before it).
-    line = [x for x in log.splitlines() if 'episode(s) recorded in' in x][-1]
+    line = [x for x in log.splitlines()
+            if re.search(r'\b(1 episode|\d+ episodes) recorded in ', x)][-1]
     for label, counts in (('not written at the stop', not_written),
                           ('dropped from the full backlog', shed)):
         total = int(re.search(rf'{label} (\d+)', line).group(1))

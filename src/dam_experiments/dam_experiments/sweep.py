@@ -320,7 +320,8 @@ class SweepSpec:
         names = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - names)
         if unknown:
-            raise SweepError(f'sweep parameters: unknown key(s) {unknown}')
+            keys = 'key' if len(unknown) == 1 else 'keys'
+            raise SweepError(f'sweep parameters: unknown {keys} {unknown}')
         values = dict(data)
         try:
             values['perturbations'] = Perturbations(**dict(values.get('perturbations', {})))

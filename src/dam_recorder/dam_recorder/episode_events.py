@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from dam_common.words import counted
 from dam_recorder.completeness import describe
 from dam_recorder.episode_messages import (
     EPISODE_TOPIC,
@@ -125,7 +126,7 @@ class EpisodeEvents:
             self._log_episode(closed)
         incomplete = sum(1 for c in self.episodes.finished if c.missing)
         unwritten = self.episodes.unwritten_count()
-        text = (f'{len(self.episodes.finished)} episode(s) recorded in '
+        text = (f'{counted(len(self.episodes.finished), "episode")} recorded in '
                 f'{self.episodes.out_dir} ({incomplete} incomplete); '
                 f'{writing.losses(unwritten)}')
         log = self._log.warning if incomplete or unwritten or writing.lost() \

@@ -90,6 +90,7 @@ from dam_common.clock import create_steady_timer
 from dam_common.node import run_node
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
+from dam_common.words import counted
 from dam_recorder.bag_writer import CHUNK_INTERVAL_RANGE_S, MIN_SPLIT_BYTES, BagWriter
 from dam_recorder.cdr_end import CdrEnd
 from dam_recorder.cli import parameter_overrides
@@ -476,8 +477,8 @@ class RecorderNode(Node):
         writing = self._writing
         backlog = writing.begin_stop()
         self.get_logger().info(
-            f'stop requested: writing what was received ({backlog} message(s) waiting) for '
-            f'at most {writing.stop_write_s:g} s (stop_write_time), then closing')
+            f'stop requested: writing what was received ({counted(backlog, "message")} '
+            f'waiting) for at most {writing.stop_write_s:g} s (stop_write_time), then closing')
         if writing.hurried:
             return None  # behind: nothing in flight is worth waiting for
         done = Future()

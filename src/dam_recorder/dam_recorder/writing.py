@@ -245,16 +245,17 @@ class BagWriting:
                 if held:
                     first = self.clock_receipts.at(0) or 0
                     self._log.info(
-                        f'{held} message(s) arrived before the first /clock: written now, '
-                        f'stamped with its time ({first * 1e-9:.3f} s; counted in '
+                        f'{counted(held, "message")} arrived before the first /clock: '
+                        f'written now, stamped with its time ({first * 1e-9:.3f} s; counted in '
                         f'dam_recorder.before_clock_messages)')
             elif final:
                 self._no_clock = True
                 held = self.waiting()
                 if held:
                     self._log.warning(
-                        f'no /clock came while recording (use_sim_time): {held} message(s) '
-                        f'written with their receive time (system clock)')
+                        f'no /clock came while recording (use_sim_time): '
+                        f'{counted(held, "message")} written with '
+                        f'{"its" if held == 1 else "their"} receive time (system clock)')
             else:
                 return  # held until the clock runs
         writer = self.writer if self.episodes is None else self.episodes
@@ -424,9 +425,10 @@ class BagWriting:
                 recorded.before_subscription = sequence - 1
                 self._log.warning(
                     f'{recorded.name} appeared while recording: its publisher sent '
-                    f'{sequence - 1} message(s) before the recorder had found and subscribed '
-                    f'to it (discovery_period {self._discovery_period_s:g} s); they are not in '
-                    f'the bag (counted in its custom data '
+                    f'{counted(sequence - 1, "message")} before the recorder had found and '
+                    f'subscribed to it (discovery_period {self._discovery_period_s:g} s); '
+                    f'{"it is" if sequence == 2 else "they are"} not in the bag (counted in '
+                    f'its custom data '
                     f'dam_recorder.before_subscription_messages)')
             return
         if sequence <= last:  # another publisher's: gaps mean nothing until the graph says one
@@ -437,16 +439,16 @@ class BagWriting:
             if self.episodes is not None:
                 self.episodes.note_dropped(recorded.topic_id, gap, stamp)
             self._log.warning(
-                f'{recorded.name}: {gap} message(s) of its publisher never reached the recorder '
-                f'(sequence {last} to {sequence}; {recorded.dropped} in all)',
+                f'{recorded.name}: {counted(gap, "message")} of its publisher never reached '
+                f'the recorder (sequence {last} to {sequence}; {recorded.dropped} in all)',
                 throttle_duration_sec=2.0)
 
     def _on_lost(self, recorded: RecordedTopic, change: int) -> None:
         recorded.lost += change
         if self.episodes is not None:
             self.episodes.note_lost(recorded.topic_id, change)
-        self._log.warning(f'{recorded.name}: the middleware reports {change} message(s) '
-                          f'lost ({recorded.lost} in all)')
+        self._log.warning(f'{recorded.name}: the middleware reports '
+                          f'{counted(change, "message")} lost ({recorded.lost} in all)')
 
     # -- flushing, write errors, closing -----------------------------------------------------
 
