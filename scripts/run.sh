@@ -206,10 +206,6 @@ set +e
   --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 | tee "$grasp_log"
 status=${PIPESTATUS[0]}
 set -e
-# The controller's own estimate of the rise (from the joint angles), when its client prints it.
-rise_from_result=false
-grep -q 'object rise: .*(estimated from the joint angles)' "$grasp_log" &&
-  rise_from_result=true
 
 # The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
 # A recorder behind a busy machine catches up first: waited for while it runs and its episode
@@ -250,11 +246,8 @@ else
     echo "run.sh: bag plot $episode failed" >&2
   # Where the bag holds the stand-in's rise and the controller's estimate, bag plot prints
   # both on one line, each named ('object rise: 8.09 mm (stand-in), 9.80 mm estimated from
-  # the joints'); the grasp's own line above is the estimate.
-  if [ "$rise_from_result" != true ] && grep -q 'object rise' <<<"$plot"; then
-    plot+=$'\n'"  (that rise is the stand-in's ground truth recorded in the bag,"
-    plot+=" /sim/object_pose; the controller does not report its own estimate yet)"
-  fi
+  # the joints'); the grasp's own line above is the estimate. Each object line names its
+  # source (the stand-in's ground truth; the controller's estimate, or 'none recorded').
   [ -z "$plot" ] || sed 's/^/    /' <<<"$plot"
   echo "    picture: $picture"
 fi
