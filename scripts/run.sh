@@ -3,9 +3,10 @@
 # /check_lift about the (k_theta, delta_theta_p) pair, grasp the object by Detaching Assist
 # Motion through the /dam_grasp action, print the outcome, and stop everything it started.
 # The grasp is recorded as an episode bag (bags/episodes/<time>_<outcome>, or under
-# $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed, with where each
-# number comes from (the stand-in's and the joints' estimate, both where both exist), and an
-# episode bag the recorder marks incomplete is said to be so.
+# $DAM_BAG_DIR) and drawn (out/<episode>.png); the object's rise is printed, each figure once
+# and named (the controller's estimate from the joints in the result line, the stand-in's
+# measured rise under the recorded episode), and an episode bag the recorder marks incomplete
+# is said to be so.
 #
 #   bash scripts/run.sh                                   # the pair configured in config/dam.yaml
 #   bash scripts/run.sh --k-theta 0.5 --delta-theta-p 10deg   # any other pair
@@ -201,9 +202,14 @@ echo "==> /check_lift for k_theta = $k_theta N*m/rad, delta_theta_p = $delta_the
   --object "$object" --timeout "$client_wait" || true
 echo "==> DAM grasp"
 grasp_log="$RUN_DIR/dam_grasp.log"
+# The result line's message carries the controller's estimate of the rise ('rise 9.75 mm
+# (estimated from the joints)'): dam_grasp's next line, the same estimate again ('object rise:
+# 9.7 mm, left the table (estimated from the joint angles)'), stays in its log only.
 set +e
 "$(exe dam_spcm_controller dam_grasp)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 | tee "$grasp_log"
+  --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 | tee "$grasp_log" |
+  awk '/^result: / { estimate = /\(estimated from the joints\)/ }
+    !(estimate && /^object rise: .* \(estimated from the joint angles\)$/) { print; fflush() }'
 status=${PIPESTATUS[0]}
 set -e
 
@@ -244,10 +250,11 @@ else
   fi
   plot=$("$(exe dam_recorder bag)" plot "$episode" -o "$picture") ||
     echo "run.sh: bag plot $episode failed" >&2
-  # Where the bag holds the stand-in's rise and the controller's estimate, bag plot prints
-  # both on one line, each named ('object rise: 8.09 mm (stand-in), 9.80 mm estimated from
-  # the joints'); the grasp's own line above is the estimate. Each object line names its
-  # source (the stand-in's ground truth; the controller's estimate, or 'none recorded').
+  # bag plot's object lines, each naming its source (the stand-in's ground truth; the
+  # controller's estimate, or 'none recorded'), without the figures the result line above
+  # already gives: each rise once (scripts/lib/object_summary.py).
+  summary=$(python "$REPO_ROOT/scripts/lib/object_summary.py" "$grasp_log" <<<"$plot") &&
+    plot=$summary
   [ -z "$plot" ] || sed 's/^/    /' <<<"$plot"
   echo "    picture: $picture"
 fi

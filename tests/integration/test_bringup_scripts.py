@@ -220,12 +220,21 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
         # the result line, and its own status for an episode bag that is incomplete: the
         # recorder's reader queues hold one message (queue_depth 1), so beside the burners
         # joint states are dropped on the way (gaps in their sequence numbers)
-        assert re.search(r'^result: [A-Z_]+ \(', run.stdout, re.M), output
-        if 'mm, left the table (estimated from the joint angles)' in run.stdout:
-            # both rises of the grasp, each named: it printed the joints' estimate alone,
-            # and bag plot the stand-in's
-            assert re.search(r'object rise: \d+\.\d\d mm \(stand-in\), \d+\.\d\d mm '
-                             r'estimated from the joints', run.stdout), output
+        result = re.search(r'^result: [A-Z_]+ \(.*$', run.stdout, re.M)
+        assert result, output
+        # each rise of the grasp once, each named: the controller's estimate in the result
+        # line (it was printed three times: that line, dam_grasp's own line of it, bag plot's
+        # line of both), the stand-in's measured rise under the recorded episode
+        assert 'object rise:' not in run.stdout, output
+        assert run.stdout.count('estimated from the joint') == result.group(0).count(
+            'estimated from the joint'), output
+        if re.search(r'rise \S+ mm(, turned \S+ deg)? \(estimated from the joints\)',
+                     result.group(0)):
+            assert re.search(r"^      controller's estimate \(from the joints, /dam/episode\): "
+                             r'recorded, as in the result line above(; orientation .*)?$',
+                             run.stdout, re.M), output
+        assert re.search(r'^      object rise \(stand-in ground truth, /sim/object_pose, from '
+                         r'the first pose\): at the end -?\d+\.\d\d mm', run.stdout, re.M), output
         assert run.returncode == 5, output
         assert 'exit status 5: the episode bag is INCOMPLETE' in run.stderr, output
         controller_log = (tmp_path / 'run' / 'spcm_controller.log').read_text(encoding='utf-8')
