@@ -48,7 +48,8 @@ def main(argv: list[str]) -> int:
             changed += 1
         if BUILD_MACHINE in new:
             left.append(path)
-    print(f'    rewrote {changed} CMake file(s) to {py_include} and {np_include}')
+    files = 'file' if changed == 1 else 'files'
+    print(f'    rewrote {changed} CMake {files} to {py_include} and {np_include}')
     if left:
         print('    warning: still naming the wheel build machine (' + BUILD_MACHINE + '...): '
               + ', '.join(str(p) for p in left), file=sys.stderr)

@@ -165,7 +165,7 @@ def test_bringup_returns_serving_and_stop_stops_it(tmp_path: Path) -> None:
     finally:
         down = _script('stop.sh', env=env)
     assert down.returncode == 0, down.stdout + down.stderr
-    assert 'stopped 4 process(es)' in down.stdout, down.stdout
+    assert 'stopped 4 processes' in down.stdout, down.stdout
     _assert_all_stopped(tmp_path, _started_pids(up.stdout))
     # every node says when it served and printed its first line (which may come after the
     # graph shows it serving), from its start, and its CPU time
@@ -253,7 +253,7 @@ def test_run_sh_beside_six_cpu_burners_ends_with_its_result_line(tmp_path: Path)
     assert check_lift_timeout == pytest.approx(5.0)  # /** in the file
     assert priority == 0  # node:name:=value after --ros-args
     assert sim_time == dict.fromkeys(NODES, True)  # the stand-in is the clock
-    assert 'stopped 4 process(es)' in down.stdout, down.stdout  # run.sh stopped its recorder
+    assert 'stopped 4 processes' in down.stdout, down.stdout  # run.sh stopped its recorder
     _assert_all_stopped(tmp_path, pids)
 
 

@@ -326,7 +326,8 @@ def overlay_text(data: Mapping[str, Any], ctx: Context, baud_rate: int, output: 
     ]
     if ctx.overlays:
         below = ', '.join(str(o) for o in ctx.overlays)
-        header.append(f'Made on top of the overlay(s) {below}: give them first, this one last.')
+        which = 'overlay' if len(ctx.overlays) == 1 else 'overlays'
+        header.append(f'Made on top of the {which} {below}: give them first, this one last.')
     body = yaml.safe_dump(dict(data), sort_keys=False, default_flow_style=False)
     return ''.join(f'# {line}\n' for line in header) + body
 
