@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from dam_common.words import counted
 from dam_recorder.errors import TypeDescriptionError
 from dam_recorder.msg_definition import field_type_name, header_name, ros2msg_definition
 
@@ -279,7 +280,7 @@ def load_message_type(type_name: str, prefixes: Iterable[str | os.PathLike[str]]
     package = type_name.split('/')[0]
     raise TypeDescriptionError(
         f'no type description of {type_name!r} installed (looked for share/{package}/.../*.json'
-        f' under {len(prefixes)} prefix(es) of AMENT_PREFIX_PATH)')
+        f' under {counted(len(prefixes), "prefix", "prefixes")} of AMENT_PREFIX_PATH)')
 
 
 def installed_msg_texts(type_names: Iterable[str], prefixes: Sequence[str | os.PathLike[str]]
