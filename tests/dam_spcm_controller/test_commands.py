@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dam_common.config import load_config
-from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode
+from dam_spcm_controller.commands import HandLayout, JointCommand, JointMode, zero_torque_command
 from dam_spcm_controller.errors import InputError
 
 
@@ -56,3 +56,25 @@ def test_index_of_reorders_message_arrays():
         lay.index_of(lay.joint_names[:-1])
     with pytest.raises(InputError, match="'finger1_locked_joint' appears twice"):
         lay.index_of(list(lay.joint_names) + ['finger1_locked_joint'])
+
+
+def test_the_zero_torque_command_lets_the_compliant_joints_go_and_holds_the_rest() -> None:
+    last = JointCommand(
+        np.array([JointMode.IMPEDANCE, JointMode.HOLD, JointMode.POSITION,
+                  JointMode.TORQUE, JointMode.HOLD, JointMode.POSITION], dtype=np.int8),
+        np.array([0.3, 0.0, 0.7, 0.05, 0.01, 0.6]),
+        stiffness=np.array([5.0, 0, 0, 0, 0, 0]), damping=np.array([0.01, 0, 0, 0, 0, 0]))
+    zero = zero_torque_command(last, np.array([0.2, 0.0, 0.65, 0.1, 0.0, 0.55]))
+    assert zero.modes.tolist() == [JointMode.TORQUE, JointMode.HOLD, JointMode.HOLD,
+                                   JointMode.TORQUE, JointMode.HOLD, JointMode.HOLD]
+    # zero torque on the compliant joints; the position joints where they were sent
+    assert zero.setpoints.tolist() == [0.0, 0.0, 0.7, 0.0, 0.01, 0.6]
+    assert not zero.has_impedance
+    assert last.modes[0] == JointMode.IMPEDANCE  # the last command is left as it was
+
+
+def test_with_no_command_sent_the_zero_torque_command_holds_the_measured_angles() -> None:
+    measured = np.array([0.1, -0.02, 0.3])
+    zero = zero_torque_command(None, measured)
+    assert (zero.modes == JointMode.HOLD).all()
+    assert zero.setpoints.tolist() == measured.tolist()

@@ -82,6 +82,32 @@ class JointCommand:
         return JointMode(int(self.modes[index]))
 
 
+def zero_torque_command(last: JointCommand | None, measured: np.ndarray) -> JointCommand:
+    """The command that stops a grasp at once (a silence of the joint states).
+
+    Parameters
+    ----------
+    last : the last command sent, or ``None`` when none was.
+    measured : (3n,) the newest measured joint angles [rad].
+
+    Returns
+    -------
+    JointCommand
+        TORQUE and IMPEDANCE joints at zero torque, POSITION joints held at their last
+        setpoint, HOLD joints as they were; with no last command every joint held where it
+        was measured.
+    """
+    if last is None:
+        return JointCommand(np.full(np.shape(measured), JointMode.HOLD, dtype=np.int8),
+                            np.array(measured, dtype=np.float64))
+    modes = last.modes.copy()
+    setpoints = last.setpoints.copy()
+    modes[modes == JointMode.IMPEDANCE] = JointMode.TORQUE
+    setpoints[modes == JointMode.TORQUE] = 0.0
+    modes[modes == JointMode.POSITION] = JointMode.HOLD
+    return JointCommand(modes, setpoints)
+
+
 @dataclass(frozen=True)
 class HandLayout:
     """Where the joints of each role sit in the (3n,) joint arrays, and their limits.

@@ -115,7 +115,7 @@ from dam_spcm_controller.classification import (
     Outcome,
     classify_from_joints,
 )
-from dam_spcm_controller.commands import JointCommand, JointMode
+from dam_spcm_controller.commands import JointCommand, JointMode, zero_torque_command
 from dam_spcm_controller.controller_parameters import (
     BOOL_PARAMETERS,
     DOUBLE_PARAMETERS,
@@ -586,7 +586,7 @@ class SpcmControllerNode(Node):
                       f'{self._clock_faults()}')
             self._seq.fail(reason)
             self._state_timed_out = True
-            zero = self._zero_torque_command()
+            zero = zero_torque_command(self._last_cmd, self._last_pos)
             self._last_cmd = zero
             self._last_phase = self._seq.phase
         self.get_logger().error(reason + '; commanding zero torque')
@@ -602,19 +602,6 @@ class SpcmControllerNode(Node):
         if jump:
             faults.append(f'/clock jumped {jump}')
         return f'; clock: {"; ".join(faults)}' if faults else ''
-
-    def _zero_torque_command(self) -> JointCommand:
-        """Torque and impedance joints at zero torque, moving position joints held at their
-        last setpoint."""
-        n = self._layout.n_joints
-        if self._last_cmd is None:
-            return JointCommand(np.full(n, JointMode.HOLD, dtype=np.int8), self._last_pos.copy())
-        modes = self._last_cmd.modes.copy()
-        setpoints = self._last_cmd.setpoints.copy()
-        modes[modes == JointMode.IMPEDANCE] = JointMode.TORQUE
-        setpoints[modes == JointMode.TORQUE] = 0.0
-        modes[modes == JointMode.POSITION] = JointMode.HOLD
-        return JointCommand(modes, setpoints)
 
     # ------------------------------------------------------------------------------------
     # Status and progress of the running goal
