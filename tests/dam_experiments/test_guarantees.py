@@ -18,7 +18,8 @@ from dam_analysis.analysis import LiftAnalyzer
 from dam_analysis.rolling import pose_margin
 from dam_common.config import load_config
 from dam_experiments.experiment import run_experiment
-from dam_sim_bridge.world import HandWorld, WorldOptions
+from dam_sim_bridge.world import HandWorld
+from dam_sim_bridge.world_options import WorldOptions
 
 CONFIG = load_config()
 ALPHA = math.radians(5.0)

@@ -11,7 +11,8 @@ from dam_common.config import load_config
 from dam_common.device_protocol import JointMode
 from dam_hand_driver.errors import ParameterError
 from dam_hand_driver.slew import CommandSlew, slew_torque
-from dam_sim_bridge.world import HandWorld, WorldOptions
+from dam_sim_bridge.world import HandWorld
+from dam_sim_bridge.world_options import WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 IMP = int(JointMode.IMPEDANCE)

@@ -18,7 +18,8 @@ from dam_common.config import DamConfig, load_config
 from dam_experiments.experiment import ExperimentResult, run_experiment
 from dam_sim_bridge.errors import WorldConfigError
 from dam_sim_bridge.pybullet_import import bullet_client, pybullet
-from dam_sim_bridge.world import HandWorld, WorldOptions
+from dam_sim_bridge.world import HandWorld
+from dam_sim_bridge.world_options import WorldOptions
 
 #: getDynamicsInfo: index of the contact damping [N*s/m] and of the contact stiffness [N/m]
 #: (-1 both where a body's parameters were never set).

@@ -20,7 +20,7 @@ from dam_common.device_protocol import (
     encode_command,
 )
 from dam_sim_bridge.sim_device import SimDevice
-from dam_sim_bridge.world import WorldOptions
+from dam_sim_bridge.world_options import WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 IMP = int(JointMode.IMPEDANCE)

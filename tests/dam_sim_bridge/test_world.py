@@ -12,7 +12,8 @@ import pytest
 from dam_common.config import DamConfig, load_config
 from dam_common.device_protocol import Calibration, DeviceWatchdog, JointFault, JointMode
 from dam_sim_bridge.errors import CommandError, SimulationError, WorldConfigError
-from dam_sim_bridge.world import HandWorld, WorldOptions
+from dam_sim_bridge.world import HandWorld
+from dam_sim_bridge.world_options import WorldOptions
 
 T, P, H = int(JointMode.TORQUE), int(JointMode.POSITION), int(JointMode.HOLD)
 IMP = int(JointMode.IMPEDANCE)

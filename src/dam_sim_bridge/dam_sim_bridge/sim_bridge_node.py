@@ -127,7 +127,8 @@ from dam_sim_bridge.dynamixel_standin import DynamixelStandIn
 from dam_sim_bridge.errors import SimBridgeError
 from dam_sim_bridge.lift_off import LiftOffState
 from dam_sim_bridge.sim_device import SimDevice
-from dam_sim_bridge.world import HandWorld, WorldOptions
+from dam_sim_bridge.world import HandWorld
+from dam_sim_bridge.world_options import WorldOptions
 
 _POSE_RATE_RANGE = (1.0, 1000.0)
 #: The stand-in's ground truth of lift-off, published beside ``/sim/object_pose``.

@@ -11,7 +11,7 @@ period (``1 / device.rate_hz``) it
    :class:`~dam_common.device_protocol.Calibration`; IMPEDANCE joints then run their law
    ``clip(k (theta_0 - theta) - d theta_dot)`` inside the world at every physics step (1 kHz),
    not once per device cycle, and every TORQUE and IMPEDANCE torque is slew-limited there to
-   ``device.torque_rate_limit_nm_per_s`` (:mod:`dam_sim_bridge.world`);
+   ``device.torque_rate_limit_nm_per_s`` (:mod:`dam_sim_bridge.joint_commands`);
 3. steps the world by one period (``round(period / sim.time_step_s)`` physics steps);
 4. encodes the joint state in raw units, with fault and status bits, and sends it to the
    driver's ``device.state_port``.
