@@ -102,7 +102,6 @@ import time
 import traceback
 from collections import deque
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -118,7 +117,6 @@ from dam_common.clock_watch import ClockWatch
 from dam_common.collector import PERIOD_S as GC_PERIOD_S
 from dam_common.config import load_config
 from dam_common.device_protocol import JointMode
-from dam_common.echo import brief_repr
 from dam_common.hand_urdf import hand_urdf
 from dam_common.intake import SubscriptionThread
 from dam_common.node import (
@@ -136,6 +134,12 @@ from dam_common.realtime import (
 )
 from dam_common.service_qos import SERVICE_QOS
 from dam_common.shutdown import SHUTDOWN
+from dam_hand_driver.command_check import (
+    WIRE_MODES,
+    CommandItem,
+    CommandRejected,
+    check_joint_commands,
+)
 from dam_hand_driver.device import HandDevice, JointSample
 from dam_hand_driver.dynamixel_device import DynamixelDevice
 from dam_hand_driver.errors import HandDriverError
@@ -144,13 +148,8 @@ from dam_hand_driver.udp_device import UdpDevice
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim', 'dynamixel')
-#: HandCommand mode -> wire protocol mode (the values differ: map explicitly).
-MSG_TO_WIRE_MODE: dict[int, JointMode] = {
-    HandCommand.MODE_TORQUE: JointMode.TORQUE,
-    HandCommand.MODE_POSITION: JointMode.POSITION,
-    HandCommand.MODE_HOLD: JointMode.HOLD,
-    HandCommand.MODE_IMPEDANCE: JointMode.IMPEDANCE,
-}
+#: HandCommand mode -> wire protocol mode (:data:`dam_hand_driver.command_check.WIRE_MODES`).
+MSG_TO_WIRE_MODE: dict[int, JointMode] = WIRE_MODES
 _STANDIN_START_TIMEOUT_S = 20.0
 #: How long the stand-in may take to stop cleanly before it is killed [s].
 _STANDIN_STOP_TIMEOUT_S = 1.5
@@ -166,97 +165,24 @@ class DriverState(enum.Enum):
     ERROR = 'ERROR'
 
 
-class CommandRejected(HandDriverError, ValueError):
-    """A HandCommand message is malformed; the message names the field and the value."""
-
-
-class CommandItem(NamedTuple):
-    """One validated joint command of a HandCommand message (SI units)."""
-
-    joint: int  #: index in the configured joint order
-    mode: JointMode  #: wire mode
-    setpoint: float  #: [N*m] TORQUE, [rad] POSITION and IMPEDANCE (theta_0), 0 HOLD
-    stiffness: float = 0.0  #: k [N*m/rad] (IMPEDANCE only, else 0)
-    damping: float = 0.0  #: d [N*m*s/rad] (IMPEDANCE only, else 0)
-
-
 def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: float,
                      lower_rad: np.ndarray, upper_rad: np.ndarray,
                      max_stiffness_nm_per_rad: float, max_damping_nms_per_rad: float
                      ) -> list[CommandItem]:
-    """Check a HandCommand and turn it into one :class:`CommandItem` per named joint.
-
-    Parameters
-    ----------
-    msg
-        The message.
-    index
-        Joint name -> index in the configured order.
-    torque_limit_nm
-        Largest accepted ``|torque|`` [N*m].
-    lower_rad, upper_rad
-        (n,) joint limits [rad] (POSITION setpoints and IMPEDANCE equilibria).
-    max_stiffness_nm_per_rad, max_damping_nms_per_rad
-        Largest accepted impedance stiffness [N*m/rad] and damping [N*m*s/rad].
+    """Check a HandCommand and turn it into one :class:`CommandItem` per named joint
+    (:func:`dam_hand_driver.command_check.check_joint_commands`, whose parameters follow
+    ``msg``).
 
     Raises
     ------
     CommandRejected
-        Length mismatch, unknown or duplicate joint name, unknown mode, non-finite setpoint,
-        torque beyond ``torque_limit_nm``, angle or equilibrium outside the joint limits,
-        MODE_IMPEDANCE without gains, stiffness not in (0, max], damping not in [0, max].
+        The message is malformed; the reason names the field and the value.
     """
-    names, modes, setpoints = list(msg.name), list(msg.mode), list(msg.setpoint)
-    stiffness, damping = list(msg.stiffness), list(msg.damping)
-    if not (len(names) == len(modes) == len(setpoints)):
-        raise CommandRejected(f'name, mode and setpoint differ in length: {len(names)}, '
-                              f'{len(modes)}, {len(setpoints)}')
-    for field, values in (('stiffness', stiffness), ('damping', damping)):
-        if values and len(values) != len(names):
-            raise CommandRejected(f'{field} has {len(values)} entries for {len(names)} names '
-                                  f'(expected none or one per name)')
-    seen: set[str] = set()
-    out: list[CommandItem] = []
-    for i, (name, mode, value) in enumerate(zip(names, modes, setpoints, strict=True)):
-        if name not in index:
-            raise CommandRejected(f'unknown joint name {brief_repr(name)} (known: '
-                                  f'{sorted(index)})')
-        if name in seen:
-            raise CommandRejected(f'joint {name!r} appears more than once')
-        seen.add(name)
-        if int(mode) not in MSG_TO_WIRE_MODE:
-            raise CommandRejected(f'joint {name!r}: mode {int(mode)} is not MODE_TORQUE (0), '
-                                  f'MODE_POSITION (1), MODE_HOLD (2) or MODE_IMPEDANCE (3)')
-        wire = MSG_TO_WIRE_MODE[int(mode)]
-        sp = float(value)
-        if not math.isfinite(sp):
-            raise CommandRejected(f'joint {name!r}: setpoint {sp!r} is not finite')
-        j = index[name]
-        if wire is JointMode.TORQUE and abs(sp) > torque_limit_nm:
-            raise CommandRejected(f'joint {name!r}: torque {sp!r} N*m is beyond the limit '
-                                  f'+-{torque_limit_nm!r} N*m')
-        if wire is JointMode.POSITION and not lower_rad[j] <= sp <= upper_rad[j]:
-            raise CommandRejected(f'joint {name!r}: angle {sp!r} rad is outside the joint '
-                                  f'limits [{float(lower_rad[j])!r}, {float(upper_rad[j])!r}] rad')
-        if wire is not JointMode.IMPEDANCE:
-            out.append(CommandItem(j, wire, sp))
-            continue
-        if not stiffness or not damping:
-            raise CommandRejected(f'joint {name!r}: MODE_IMPEDANCE needs stiffness and damping '
-                                  f'(got {len(stiffness)} and {len(damping)} entries)')
-        if not lower_rad[j] <= sp <= upper_rad[j]:
-            raise CommandRejected(f'joint {name!r}: impedance equilibrium theta_0 {sp!r} rad is '
-                                  f'outside the joint limits [{float(lower_rad[j])!r}, '
-                                  f'{float(upper_rad[j])!r}] rad')
-        k, d = float(stiffness[i]), float(damping[i])
-        if not (math.isfinite(k) and 0.0 < k <= max_stiffness_nm_per_rad):
-            raise CommandRejected(f'joint {name!r}: stiffness {k!r} N*m/rad is outside '
-                                  f'(0, {max_stiffness_nm_per_rad!r}] N*m/rad')
-        if not (math.isfinite(d) and 0.0 <= d <= max_damping_nms_per_rad):
-            raise CommandRejected(f'joint {name!r}: damping {d!r} N*m*s/rad is outside '
-                                  f'[0, {max_damping_nms_per_rad!r}] N*m*s/rad')
-        out.append(CommandItem(j, wire, sp, k, d))
-    return out
+    return check_joint_commands(list(msg.name), list(msg.mode), list(msg.setpoint),
+                                list(msg.stiffness), list(msg.damping), index,
+                                torque_limit_nm, lower_rad, upper_rad,
+                                max_stiffness_nm_per_rad, max_damping_nms_per_rad)
+
 
 
 class HandDriverNode(Node):
