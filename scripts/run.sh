@@ -94,6 +94,7 @@ esac
 [ -z "$port" ] || [ "$backend" = dynamixel ] ||
   usage_error "--port is for --backend dynamixel (the UDP link's addresses are in device:)"
 
+echo "==> Checking the workspace (the first run installs and builds it: a few minutes)"
 bash "$REPO_ROOT/scripts/setup.sh" >/dev/null
 set +u
 # shellcheck disable=SC1091
@@ -204,14 +205,37 @@ echo "==> DAM grasp"
 grasp_log="$RUN_DIR/dam_grasp.log"
 # The result line's message carries the controller's estimate of the rise ('rise 9.75 mm
 # (estimated from the joints)'): dam_grasp's next line, the same estimate again ('object rise:
-# 9.7 mm, left the table (estimated from the joint angles)'), stays in its log only.
+# 9.7 mm, left the table (estimated from the joint angles)'), stays in its log only. Read line
+# by line as each comes (a pipe into awk would hold the phases back until the end).
+without_second_estimate() {
+  local line estimate=false
+  while IFS= read -r line || [ -n "$line" ]; do
+    case $line in
+      'result: '*'(estimated from the joints)'*) estimate=true ;;
+      'result: '*) estimate=false ;;
+      'object rise: '*'(estimated from the joint angles)')
+        [ "$estimate" = true ] && continue ;;
+    esac
+    printf '%s\n' "$line"
+  done
+}
+# Ctrl-C reaches dam_grasp, which cancels the goal and prints its result; tee and the filter
+# ignore it so that those lines are shown and logged. The nodes stop on it too: nothing is
+# drawn then, and run.sh exits with 130 once everything it started has stopped.
+interrupted=false
+trap 'interrupted=true' INT
 set +e
 "$(exe dam_spcm_controller dam_grasp)" --k-theta "$k_theta" --delta-theta-p "$delta_theta_p" \
-  --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 | tee "$grasp_log" |
-  awk '/^result: / { estimate = /\(estimated from the joints\)/ }
-    !(estimate && /^object rise: .* \(estimated from the joint angles\)$/) { print; fflush() }'
+  --server-timeout "$client_wait" --timeout "$result_wait" 2>&1 |
+  (trap '' INT; tee "$grasp_log") | (trap '' INT; without_second_estimate)
 status=${PIPESTATUS[0]}
 set -e
+trap - INT
+if [ "$interrupted" = true ]; then
+  echo "run.sh: interrupted (Ctrl-C) during the grasp: the goal was cancelled and the nodes" \
+    "stop; nothing is drawn (exit status 130)" >&2
+  exit 130
+fi
 
 # The episode closes after its post-roll; then the recorder is stopped and the grasp drawn.
 # A recorder behind a busy machine catches up first: waited for while it runs and its episode

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -412,3 +413,36 @@ def test_record_sh_follows_the_clock_the_bring_up_chose(tmp_path: Path, sim_time
             client.close()
         assert recorder.stop() == 0, recorder.output()
     assert taken is sim_time
+
+
+def test_run_sh_shows_the_phases_as_they_come_and_stops_cleanly_on_ctrl_c(
+        tmp_path: Path) -> None:
+    """A user who watches ``run.sh`` sees each phase while the grasp runs (a pipe through
+    mawk held them all back until the result), and Ctrl-C, which a terminal sends to the
+    whole process group, cancels the goal, prints what the client knows, draws nothing and
+    exits with 130 once everything run.sh started has stopped (it exited with 141, SIGPIPE,
+    and drew a picture of the cut grasp)."""
+    env = _env(tmp_path)
+    command = ['bash', str(SCRIPTS / 'run.sh'), '--backend', 'sim']
+    errors = tmp_path / 'run.stderr'
+    lines: list[str] = []
+    with errors.open('w', encoding='utf-8') as err, subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=err, text=True, env=env,
+            stdin=subprocess.DEVNULL, start_new_session=True) as proc:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            if re.search(r'\] phase ROLLING_UP ', line):  # read while the grasp runs
+                os.killpg(proc.pid, signal.SIGINT)
+                break
+        lines += proc.stdout.readlines()
+        proc.wait(timeout=600.0)  # only stops a hung test
+    stdout = ''.join(lines)
+    stderr = errors.read_text(encoding='utf-8')
+    output = stdout + stderr
+    assert re.search(r'\] phase ROLLING_UP ', stdout), output
+    assert proc.returncode == 130, output
+    assert 'SIGINT: cancelling the goal' in stdout, output
+    assert 'run.sh: interrupted (Ctrl-C) during the grasp' in stderr, output
+    assert '==> Recorded' not in stdout and 'picture:' not in stdout, output
+    _assert_all_stopped(tmp_path, _started_pids(stdout))
