@@ -90,18 +90,11 @@ port that failed, an exception in the device-link thread) -> ACTIVE only through
 from __future__ import annotations
 
 import array
-import contextlib
-import enum
-import math
-import os
-import signal
 import subprocess
-import tempfile
 import threading
 import time
 import traceback
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -143,26 +136,36 @@ from dam_hand_driver.command_check import (
 from dam_hand_driver.device import HandDevice, JointSample
 from dam_hand_driver.dynamixel_device import DynamixelDevice
 from dam_hand_driver.errors import HandDriverError
+from dam_hand_driver.link_health import (
+    DriverState,
+    Level,
+    RateWindow,
+    latency_summary_us,
+    link_status,
+)
 from dam_hand_driver.slew import CommandSlew
+from dam_hand_driver.standin import START_TIMEOUT_S as STANDIN_START_TIMEOUT_S
+from dam_hand_driver.standin import (
+    await_port_file,
+    new_port_file,
+    signal_standin,
+    standin_command,
+    standin_executable,
+    stop_standin,
+)
 from dam_hand_driver.udp_device import UdpDevice
 from dam_interfaces.msg import HandCommand
 
 BACKENDS = ('auto', 'hardware', 'sim', 'dynamixel')
 #: HandCommand mode -> wire protocol mode (:data:`dam_hand_driver.command_check.WIRE_MODES`).
 MSG_TO_WIRE_MODE: dict[int, JointMode] = WIRE_MODES
-_STANDIN_START_TIMEOUT_S = 20.0
-#: How long the stand-in may take to stop cleanly before it is killed [s].
-_STANDIN_STOP_TIMEOUT_S = 1.5
 _LOG_THROTTLE_S = 1.0
 #: On simulated time, the newest command is sent again after this much wall time without a
 #: state frame (twice the stand-in's own resend period) [s].
 _RESEND_AFTER_S = 2.0 * 0.1
-
-
-class DriverState(enum.Enum):
-    WAITING = 'WAITING'
-    ACTIVE = 'ACTIVE'
-    ERROR = 'ERROR'
+#: :class:`~dam_hand_driver.link_health.Level` -> ``DiagnosticStatus`` level.
+_DIAGNOSTIC_LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
+                      Level.ERROR: DiagnosticStatus.ERROR}
 
 
 def validate_command(msg: HandCommand, index: dict[str, int], torque_limit_nm: float,
@@ -281,8 +284,8 @@ class HandDriverNode(Node):
         #: (joint states published, header stamp of the last one [ns])
         self._published_last: tuple[int, int] = (0, 0)
         self._latencies_s: deque[float] = deque(maxlen=2000)
-        self._diag_prev = (time.monotonic(), 0, 0, 0)
-        self._failures_prev = 0
+        #: Counts at the previous /diagnostics, for the rates since.
+        self._diag_window = RateWindow(time.monotonic())
         #: Header stamp [ns] of the joint state the newest /hand/command answers (its own
         #: stamp), and the condition the device-link thread waits on for it.
         self._command_ref_ns: int | None = None
@@ -390,31 +393,11 @@ class HandDriverNode(Node):
     def _start_standin(self, why: str, bus: str = 'udp') -> str:
         """Start the stand-in (``bus``: its UDP device link, or an emulated Dynamixel bus);
         returns the emulated bus's port (empty for UDP)."""
-        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
-
-        try:
-            exe = Path(get_package_prefix('dam_sim_bridge')) / 'lib' / 'dam_sim_bridge' \
-                / 'sim_bridge'
-        except PackageNotFoundError as exc:
-            raise HandDriverError(f'{why}, and dam_sim_bridge is not installed: {exc}') from exc
-        if not exe.is_file():
-            raise HandDriverError(f'{why}, and the stand-in {str(exe)!r} does not exist')
+        exe = standin_executable(why)
         self._simulated_device = True
-        cmd = [str(exe), '--ros-args', '-r', '__node:=hand_driver_sim', '-p',
-               f'gui:={str(self._gui).lower()}', '-p',
-               f'use_sim_time:={str(self._sim_time).lower()}']
-        base = self.config.source.split(' + ')[0]  # 'FILE + OVERLAY' with an overlay
-        if os.path.isfile(base):
-            cmd += ['-p', f'config_file:={base}']
-        for overlay in self._overlays:  # the stand-in's servos get the same offsets
-            cmd += ['-p', f'config_overlay:={overlay}']
-        cmd += ['-p', f'object:={self.config.object.name}']
-        port_file = ''
-        if bus == 'dynamixel':
-            fd, port_file = tempfile.mkstemp(prefix='dam_dynamixel_port_')
-            os.close(fd)
-            os.unlink(port_file)  # the stand-in writes it when the bus is open
-            cmd += ['-p', 'bus:=dynamixel', '-p', f'port_file:={port_file}']
+        port_file = new_port_file() if bus == 'dynamixel' else ''
+        cmd = standin_command(exe, self.config.source, self._overlays, self.config.object.name,
+                              self._gui, self._sim_time, port_file)
         # A session of its own: Ctrl-C in the terminal reaches the driver only, which stops the
         # stand-in itself (a signal in the stand-in's first milliseconds, before it handles
         # signals, would end it with a traceback); it dies with the driver however that dies.
@@ -423,9 +406,9 @@ class HandDriverNode(Node):
         self.get_logger().warning(
             f'{why}: RUNNING ON THE SIMULATOR - started the stand-in sim_bridge '
             f'(PID {self._child.pid})')
-        deadline = time.monotonic() + _STANDIN_START_TIMEOUT_S
+        deadline = time.monotonic() + STANDIN_START_TIMEOUT_S
         if bus == 'dynamixel':
-            return self._await_port_file(port_file, deadline)
+            return await_port_file(self._child, port_file, deadline)
         while time.monotonic() < deadline and self._child.poll() is None:
             if self._receive_at_start(0.1) is not None:
                 return ''
@@ -433,31 +416,8 @@ class HandDriverNode(Node):
             raise HandDriverError(f'the stand-in exited with code {self._child.returncode} '
                                   f'before sending a state frame')
         self.get_logger().error(f'the stand-in sent no state frame within '
-                                f'{_STANDIN_START_TIMEOUT_S} s')
+                                f'{STANDIN_START_TIMEOUT_S} s')
         return ''
-
-    def _await_port_file(self, port_file: str, deadline: float) -> str:
-        """The emulated bus's port, from the file the stand-in writes once it serves."""
-        child = self._child
-        assert child is not None
-        try:
-            while time.monotonic() < deadline and child.poll() is None:
-                SHUTDOWN.raise_if_requested()
-                try:
-                    port = Path(port_file).read_text(encoding='utf-8').strip()
-                except OSError:
-                    port = ''
-                if port:
-                    return port
-                time.sleep(0.05)
-        finally:
-            with contextlib.suppress(OSError):
-                os.unlink(port_file)
-        if child.poll() is not None:
-            raise HandDriverError(f'the emulated Dynamixel bus exited with code '
-                                  f'{child.returncode} before serving its port')
-        raise HandDriverError(f'the emulated Dynamixel bus served no port within '
-                              f'{_STANDIN_START_TIMEOUT_S} s')
 
     def _receive_at_start(self, timeout_s: float) -> JointSample | None:
         """A sample within ``timeout_s`` [s], or ``None``; in short waits, so that a stop
@@ -476,27 +436,11 @@ class HandDriverNode(Node):
             if sample is not None or left <= 0.05:
                 return sample
 
-    def _signal_standin(self) -> None:
-        """Ask the stand-in to stop (it tears down while the driver does)."""
-        child = self._child
-        if child is not None and child.poll() is None:
-            # SIGTERM: a clean stop once the stand-in handles it, a silent end before that.
-            child.send_signal(signal.SIGTERM)
-
     def _stop_standin(self) -> None:
-        """Stop the stand-in and wait for it: SIGTERM, SIGKILL after
-        :data:`_STANDIN_STOP_TIMEOUT_S`."""
-        self._signal_standin()
+        """Stop the stand-in and wait for it (:func:`dam_hand_driver.standin.stop_standin`)."""
         child, self._child = self._child, None
-        if child is None:
-            return
-        try:
-            child.wait(timeout=_STANDIN_STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            self.get_logger().warning(f'the stand-in (PID {child.pid}) did not stop within '
-                                      f'{_STANDIN_STOP_TIMEOUT_S:g} s: killed')
-            child.kill()
-            child.wait(timeout=5.0)
+        if child is not None:
+            stop_standin(child, self.get_logger())
 
     # ---------------------------------------------------------------------------------------
     # Control loop (own thread)
@@ -796,62 +740,41 @@ class HandDriverNode(Node):
 
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
-        t0, accepted0, published0, device_ns0 = self._diag_prev
         device = self.device
         received = device.samples_received if device is not None else 0
-        dt = max(now - t0, 1e-9)
-        state_rate = (received - accepted0) / dt
         published, last_stamp_ns = self._published_last
-        js_rate = (published - published0) / dt
         sample = self._last_sample
         device_ns = int(sample.stamp_ns) if sample is not None else 0
+        failures = device.read_failures if device is not None else 0
         # Device time per wall time over the last period: the real-time factor of a stand-in
         # on simulated time (at most 1.0; lower when a period's work does not fit in a period).
-        rtf = (device_ns - device_ns0) * 1e-9 / dt if device_ns0 and device_ns else math.nan
-        self._diag_prev = (now, received, published, device_ns)
-        failures = device.read_failures if device is not None else 0
-        failures0, self._failures_prev = self._failures_prev, failures
+        rates = self._diag_window.advance(now, received, published, device_ns, failures)
         failing = device.failing_reads if device is not None else 0
         tripped = bool(sample is not None and sample.watchdog_tripped)
         simulated = bool(sample is not None and sample.simulated)
-        lat = np.array(self._latencies_s) if self._latencies_s else np.zeros(1)
+        latency_p50_us, latency_max_us = latency_summary_us(self._latencies_s)
         last = device.last_sample_time if device is not None else None
         status = DiagnosticStatus()
         status.name = 'dam_hand_driver: device link'
         status.hardware_id = device.hardware_id if device is not None else ''
         state = self.state
-        if state is DriverState.ERROR:
-            status.level = DiagnosticStatus.ERROR
-            status.message = f'ERROR: {self._error_reason}'
-        elif state is DriverState.WAITING:
-            status.level = DiagnosticStatus.ERROR
-            status.message = 'waiting for the device'
-        elif (state_rate < 0.8 / self.period_s and not self._sim_time) or tripped \
-                or failures > failures0 or failing:
-            status.level = DiagnosticStatus.WARN
-            last_failure = device.last_failure if device is not None else ''
-            status.message = (
-                'device watchdog tripped' if tripped else
-                f'{failures - failures0} failed reads in {dt:.1f} s (last: {last_failure})'
-                if failures > failures0 else
-                f'reads failing: {failing} in a row (last: {last_failure})' if failing else
-                f'state rate {state_rate:.0f} Hz below target')
-        else:
-            status.level = DiagnosticStatus.OK
-            status.message = 'ACTIVE' + (' (simulator)' if simulated else '')
+        level, status.message = link_status(
+            state, self._error_reason, rates, self.period_s, self._sim_time, tripped, failing,
+            device.last_failure if device is not None else '', simulated)
+        status.level = _DIAGNOSTIC_LEVELS[level]
         collector = getattr(self, 'garbage_collector', None)  # set by run_node
         gc_pause_max_s = collector.max_pause_s if collector is not None else 0.0
         values = {
             'state': state.value,
             'backend': self.backend + (' (simulator running)' if simulated else ''),
             'standin_pid': str(self._child.pid) if self._child is not None else '',
-            'state_rate_hz': f'{state_rate:.1f}',
-            'joint_states_rate_hz': f'{js_rate:.1f}',
+            'state_rate_hz': f'{rates.state_rate_hz:.1f}',
+            'joint_states_rate_hz': f'{rates.joint_states_rate_hz:.1f}',
             'joint_states_published': str(published),
             'joint_states_last_stamp_ns': str(last_stamp_ns),
             'target_rate_hz': f'{1.0 / self.period_s:g}',
             'use_sim_time': str(self._sim_time),
-            'real_time_factor': f'{rtf:.3f}',
+            'real_time_factor': f'{rates.real_time_factor:.3f}',
             'command_waits_timed_out': str(self._command_waits_timed_out),
             # The scheduled garbage collections (dam_common.collector): how long the longest
             # held the interpreter lock, i.e. stopped the device-link thread.
@@ -859,8 +782,8 @@ class HandDriverNode(Node):
             'gc_pause_max_ms': f'{gc_pause_max_s * 1e3:.2f}',
             'link_thread_scheduling': self._scheduling,
             'state_age_s': f'{now - last:.4f}' if last is not None else 'never',
-            'loop_latency_p50_us': f'{np.percentile(lat, 50) * 1e6:.0f}',
-            'loop_latency_max_us': f'{lat.max() * 1e6:.0f}',
+            'loop_latency_p50_us': f'{latency_p50_us:.0f}',
+            'loop_latency_max_us': f'{latency_max_us:.0f}',
             'device_watchdog_tripped': str(tripped),
             'link_thread_exceptions': str(self._link_exceptions),
             'hand_commands_rejected': str(self._rejected_commands),
@@ -880,7 +803,7 @@ class HandDriverNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the link thread, the stand-in (by PID) and close the socket."""
-        self._signal_standin()  # first: both shut down at the same time
+        signal_standin(self._child)  # first: both shut down at the same time
         self._running = False
         if hasattr(self, '_command_arrived'):
             with self._command_arrived:
