@@ -207,7 +207,8 @@ def _dam_grasp(*args: str, env: dict[str, str] | None = None,
 
 def test_dam_grasp_executable_exit_codes(stack: _Grasper) -> None:
     """2 on a rejected goal, 3 after --cancel-after (ABORTED), 1 with no server (0 on
-    SUCCESS is checked by hand: see docs/simulation_grasp.md)."""
+    SUCCESS is checked by hand: see docs/simulation_grasp.md); --release opens the hand (0),
+    goes with no goal option (2) and needs the controller (1)."""
     # 80 deg is a displacement the command line allows (below 90 deg) but the controller
     # refuses (above the configured delta_theta_p_max_deg, 65 deg)
     rejected = _dam_grasp('--k-theta', '7', '--delta-theta-p', '80deg')
@@ -220,9 +221,21 @@ def test_dam_grasp_executable_exit_codes(stack: _Grasper) -> None:
     assert cancelled.returncode == 3, cancelled.stdout + cancelled.stderr
     assert 'cancelling' in cancelled.stdout and 'result: ABORTED' in cancelled.stdout
 
+    # --release: the hand opened without the ros2 CLI (a new user of the wheels has none)
+    released = _dam_grasp('--release')
+    assert released.returncode == 0, released.stdout + released.stderr
+    assert 'release: done: released: every joint holds the open posture' in released.stdout
+    both = _dam_grasp('--release', '--k-theta', '7')
+    assert both.returncode == 2 and '--release sends no goal: --k-theta' in both.stderr, \
+        both.stderr
+
     other_domain = str((int(os.environ.get('ROS_DOMAIN_ID', '0')) + 17) % 100 + 1)
     lonely = _dam_grasp('--k-theta', '7', '--delta-theta-p', '10deg', '--server-timeout',
                         '1', env={'ROS_DOMAIN_ID': other_domain})
     assert lonely.returncode == 1, lonely.stdout + lonely.stderr
     assert 'no action server' in lonely.stderr
+    lonely = _dam_grasp('--release', '--server-timeout', '1',
+                        env={'ROS_DOMAIN_ID': other_domain})
+    assert lonely.returncode == 1, lonely.stdout + lonely.stderr
+    assert 'no /spcm_controller/release service within 1 s' in lonely.stderr
 

@@ -830,8 +830,8 @@ class SpcmControllerNode(Node):
                 busy = True
                 activity = (f'the hand still holds the previous grasp (DONE, outcome '
                             f'{_OUTCOME_NAME[self._outcome]}): let go first with '
-                            f'ros2 service call {self.get_fully_qualified_name()}/release '
-                            'std_srvs/srv/Trigger')
+                            'dam_grasp --release or ros2 service call '
+                            f'{self.get_fully_qualified_name()}/release std_srvs/srv/Trigger')
             else:
                 self._busy = True
         if busy:

@@ -3,11 +3,18 @@
 ::
 
     ros2 run dam_spcm_controller dam_grasp [--k-theta 7] [--delta-theta-p 40deg] [--cancel-after S]
+    ros2 run dam_spcm_controller dam_grasp --release
 
 Prints the feedback phases as they change (with the ``/check_lift`` answer) and the result.
 Exit codes: 0 the outcome is SUCCESS; 3 any other outcome (not lifted, lifted but not
 enveloped, aborted, cancelled, or stopped by SIGINT/SIGTERM); 2 the goal was refused (its
 reason is printed) or bad arguments; 1 no action server.
+
+``--release`` sends no goal: it asks ``/spcm_controller/release`` (``std_srvs/Trigger``) to let
+go of the object the hand holds after a grasp (torques to zero, the hand opened), as
+``ros2 service call /spcm_controller/release std_srvs/srv/Trigger`` does, and prints its
+answer. Exit codes: 0 released; 3 refused or stopped (the answer says why: a grasp is running,
+the joint states went silent); 1 no such service.
 
 SIGINT (Ctrl-C) or SIGTERM while the goal runs cancels it: the client waits up to
 ``--cancel-timeout`` seconds in all (the cancel's answer and the end of the goal: the torque
@@ -80,7 +87,69 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--cancel-timeout', type=_positive, default=5.0, metavar='S',
                    help='on SIGINT/SIGTERM, how long to wait for the cancel to be confirmed '
                         '[s] (default 5)')
-    return p.parse_args(strip_ros_args(list(argv)))  # rclpy's, as ros2 run passes them
+    p.add_argument('--release', action='store_true',
+                   help='send no goal: let go of the object the hand holds after a grasp '
+                        '(/spcm_controller/release) and open the hand')
+    args = p.parse_args(strip_ros_args(list(argv)))  # rclpy's, as ros2 run passes them
+    if args.release:
+        given = [name for name, value in (('--k-theta', args.k_theta),
+                                          ('--delta-theta-p', args.delta_theta_p),
+                                          ('--cancel-after', args.cancel_after))
+                 if value is not None]
+        if given:
+            p.error(f'--release sends no goal: {" and ".join(given)} cannot go with it')
+    return args
+
+
+def release(args: argparse.Namespace) -> int:
+    """Ask ``/spcm_controller/release`` to let go and open the hand; return the exit code."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from std_srvs.srv import Trigger
+
+    from dam_common.service_qos import SERVICE_QOS
+    from dam_common.shutdown import catch_signals
+
+    shutdown = catch_signals()
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('dam_grasp_release', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    client = node.create_client(Trigger, '/spcm_controller/release', qos_profile=SERVICE_QOS)
+    try:
+        deadline = time.monotonic() + args.server_timeout
+        while not client.service_is_ready():
+            if shutdown.requested or time.monotonic() >= deadline:
+                if shutdown.requested:
+                    return EXIT_OTHER_OUTCOME
+                print(f'dam_grasp: no /spcm_controller/release service within '
+                      f'{args.server_timeout:g} s (is spcm_controller running?)',
+                      file=sys.stderr)
+                return EXIT_NO_SERVER
+            executor.spin_once(timeout_sec=0.05)
+        future = client.call_async(Trigger.Request())
+        deadline = time.monotonic() + args.timeout
+        while not future.done():
+            if shutdown.requested:
+                print('dam_grasp: stopped before the answer came; the release goes on in the '
+                      'controller (see /dam/status)', file=sys.stderr)
+                return EXIT_OTHER_OUTCOME
+            if time.monotonic() >= deadline:
+                print(f'dam_grasp: no answer from /spcm_controller/release within '
+                      f'{args.timeout:g} s', file=sys.stderr)
+                return EXIT_OTHER_OUTCOME
+            executor.spin_once(timeout_sec=0.05)
+        answer = future.result()
+        print(f'release: {"done" if answer.success else "refused"}: {answer.message}',
+              flush=True)
+        return EXIT_SUCCESS if answer.success else EXIT_OTHER_OUTCOME
+    finally:
+        node.destroy_client(client)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -239,7 +308,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     except SystemExit as exc:  # argparse: 2 on bad arguments, 0 on --help
         sys.exit(exc.code)
     try:
-        code = run(args)
+        code = release(args) if args.release else run(args)
     except KeyboardInterrupt:
         code = EXIT_OTHER_OUTCOME
     sys.exit(code)
