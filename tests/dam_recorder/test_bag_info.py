@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -361,3 +362,12 @@ def test_paths_that_are_no_bag_are_refused(tmp_path: Path, typestore, prefixes) 
         'dam_recorder.lost_messages: many'))
     with pytest.raises(BagReadError, match="lost_messages: expected JSON .*'many'"):
         bag_info(broken)
+
+
+def test_an_unknown_time_reads_as_a_dash_in_every_column() -> None:
+    """An episode cut short has no grasp wall time (NaN in its summary): the table showed
+    'nan' in one column and '-' in the next for the same unknown."""
+    from dam_recorder.bag_info_text import _num
+
+    assert _num(math.nan, '.3f') == _num(None, '.3f') == '-'
+    assert _num(1.5, '.3f') == '1.500'

@@ -55,7 +55,10 @@ def grasp_time(s: Any, bag_start_ns: int | None) -> str:
 
 
 def _num(value: float | None, spec: str) -> str:
-    return '-' if value is None else format(value, spec)
+    """``value`` in ``spec``; '-' when it is unknown (None or NaN: an episode cut short)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return '-'
+    return format(value, spec)
 
 
 def _margin(value: float) -> str:
