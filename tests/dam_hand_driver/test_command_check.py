@@ -28,8 +28,12 @@ def _check(names, modes, setpoints, stiffness=(), damping=()) -> list[CommandIte
 
 
 def test_the_message_mode_numbers_name_the_wire_modes() -> None:
-    assert WIRE_MODES == {0: JointMode.TORQUE, 1: JointMode.POSITION, 2: JointMode.HOLD,
-                          3: JointMode.IMPEDANCE}
+    from dam_interfaces.msg import HandCommand  # the numbers the message defines
+
+    assert WIRE_MODES == {HandCommand.MODE_TORQUE: JointMode.TORQUE,
+                          HandCommand.MODE_POSITION: JointMode.POSITION,
+                          HandCommand.MODE_HOLD: JointMode.HOLD,
+                          HandCommand.MODE_IMPEDANCE: JointMode.IMPEDANCE}
 
 
 def test_accepted_commands_keep_the_order_of_the_message_in_si_units() -> None:

@@ -688,6 +688,12 @@ class SpcmControllerNode(Node):
                           float(self._config.device.max_stiffness_nm_per_rad) if on_device
                           else None)
 
+    def _release_hint(self) -> str:
+        """How to let go: ``dam_grasp --release`` knows this node under its default name only."""
+        name = self.get_fully_qualified_name()
+        command = f'ros2 service call {name}/release std_srvs/srv/Trigger'
+        return f'dam_grasp --release or {command}' if name == '/spcm_controller' else command
+
     def _on_goal(self, _goal: DamGrasp.Goal) -> GoalResponse:
         # Every goal is accepted: one that cannot run is aborted at once with
         # OUTCOME_REJECTED and the reason in its result, which every action client shows
@@ -830,8 +836,7 @@ class SpcmControllerNode(Node):
                 busy = True
                 activity = (f'the hand still holds the previous grasp (DONE, outcome '
                             f'{_OUTCOME_NAME[self._outcome]}): let go first with '
-                            'dam_grasp --release or ros2 service call '
-                            f'{self.get_fully_qualified_name()}/release std_srvs/srv/Trigger')
+                            f'{self._release_hint()}')
             else:
                 self._busy = True
         if busy:

@@ -13,8 +13,10 @@ reason is printed) or bad arguments; 1 no action server.
 ``--release`` sends no goal: it asks ``/spcm_controller/release`` (``std_srvs/Trigger``) to let
 go of the object the hand holds after a grasp (torques to zero, the hand opened), as
 ``ros2 service call /spcm_controller/release std_srvs/srv/Trigger`` does, and prints its
-answer. Exit codes: 0 released; 3 refused or stopped (the answer says why: a grasp is running,
-the joint states went silent); 1 no such service.
+answer. Exit codes: 0 released; 3 refused (the answer says why: a grasp or a release is
+running, the joint states went silent), no answer within ``--timeout`` or stopped by a signal
+(the release goes on in the controller); 1 no such service within ``--server-timeout``; 2 a
+goal option given with it. It asks ``/spcm_controller/release``, the default name.
 
 SIGINT (Ctrl-C) or SIGTERM while the goal runs cancels it: the client waits up to
 ``--cancel-timeout`` seconds in all (the cancel's answer and the end of the goal: the torque
@@ -83,7 +85,8 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
     p.add_argument('--server-timeout', type=_positive, default=10.0, metavar='S',
                    help='how long to wait for the action server [s] (default 10)')
     p.add_argument('--timeout', type=_positive, default=120.0, metavar='S',
-                   help='how long to wait for the result [s] (default 120)')
+                   help='how long to wait for the result, or with --release for its answer '
+                        '[s] (default 120)')
     p.add_argument('--cancel-timeout', type=_positive, default=5.0, metavar='S',
                    help='on SIGINT/SIGTERM, how long to wait for the cancel to be confirmed '
                         '[s] (default 5)')
@@ -102,7 +105,11 @@ def _parse(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def release(args: argparse.Namespace) -> int:
-    """Ask ``/spcm_controller/release`` to let go and open the hand; return the exit code."""
+    """Ask ``/spcm_controller/release`` to let go and open the hand; return the exit code.
+
+    Waits up to ``args.server_timeout`` [s] for the service and ``args.timeout`` [s] for its
+    answer (the hand is open when it comes); exit codes as in the module's docstring.
+    """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
