@@ -752,12 +752,20 @@ class SpcmControllerNode(Node):
 
     async def _fresh_state(self, wait_s: float, goal_handle: ServerGoalHandle | None = None
                            ) -> bool:
-        """Wait up to ``wait_s`` [s] for a joint state younger than ``state_timeout``; ``False``
-        also when ``goal_handle``'s goal is cancelled meanwhile."""
-        deadline = time.monotonic() + wait_s
+        """Wait up to ``wait_s`` [s] for the joint states to flow: the newest younger than
+        ``state_timeout``, or one that came since the wait began; ``False`` also when
+        ``goal_handle``'s goal is cancelled meanwhile.
+
+        On simulated time ``/clock`` comes from the stand-in and the joint states from the
+        driver: on a loaded machine the clock can run ahead of joint states that still flow,
+        which is no silence (a driver in ERROR sends none at all).
+        """
+        started = time.monotonic()
+        deadline = started + wait_s
 
         def poll(fresh: Future) -> None:
-            if self._silence() is None:
+            last = self._last_state_time
+            if self._silence() is None or (last is not None and last > started):
                 fresh.set_result(True)
             elif time.monotonic() >= deadline or (goal_handle is not None
                                                   and goal_handle.is_cancel_requested):
