@@ -42,6 +42,9 @@
 #   5  the grasp ran but its episode bag is INCOMPLETE (the recorder's "... is INCOMPLETE"
 #      line, custom data dam_episode.complete: "false"), or the recorder wrote no episode:
 #      the outcome printed is not backed by a complete recording
+#   130 Ctrl-C during the grasp: dam_grasp asked for a cancel while the nodes stop on the
+#      same signal (its lines say how the goal ended); nothing is drawn; what run.sh started
+#      is stopped (with --keep too)
 set -euo pipefail
 REPO_ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 RUN_DIR=${DAM_RUN_DIR:-$REPO_ROOT/.run}
@@ -232,8 +235,9 @@ status=${PIPESTATUS[0]}
 set -e
 trap - INT
 if [ "$interrupted" = true ]; then
-  echo "run.sh: interrupted (Ctrl-C) during the grasp: the goal was cancelled and the nodes" \
-    "stop; nothing is drawn (exit status 130)" >&2
+  echo "run.sh: interrupted (Ctrl-C) during the grasp: dam_grasp asked for a cancel while the" \
+    "nodes stop on the same signal (its lines above say how the goal ended); nothing is" \
+    "drawn (exit status 130)" >&2
   exit 130
 fi
 

@@ -47,4 +47,6 @@ stop_stage() {  # stop_stage NAME...: SIGINT to each, then wait for all of them 
 stop_stage recorder
 stop_stage spcm_controller check_lift_server dam_state_publisher robot_state_publisher
 stop_stage hand_driver
-if [ "$stopped" -eq 1 ]; then echo "==> stopped 1 process"; else echo "==> stopped $stopped processes"; fi
+noun=processes
+[ "$stopped" -ne 1 ] || noun=process
+echo "==> stopped $stopped $noun"
