@@ -33,7 +33,9 @@ from bag_readers import read_with_mcap, read_with_rosbags  # noqa: E402
 from rosbag2_format import metadata_problems  # noqa: E402
 
 # Real-time runs on a shared 2-core machine: a failure is run once more (R in the summary).
-pytestmark = [pytest.mark.integration, pytest.mark.flaky(reruns=1)]
+# Alone (exclusive): beside another worker's stack the driver's ~/reset, which waits 0.5 s of
+# wall time for a device state, failed, and a release waited for joint states (two full runs).
+pytestmark = [pytest.mark.integration, pytest.mark.exclusive, pytest.mark.flaky(reruns=1)]
 
 DELTA_THETA_P = math.radians(10.0)
 PRE_ROLL_S = 2.0
