@@ -28,10 +28,12 @@ within ``--cancel-timeout`` plus the client's own shutdown (tenths of a second).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
 
 from dam_common.command_line import CommandLineParser
 from dam_common.quantities import (
@@ -110,85 +112,57 @@ def release(args: argparse.Namespace) -> int:
     Waits up to ``args.server_timeout`` [s] for the service and ``args.timeout`` [s] for its
     answer (the hand is open when it comes); exit codes as in the module's docstring.
     """
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from std_srvs.srv import Trigger
 
     from dam_common.service_qos import SERVICE_QOS
     from dam_common.shutdown import catch_signals
 
     shutdown = catch_signals()
-    context = rclpy.Context()
-    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('dam_grasp_release', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    client = node.create_client(Trigger, '/spcm_controller/release', qos_profile=SERVICE_QOS)
-    try:
-        deadline = time.monotonic() + args.server_timeout
-        while not client.service_is_ready():
-            if shutdown.requested or time.monotonic() >= deadline:
-                if shutdown.requested:
-                    return EXIT_OTHER_OUTCOME
-                print(f'dam_grasp: no /spcm_controller/release service within '
-                      f'{args.server_timeout:g} s (is spcm_controller running?)',
-                      file=sys.stderr)
-                return EXIT_NO_SERVER
-            executor.spin_once(timeout_sec=0.05)
-        future = client.call_async(Trigger.Request())
-        deadline = time.monotonic() + args.timeout
-        while not future.done():
+    with _client_node('dam_grasp_release') as (node, executor):
+        client = node.create_client(Trigger, '/spcm_controller/release',
+                                    qos_profile=SERVICE_QOS)
+        if not spin_until_ready(client.service_is_ready, executor, args.server_timeout,
+                                shutdown):
             if shutdown.requested:
-                print('dam_grasp: stopped before the answer came; the release goes on in the '
-                      'controller (see /dam/status)', file=sys.stderr)
                 return EXIT_OTHER_OUTCOME
-            if time.monotonic() >= deadline:
-                print(f'dam_grasp: no answer from /spcm_controller/release within '
-                      f'{args.timeout:g} s', file=sys.stderr)
-                return EXIT_OTHER_OUTCOME
-            executor.spin_once(timeout_sec=0.05)
+            print(f'dam_grasp: no /spcm_controller/release service within '
+                  f'{args.server_timeout:g} s (is spcm_controller running?)', file=sys.stderr)
+            return EXIT_NO_SERVER
+        future = client.call_async(Trigger.Request())
+        if not spin_until_done(future, executor, args.timeout, shutdown):
+            print('dam_grasp: stopped before the answer came; the release goes on in the '
+                  'controller (see /dam/status)' if shutdown.requested else
+                  f'dam_grasp: no answer from /spcm_controller/release within '
+                  f'{args.timeout:g} s', file=sys.stderr)
+            return EXIT_OTHER_OUTCOME
         answer = future.result()
         print(f'release: {"done" if answer.success else "refused"}: {answer.message}',
               flush=True)
         return EXIT_SUCCESS if answer.success else EXIT_OTHER_OUTCOME
-    finally:
-        node.destroy_client(client)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
 
 
 def run(args: argparse.Namespace) -> int:
     """Send the goal described by ``args``; return the exit code."""
-    import rclpy
+    from dam_common.shutdown import catch_signals
+
+    shutdown = catch_signals()
+    with _client_node('dam_grasp_client') as (node, executor):
+        return _send_goal(args, node, executor, shutdown)
+
+
+def _send_goal(args: argparse.Namespace, node, executor, shutdown) -> int:
+    """The goal of :func:`run`, sent from ``node``; return the exit code."""
     from action_msgs.msg import GoalStatus
     from rclpy.action import ActionClient
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
 
-    from dam_common.shutdown import catch_signals
     from dam_interfaces.action import DamGrasp
 
     _STATUS = {GoalStatus.STATUS_SUCCEEDED: 'SUCCEEDED', GoalStatus.STATUS_ABORTED: 'ABORTED',
                GoalStatus.STATUS_CANCELED: 'CANCELED'}
-    shutdown = catch_signals()
-    context = rclpy.Context()
-    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('dam_grasp_client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
     client = ActionClient(node, DamGrasp, '/dam_grasp')
 
     def spin_until(future, timeout: float, interruptible: bool = True) -> bool:
-        """Spin until ``future`` is done, ``timeout`` [s] passed or (if ``interruptible``) a
-        stop was requested."""
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            if interruptible and shutdown.requested:
-                break
-            executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
-        return future.done()
+        return spin_until_done(future, executor, timeout, shutdown if interruptible else None)
 
     def cancel_on_signal(handle, result_future) -> int:
         """Cancel the goal; wait for its result at most ``--cancel-timeout`` in all (the
@@ -234,7 +208,8 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.monotonic()
     try:
-        if not spin_until_server(client, executor, args.server_timeout, shutdown):
+        if not spin_until_ready(client.server_is_ready, executor, args.server_timeout,
+                                shutdown):
             if shutdown.requested:
                 return EXIT_OTHER_OUTCOME
             print(f'dam_grasp: no action server /dam_grasp within {args.server_timeout:g} s',
@@ -293,19 +268,51 @@ def run(args: argparse.Namespace) -> int:
         return EXIT_SUCCESS if ok else EXIT_OTHER_OUTCOME
     finally:
         client.destroy()
+
+
+@contextlib.contextmanager
+def _client_node(name: str) -> Iterator[tuple[Any, Any]]:
+    """A node ``name`` in a context of its own with its single-threaded executor; the
+    caller's signal handling (:func:`dam_common.shutdown.catch_signals`) is left in place.
+    Yields ``(node, executor)``; everything is shut down on leaving."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        yield node, executor
+    finally:
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
 
 
-def spin_until_server(client, executor, timeout_s: float, shutdown) -> bool:
-    """Wait for the action server (spinning ``executor``) up to ``timeout_s`` [s] or a stop."""
+def spin_until_ready(is_ready: Callable[[], bool], executor, timeout_s: float,
+                     shutdown) -> bool:
+    """Spin ``executor`` until ``is_ready()`` (a server's readiness), ``timeout_s`` [s]
+    passed or a stop was requested; return whether it is ready."""
     deadline = time.monotonic() + timeout_s
-    while not client.server_is_ready():
+    while not is_ready():
         if shutdown.requested or time.monotonic() >= deadline:
             return False
         executor.spin_once(timeout_sec=0.05)
     return True
+
+
+def spin_until_done(future, executor, timeout_s: float, shutdown=None) -> bool:
+    """Spin ``executor`` until ``future`` is done, ``timeout_s`` [s] passed or (``shutdown``
+    given) a stop was requested; return whether it is done."""
+    deadline = time.monotonic() + timeout_s
+    while not future.done() and time.monotonic() < deadline:
+        if shutdown is not None and shutdown.requested:
+            break
+        executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+    return future.done()
 
 
 def main(argv: Sequence[str] | None = None) -> None:
