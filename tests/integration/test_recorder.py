@@ -214,6 +214,9 @@ def test_pause_resume_and_split_services(tmp_path: Path) -> None:
     assert 0 < first_file < info['message_count']
 
 
+# Alone (exclusive), as the driver's storms: its 2 s exit bound is the issue's; beside another
+# worker's stack three of 100 exits took 2.1-3.9 s, twice in one full run.
+@pytest.mark.exclusive
 def test_100_signals_at_random_moments_each_leave_a_whole_bag_or_none(tmp_path: Path) -> None:
     """SIGINT or SIGTERM (at random) at a random moment from the entry point's first line to
     well into recording, while messages flow: exit status 0 within 2 s, no traceback, and the
